@@ -1,0 +1,2 @@
+//! The acps learner.
+pub mod selection;

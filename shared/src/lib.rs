@@ -1,0 +1,14 @@
+//! What every part of an acps run agrees on: the task a learner hands out, the outcome an
+//! environment returns, the problem description, the space contexts live in, and how seeds are
+//! derived.
+#![warn(missing_docs)]
+
+mod context_space;
+mod problem;
+mod seed;
+mod task;
+
+pub use context_space::{ContextSpace, ContextSpaceError, random_unit_vector};
+pub use problem::{Problem, ScoreAggregate};
+pub use seed::{Stream, derive_seed};
+pub use task::{Environment, Outcome, OutcomeStatus, Task, TaskKind};

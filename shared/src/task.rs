@@ -1,0 +1,110 @@
+//! Tasks, outcomes and the environment trait.
+
+use serde::{Deserialize, Serialize};
+
+/// Why a task exists.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TaskKind {
+    /// A training rollout: explorative parameters, the outcome feeds the learner.
+    Train,
+    /// A rollout of the greedy policy (exploration off) on a test context, for the learning curve.
+    Evaluate,
+    /// A rollout of the initial greedy policy on a training context before learning starts: it
+    /// gives each context's first-visit baseline for the intrinsic rewards.
+    Baseline,
+}
+
+/// One rollout to perform: parameters `theta` in `context`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Task {
+    /// Position in the learner's task sequence; outcomes are consumed in this order.
+    pub id: u64,
+    /// Why the task exists.
+    pub kind: TaskKind,
+    /// Seed for everything random inside the rollout.
+    pub seed: u64,
+    /// The task context s.
+    pub context: Vec<f64>,
+    /// The low-level policy parameters theta.
+    pub theta: Vec<f64>,
+}
+
+/// Whether a rollout produced a usable return.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum OutcomeStatus {
+    /// The return and score are finite and meaningful.
+    Ok,
+    /// The simulation failed (non-finite state, explosion, violated limit); the return is not used.
+    Failed,
+}
+
+/// The result of one task.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Outcome {
+    /// The id of the task this answers.
+    pub task_id: u64,
+    /// Whether `reward` and `score` can be used.
+    pub status: OutcomeStatus,
+    /// The return r(s, theta) the learner maximises.
+    pub reward: f64,
+    /// The problem's evaluation measure for this rollout (for example a cost or a distance);
+    /// the problem says how scores of a test set are aggregated.
+    pub score: f64,
+}
+
+impl Outcome {
+    /// A successful outcome. Non-finite values are turned into a failed outcome, so that a NaN
+    /// can never reach the learner as a return.
+    pub fn new(task_id: u64, reward: f64, score: f64) -> Self {
+        let status = if reward.is_finite() && score.is_finite() {
+            OutcomeStatus::Ok
+        } else {
+            OutcomeStatus::Failed
+        };
+        Self {
+            task_id,
+            status,
+            reward,
+            score,
+        }
+    }
+
+    /// A failed outcome.
+    pub fn failed(task_id: u64) -> Self {
+        Self {
+            task_id,
+            status: OutcomeStatus::Failed,
+            reward: f64::NAN,
+            score: f64::NAN,
+        }
+    }
+
+    /// True when the outcome carries a usable return.
+    pub fn is_ok(&self) -> bool {
+        self.status == OutcomeStatus::Ok
+    }
+}
+
+/// Something that performs rollouts. Implementations must be deterministic given the task
+/// (its seed included), unless they document otherwise.
+pub trait Environment: Send {
+    /// Dimension of the context s.
+    fn context_dim(&self) -> usize;
+    /// Dimension of the low-level parameters theta.
+    fn param_dim(&self) -> usize;
+    /// Perform one rollout. Never panics on bad numbers: a failed simulation is a failed outcome.
+    fn rollout(&mut self, task: &Task) -> Outcome;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn non_finite_values_make_a_failed_outcome() {
+        assert!(Outcome::new(0, 1.0, 2.0).is_ok());
+        assert!(!Outcome::new(0, f64::NAN, 2.0).is_ok());
+        assert!(!Outcome::new(0, 1.0, f64::INFINITY).is_ok());
+        assert!(!Outcome::failed(3).is_ok());
+    }
+}
