@@ -10,8 +10,7 @@
 
 use crate::{ModelError, check};
 use acps_shared::{
-    ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, derive_seed,
-    random_unit_vector,
+    ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, derive_seed, random_unit_vector,
 };
 use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
@@ -30,13 +29,7 @@ impl ContextualFunction {
     /// Draw A (n_s x n_theta) uniformly in [0, 1] from `problem_seed` until it has rank n_s.
     pub fn new(n_s: usize, n_theta: usize, problem_seed: u64) -> Result<Self, ModelError> {
         check(n_s >= 1, "contextual function", "n_s", ">= 1", n_s)?;
-        check(
-            n_theta > n_s,
-            "contextual function",
-            "n_theta",
-            "> n_s",
-            n_theta,
-        )?;
+        check(n_theta > n_s, "contextual function", "n_theta", "> n_s", n_theta)?;
         let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, 0));
         loop {
             let a = DMatrix::from_fn(n_s, n_theta, |_, _| rng.random::<f64>());
@@ -56,8 +49,7 @@ impl ContextualFunction {
         if theta.len() != self.a.ncols() || s.len() != self.a.nrows() {
             return None;
         }
-        let error =
-            (&self.a * DVector::from_column_slice(theta) - DVector::from_column_slice(s)).norm();
+        let error = (&self.a * DVector::from_column_slice(theta) - DVector::from_column_slice(s)).norm();
         let complexity: f64 = s.iter().map(|x| x * x).sum();
         let cost = error * complexity;
         Some((s.iter().sum::<f64>() - cost, cost))
@@ -82,8 +74,7 @@ impl ContextualFunction {
     /// continuous space is the unit ball.
     pub fn shell_problem(n_s: usize, n_theta: usize, problem_seed: u64) -> Problem {
         let shells = |index: u64| -> Vec<Vec<f64>> {
-            let mut rng =
-                ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, index));
+            let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, index));
             (1..=25)
                 .map(|k| {
                     random_unit_vector(n_s, &mut rng)
@@ -111,8 +102,7 @@ impl ContextualFunction {
             space,
             theta0: vec![0.0; n_theta],
             score: ScoreAggregate::LogMean,
-            metric: "natural log of the mean cost |f - f*| over the test contexts, exploration off"
-                .into(),
+            metric: "natural log of the mean cost |f - f*| over the test contexts, exploration off".into(),
         }
     }
 }
@@ -153,8 +143,7 @@ mod tests {
         let f = ContextualFunction::new(2, 20, 4).unwrap();
         let s = [0.5, -1.0];
         // A least-norm solution of A theta = s reaches the optimum.
-        let theta =
-            f.matrix().clone().pseudo_inverse(1e-12).unwrap() * DVector::from_column_slice(&s);
+        let theta = f.matrix().clone().pseudo_inverse(1e-12).unwrap() * DVector::from_column_slice(&s);
         let (value, cost) = f.evaluate(theta.as_slice(), &s).unwrap();
         assert!((value - (-0.5)).abs() < 1e-9 && cost < 1e-9);
         // theta = 0: the error is ||s||, so the cost is ||s||^3.

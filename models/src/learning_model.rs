@@ -14,10 +14,7 @@
 //! - the model has no policy parameters: theta is empty.
 
 use crate::{ModelError, check};
-use acps_shared::{
-    ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind,
-    derive_seed,
-};
+use acps_shared::{ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind, derive_seed};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -62,11 +59,9 @@ impl LearningModel {
             config.sigma_b,
         )?;
         let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, 0));
-        let mut learning_factors: [f64; CONTEXTS] =
-            std::array::from_fn(|i| ((i + 1) as f64 / 10.0).powi(2));
+        let mut learning_factors: [f64; CONTEXTS] = std::array::from_fn(|i| ((i + 1) as f64 / 10.0).powi(2));
         learning_factors.shuffle(&mut rng);
-        let baseline_noise =
-            Normal::new(0.0, config.sigma_b).expect("sigma_b was checked to be finite and >= 0");
+        let baseline_noise = Normal::new(0.0, config.sigma_b).expect("sigma_b was checked to be finite and >= 0");
         let baselines = std::array::from_fn(|_| baseline_noise.sample(&mut rng));
         Ok(Self {
             config,
@@ -77,10 +72,7 @@ impl LearningModel {
     }
 
     /// Replace the drawn learning factors, for example by the permutation of the paper's Fig. 3.
-    pub fn with_learning_factors(
-        mut self,
-        learning_factors: [f64; CONTEXTS],
-    ) -> Result<Self, ModelError> {
+    pub fn with_learning_factors(mut self, learning_factors: [f64; CONTEXTS]) -> Result<Self, ModelError> {
         let valid = learning_factors.iter().all(|w| w.is_finite() && *w >= 0.0);
         check(
             valid,
@@ -101,8 +93,7 @@ impl LearningModel {
             name: "learning-model".into(),
             training_contexts: contexts.clone(),
             test_contexts: contexts,
-            space: ContextSpace::new_box(vec![-0.5], vec![CONTEXTS as f64 - 0.5])
-                .expect("a valid box"),
+            space: ContextSpace::new_box(vec![-0.5], vec![CONTEXTS as f64 - 0.5]).expect("a valid box"),
             theta0: Vec::new(),
             score: ScoreAggregate::Sum,
             metric: "J = sum over the 10 contexts of the noise-free reward r(s)".into(),
@@ -145,9 +136,7 @@ impl LearningModel {
 /// The context index a task names, if it is one of the ten.
 fn context_index(context: &[f64]) -> Option<usize> {
     match context {
-        [s] if s.is_finite() && s.fract() == 0.0 && (0.0..CONTEXTS as f64).contains(s) => {
-            Some(*s as usize)
-        }
+        [s] if s.is_finite() && s.fract() == 0.0 && (0.0..CONTEXTS as f64).contains(s) => Some(*s as usize),
         _ => None,
     }
 }
@@ -172,8 +161,7 @@ impl Environment for LearningModel {
         self.practise(s);
         let r = self.true_reward(s);
         let mut rng = ChaCha8Rng::seed_from_u64(task.seed);
-        let noise = Normal::new(0.0, self.config.sigma_r)
-            .expect("sigma_r was checked to be finite and >= 0");
+        let noise = Normal::new(0.0, self.config.sigma_r).expect("sigma_r was checked to be finite and >= 0");
         Outcome::new(task.id, r + noise.sample(&mut rng), r)
     }
 }
@@ -271,8 +259,7 @@ mod tests {
             .map(|i| model.rollout(&task(i, TaskKind::Train, 0.0)).reward - truth)
             .collect();
         let mean = noise.iter().sum::<f64>() / noise.len() as f64;
-        let std =
-            (noise.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / noise.len() as f64).sqrt();
+        let std = (noise.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / noise.len() as f64).sqrt();
         assert!(
             mean.abs() < 0.001 && (std - 0.01).abs() < 0.0005,
             "mean {mean}, std {std}"

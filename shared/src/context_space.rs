@@ -36,9 +36,7 @@ pub enum ContextSpaceError {
         high: Vec<f64>,
     },
     /// A zero dimension or a radius that is not finite and positive.
-    #[error(
-        "context ball: dim must be >= 1 and radius finite and > 0; got dim {dim}, radius {radius}"
-    )]
+    #[error("context ball: dim must be >= 1 and radius finite and > 0; got dim {dim}, radius {radius}")]
     InvalidBall {
         /// The offending dimension.
         dim: usize,
@@ -92,25 +90,16 @@ impl ContextSpace {
     pub fn contains(&self, s: &[f64]) -> bool {
         match self {
             Self::Box { low, high } => {
-                s.len() == low.len()
-                    && s.iter()
-                        .zip(low.iter().zip(high))
-                        .all(|(x, (l, h))| l <= x && x <= h)
+                s.len() == low.len() && s.iter().zip(low.iter().zip(high)).all(|(x, (l, h))| l <= x && x <= h)
             }
-            Self::Ball { dim, radius } => {
-                s.len() == *dim && s.iter().map(|x| x * x).sum::<f64>() <= radius * radius
-            }
+            Self::Ball { dim, radius } => s.len() == *dim && s.iter().map(|x| x * x).sum::<f64>() <= radius * radius,
         }
     }
 
     /// A uniform sample. The ball uses a Gaussian direction and a radius of `radius * u^(1/dim)`.
     pub fn sample(&self, rng: &mut dyn RngCore) -> Vec<f64> {
         match self {
-            Self::Box { low, high } => low
-                .iter()
-                .zip(high)
-                .map(|(l, h)| rng.random_range(*l..*h))
-                .collect(),
+            Self::Box { low, high } => low.iter().zip(high).map(|(l, h)| rng.random_range(*l..*h)).collect(),
             Self::Ball { dim, radius } => {
                 let direction = random_unit_vector(*dim, rng);
                 let r = radius * rng.random::<f64>().powf(1.0 / *dim as f64);
@@ -156,11 +145,7 @@ mod tests {
         let samples: Vec<_> = (0..4000).map(|_| ball.sample(&mut rng)).collect();
         assert!(samples.iter().all(|s| ball.contains(s)));
         // Uniform in the disc: the fraction inside radius 0.5 is 0.25.
-        let inner = samples
-            .iter()
-            .filter(|s| s[0] * s[0] + s[1] * s[1] < 0.25)
-            .count() as f64
-            / 4000.0;
+        let inner = samples.iter().filter(|s| s[0] * s[0] + s[1] * s[1] < 0.25).count() as f64 / 4000.0;
         assert!((inner - 0.25).abs() < 0.03, "inner fraction {inner}");
     }
 }

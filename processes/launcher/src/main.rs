@@ -1,1 +1,176 @@
-fn main() {}
+//! `acps`: the command line of Active Contextual Policy Search.
+
+use acps::experiment::{Experiment, progress_bar};
+use acps::paper::{self, Options};
+use acps_learner::Method;
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "acps",
+    version,
+    about = "Active contextual policy search (Fabisch & Metzen, JMLR 2014): C-REPS learns one policy over task contexts while D-UCB chooses which context to practise next."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run one of the paper's experiments in this process, for several methods x seeds in
+    /// parallel, and write DIR/summary.json.
+    Experiment(ExperimentArgs),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum ExperimentName {
+    /// Section 4's model of the learning process (Fig. 2 and 3).
+    Toy,
+    /// Section 5.1.2's contextual function on a 5x5 grid of contexts (Fig. 4 and 5).
+    Function,
+    /// Section 5.1.3: the contextual function for 1 to 4 context dimensions (Fig. 6).
+    Dims,
+}
+
+#[derive(clap::Args)]
+struct ExperimentArgs {
+    /// Which experiment.
+    name: ExperimentName,
+    /// Runs per method.
+    #[arg(long, default_value_t = 20)]
+    runs: usize,
+    /// Training episodes per run (default: the paper's length: toy 1000, function 2500, dims 5000).
+    #[arg(long)]
+    episodes: Option<u64>,
+    /// Seed of run 0; run r uses seed + r for the problem instance and the learner.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Training tasks in flight (P): task t is created after outcome t - P is consumed. 1 is the
+    /// paper's sequential algorithm.
+    #[arg(long, default_value_t = 1)]
+    in_flight: usize,
+    /// Run only this method (repeatable). Default: the methods of the paper's figure.
+    #[arg(long = "method", value_name = "METHOD")]
+    methods: Vec<String>,
+    /// toy only: one panel of Fig. 2 (a: sigma_r 0, sigma_b 0; b: 0.01, 0; c: 0, 0.2; d: 0.01, 0.2)
+    /// into DIR; without it all four go to DIR/a .. DIR/d.
+    #[arg(long)]
+    panel: Option<char>,
+    /// dims only: one context dimension (1..=4) into DIR; without it all four go to DIR/ns-1 .. DIR/ns-4.
+    #[arg(long)]
+    n_s: Option<usize>,
+    /// Output directory (default: runs/NAME).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Experiment(args) => experiment(args),
+    }
+}
+
+fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
+    if args.runs == 0 {
+        bail!("--runs must be >= 1, got 0");
+    }
+    let methods = args
+        .methods
+        .iter()
+        .map(|name| name.parse::<Method>())
+        .collect::<Result<Vec<_>, _>>()
+        .context("--method")?;
+    let options = Options {
+        runs: args.runs,
+        episodes: args.episodes,
+        seed: args.seed,
+        in_flight: args.in_flight,
+        methods: (!methods.is_empty()).then_some(methods),
+    };
+    let (name, default_dir) = match args.name {
+        ExperimentName::Toy => ("toy", "runs/toy"),
+        ExperimentName::Function => ("function", "runs/function"),
+        ExperimentName::Dims => ("dims", "runs/dims"),
+    };
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(default_dir));
+    let jobs: Vec<(Experiment, PathBuf)> = match args.name {
+        ExperimentName::Toy => {
+            if args.n_s.is_some() {
+                bail!("--n-s belongs to the dims experiment, not {name}");
+            }
+            let panels = match args.panel {
+                Some(panel) => vec![(panel, out.clone())],
+                None => "abcd".chars().map(|p| (p, out.join(p.to_string()))).collect(),
+            };
+            panels
+                .into_iter()
+                .map(|(panel, dir)| match paper::toy_panel(panel) {
+                    Some(model) => Ok((paper::toy(model, &options), dir)),
+                    None => bail!("--panel must be one of a, b, c, d; got '{panel}'"),
+                })
+                .collect::<anyhow::Result<_>>()?
+        }
+        ExperimentName::Function => {
+            if args.panel.is_some() || args.n_s.is_some() {
+                bail!("--panel and --n-s do not apply to the function experiment");
+            }
+            vec![(paper::function(&options), out.clone())]
+        }
+        ExperimentName::Dims => {
+            if args.panel.is_some() {
+                bail!("--panel belongs to the toy experiment, not {name}");
+            }
+            match args.n_s {
+                Some(n_s @ 1..=4) => vec![(paper::dims(n_s, &options), out.clone())],
+                Some(n_s) => bail!("--n-s must be in 1..=4, got {n_s}"),
+                None => (1..=4)
+                    .map(|n_s| (paper::dims(n_s, &options), out.join(format!("ns-{n_s}"))))
+                    .collect(),
+            }
+        }
+    };
+    for (experiment, dir) in jobs {
+        run_and_write(&experiment, &dir, args.quiet)?;
+    }
+    Ok(())
+}
+
+fn run_and_write(experiment: &Experiment, dir: &Path, quiet: bool) -> anyhow::Result<()> {
+    let progress = progress_bar(quiet);
+    let summary = experiment
+        .run(&progress)
+        .with_context(|| format!("experiment {}", experiment.name))?;
+    progress.finish_and_clear();
+    summary
+        .write(dir)
+        .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
+    if !quiet {
+        println!("{} -> {}", experiment.name, dir.join("summary.json").display());
+        for (method, result) in &summary.methods {
+            let fmt = |x: Option<f64>| x.map_or("n/a".to_string(), |x| format!("{x:.3}"));
+            println!(
+                "  {method:>20}: final {} +- {}",
+                fmt(result.final_mean),
+                fmt(result.final_sem)
+            );
+        }
+    }
+    Ok(())
+}

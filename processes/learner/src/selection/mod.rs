@@ -2,6 +2,26 @@
 //!
 //! Every strategy implements [`ContextSelector`]; the learner core only talks to that trait, so a
 //! new teacher plugs in without touching the learner loop.
+//!
+//! - [`BanditSelector`]: the paper's proposal, [`DUcb`] over the training contexts rewarded with
+//!   an [`IntrinsicReward`] (Sec. 3).
+//! - [`RoundRobin`], [`UniformDiscrete`], [`UniformContinuous`]: the paper's baselines.
+//! - [`SaggRiac`]: goal generation by competence progress in regions (Sec. 2.2, 4).
+
+mod bandit;
+mod baselines;
+mod ducb;
+mod error;
+mod intrinsic;
+mod sagg_riac;
+mod validate;
+
+pub use bandit::BanditSelector;
+pub use baselines::{RoundRobin, UniformContinuous, UniformDiscrete};
+pub use ducb::{DUcb, DUcbConfig};
+pub use error::SelectionError;
+pub use intrinsic::{FirstVisit, IntrinsicReward, IntrinsicTracker};
+pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig};
 
 use rand::RngCore;
 

@@ -1,0 +1,264 @@
+//! Running an experiment: every (method, run) pair is an independent learner run, executed in
+//! parallel with rayon and summarised into `summary.json`.
+//!
+//! Run `r` of every method uses the seed `base_seed + r` for both the problem instance and the
+//! learner, so methods are compared on the same problem instances (paired runs).
+
+use acps_learner::{Episode, Learner, LearnerConfig, LearnerError, LearnerStats, SelectorConfig, run_in_process};
+use acps_shared::{Environment, Problem};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One problem instance: what the learner sees, the environment, and a known optimal score.
+pub struct Instance {
+    /// The problem description.
+    pub problem: Problem,
+    /// The environment that performs rollouts.
+    pub environment: Box<dyn Environment>,
+    /// The best achievable score, when the problem knows it (the Section 4 model's J_opt).
+    pub optimal_score: Option<f64>,
+}
+
+/// Builds the problem instance of a run from the run's seed.
+pub type InstanceFactory = Box<dyn Fn(u64) -> Instance + Send + Sync>;
+
+/// A complete experiment definition.
+pub struct Experiment {
+    /// Name, as on the command line.
+    pub name: String,
+    /// The methods to compare.
+    pub methods: Vec<SelectorConfig>,
+    /// Runs per method.
+    pub runs: usize,
+    /// Run `r` uses seed `base_seed + r`.
+    pub base_seed: u64,
+    /// Learner settings (the seed is set per run).
+    pub learner: LearnerConfig,
+    /// The problem instance of a run.
+    pub instance: InstanceFactory,
+    /// Training episodes counted in the selection ratios (paper Fig. 5 uses 250).
+    pub selection_window: usize,
+    /// Settings to record in the summary, for readers and for re-running.
+    pub settings: serde_json::Value,
+}
+
+/// The result of one learner run.
+pub struct RunResult {
+    /// Episodes at which the policy was evaluated.
+    pub eval_episodes: Vec<u64>,
+    /// The evaluation scores (`None` if every rollout of an evaluation failed).
+    pub scores: Vec<Option<f64>>,
+    /// The consumed training episodes.
+    pub episodes: Vec<Episode>,
+    /// Counters.
+    pub stats: LearnerStats,
+    /// The instance's optimal score.
+    pub optimal_score: Option<f64>,
+}
+
+/// Per-method statistics over runs, in the summary.json contract.
+#[derive(Debug, Serialize)]
+pub struct MethodSummary {
+    /// Training episodes at which the policy was evaluated.
+    pub episodes: Vec<u64>,
+    /// Mean score over runs at each evaluation.
+    pub mean: Vec<Option<f64>>,
+    /// Standard error of that mean.
+    pub sem: Vec<Option<f64>>,
+    /// Mean of the last evaluation.
+    pub final_mean: Option<f64>,
+    /// Its standard error.
+    pub final_sem: Option<f64>,
+    /// The selected training context (index) of every episode of run 0 (null: continuous).
+    pub selections_run0: Vec<Option<usize>>,
+    /// Fraction of the first `selection_window` episodes spent in each training context,
+    /// averaged over runs.
+    pub selection_ratio: Vec<f64>,
+    /// Summed counters over runs.
+    pub updates: u64,
+    /// Summed rejected C-REPS updates over runs.
+    pub rejected_updates: u64,
+    /// Summed failed training rollouts over runs.
+    pub failed_episodes: u64,
+}
+
+/// The summary.json of an experiment.
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    /// Experiment name.
+    pub experiment: String,
+    /// What the numbers mean.
+    pub metric: String,
+    /// Runs per method.
+    pub runs: usize,
+    /// Seed of run 0.
+    pub base_seed: u64,
+    /// Training episodes per run.
+    pub training_episodes: u64,
+    /// Tasks in flight.
+    pub in_flight: usize,
+    /// Episodes counted in `selection_ratio`.
+    pub selection_window: usize,
+    /// The training contexts (indices in `selections_run0` refer to these).
+    pub training_contexts: Vec<Vec<f64>>,
+    /// Mean optimal score over runs, when known (Section 4: J_opt).
+    pub optimal_score_mean: Option<f64>,
+    /// Recorded settings.
+    pub settings: serde_json::Value,
+    /// Results per method.
+    pub methods: BTreeMap<String, MethodSummary>,
+}
+
+impl Experiment {
+    /// Run every (method, run) pair in parallel and summarise.
+    pub fn run(&self, progress: &ProgressBar) -> Result<Summary, LearnerError> {
+        let jobs: Vec<(usize, usize)> = (0..self.methods.len())
+            .flat_map(|m| (0..self.runs).map(move |r| (m, r)))
+            .collect();
+        progress.set_length(jobs.len() as u64);
+        progress.set_message(self.name.clone());
+        let results: Vec<RunResult> = jobs
+            .par_iter()
+            .map(|&(method, run)| {
+                let result = self.run_one(&self.methods[method], self.base_seed + run as u64);
+                progress.inc(1);
+                result
+            })
+            .collect::<Result<_, _>>()?;
+        let problem = (self.instance)(self.base_seed).problem;
+        let mut methods = BTreeMap::new();
+        for (index, selector) in self.methods.iter().enumerate() {
+            let runs = &results[index * self.runs..(index + 1) * self.runs];
+            methods.insert(
+                selector.method.name().to_string(),
+                self.summarise(runs, problem.training_contexts.len()),
+            );
+        }
+        let optimal: Vec<f64> = results[..self.runs].iter().filter_map(|r| r.optimal_score).collect();
+        Ok(Summary {
+            experiment: self.name.clone(),
+            metric: problem.metric.clone(),
+            runs: self.runs,
+            base_seed: self.base_seed,
+            training_episodes: self.learner.episodes,
+            in_flight: self.learner.in_flight,
+            selection_window: self.selection_window,
+            training_contexts: problem.training_contexts,
+            optimal_score_mean: (!optimal.is_empty()).then(|| mean(&optimal)),
+            settings: self.settings.clone(),
+            methods,
+        })
+    }
+
+    /// One learner run of `selector` with `seed`.
+    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, LearnerError> {
+        let Instance {
+            problem,
+            mut environment,
+            optimal_score,
+        } = (self.instance)(seed);
+        let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
+            problem: problem.name.clone(),
+            reason: e.to_string(),
+        })?;
+        let config = LearnerConfig {
+            seed,
+            ..self.learner.clone()
+        };
+        let mut learner = Learner::new(config, problem, selector)?;
+        run_in_process(&mut learner, environment.as_mut());
+        Ok(RunResult {
+            eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
+            scores: learner.evaluations().iter().map(|e| e.score).collect(),
+            episodes: learner.episodes().to_vec(),
+            stats: learner.stats().clone(),
+            optimal_score,
+        })
+    }
+
+    fn summarise(&self, runs: &[RunResult], contexts: usize) -> MethodSummary {
+        let points = runs[0].eval_episodes.len();
+        let (mean, sem): (Vec<_>, Vec<_>) = (0..points)
+            .map(|i| {
+                let values: Vec<f64> = runs.iter().filter_map(|r| r.scores[i]).collect();
+                if values.is_empty() {
+                    (None, None)
+                } else {
+                    (Some(self::mean(&values)), Some(standard_error(&values)))
+                }
+            })
+            .unzip();
+        let mut counts = vec![0.0; contexts];
+        for run in runs {
+            for arm in run.episodes.iter().take(self.selection_window).filter_map(|e| e.arm) {
+                counts[arm] += 1.0;
+            }
+        }
+        let window = (self.selection_window.min(runs[0].episodes.len()) * runs.len()) as f64;
+        MethodSummary {
+            episodes: runs[0].eval_episodes.clone(),
+            final_mean: mean.last().copied().flatten(),
+            final_sem: sem.last().copied().flatten(),
+            mean,
+            sem,
+            selections_run0: runs[0].episodes.iter().map(|e| e.arm).collect(),
+            selection_ratio: counts.into_iter().map(|c| c / window).collect(),
+            updates: runs.iter().map(|r| r.stats.updates).sum(),
+            rejected_updates: runs.iter().map(|r| r.stats.rejected_updates).sum(),
+            failed_episodes: runs.iter().map(|r| r.stats.failed_episodes).sum(),
+        }
+    }
+}
+
+impl Summary {
+    /// Write `dir/summary.json`, creating `dir`.
+    pub fn write(&self, dir: &Path) -> std::io::Result<()> {
+        std::fs::create_dir_all(dir)?;
+        let json = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        std::fs::write(dir.join("summary.json"), json)
+    }
+}
+
+/// Arithmetic mean.
+pub fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
+}
+
+/// Standard error of the mean (sample standard deviation / sqrt(n)); 0 for a single value.
+pub fn standard_error(values: &[f64]) -> f64 {
+    let n = values.len() as f64;
+    if values.len() < 2 {
+        return 0.0;
+    }
+    let m = mean(values);
+    (values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
+}
+
+/// A progress bar for `jobs` learner runs, hidden when `quiet`.
+pub fn progress_bar(quiet: bool) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} runs, {elapsed} elapsed, eta {eta}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn standard_error_matches_the_textbook_formula() {
+        // Sample std of [1, 2, 3, 4] is sqrt(5/3); SEM = that / 2.
+        assert!((standard_error(&[1.0, 2.0, 3.0, 4.0]) - (5.0f64 / 3.0).sqrt() / 2.0).abs() < 1e-15);
+        assert_eq!(standard_error(&[3.0]), 0.0);
+    }
+}

@@ -1,0 +1,5 @@
+//! The acps launcher: named experiments of the paper, run in-process over methods x seeds.
+#![warn(missing_docs)]
+
+pub mod experiment;
+pub mod paper;

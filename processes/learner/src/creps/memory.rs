@@ -1,0 +1,145 @@
+//! Which recorded rollouts a C-REPS update uses.
+
+use std::collections::VecDeque;
+
+use nalgebra::DVector;
+use serde::{Deserialize, Serialize};
+
+/// The sample memory an update runs on. Every update uses everything in memory.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum MemoryConfig {
+    /// The most recent `capacity` rollouts (BOLeRo's deques of `n_samples_per_update`).
+    SlidingWindow {
+        /// Maximum number of rollouts kept, >= 1.
+        capacity: usize,
+    },
+    /// For every training task separately, the `per_task` rollouts with the highest reward
+    /// (P Sec. 5.2 / Appendix A: "the best N/K rollouts" per task); a tie keeps the older one.
+    BestPerTask {
+        /// Rollouts kept per task, >= 1.
+        per_task: usize,
+    },
+}
+
+/// One stored rollout.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Sample {
+    pub features: DVector<f64>,
+    pub theta: DVector<f64>,
+    pub reward: f64,
+}
+
+#[derive(Clone, Debug)]
+pub(crate) enum Memory {
+    Window {
+        capacity: usize,
+        samples: VecDeque<Sample>,
+    },
+    /// One bucket per task, each sorted by descending reward, older first among equals.
+    PerTask {
+        per_task: usize,
+        buckets: Vec<Vec<Sample>>,
+    },
+}
+
+impl Memory {
+    pub fn new(config: &MemoryConfig, n_tasks: usize) -> Self {
+        match *config {
+            MemoryConfig::SlidingWindow { capacity } => Memory::Window {
+                capacity,
+                samples: VecDeque::with_capacity(capacity),
+            },
+            MemoryConfig::BestPerTask { per_task } => Memory::PerTask {
+                per_task,
+                buckets: vec![Vec::with_capacity(per_task + 1); n_tasks],
+            },
+        }
+    }
+
+    /// Stores `sample` for `task` (which must be < n_tasks).
+    pub fn push(&mut self, task: usize, sample: Sample) {
+        match self {
+            Memory::Window { capacity, samples } => {
+                if samples.len() == *capacity {
+                    samples.pop_front();
+                }
+                samples.push_back(sample);
+            }
+            Memory::PerTask { per_task, buckets } => {
+                let bucket = &mut buckets[task];
+                let position = bucket.partition_point(|kept| kept.reward >= sample.reward);
+                bucket.insert(position, sample);
+                bucket.truncate(*per_task);
+            }
+        }
+    }
+
+    /// Every stored sample: oldest first for the window, task by task (best first) otherwise.
+    pub fn samples(&self) -> Box<dyn Iterator<Item = &Sample> + '_> {
+        match self {
+            Memory::Window { samples, .. } => Box::new(samples.iter()),
+            Memory::PerTask { buckets, .. } => Box::new(buckets.iter().flatten()),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        match self {
+            Memory::Window { samples, .. } => samples.len(),
+            Memory::PerTask { buckets, .. } => buckets.iter().map(Vec::len).sum(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sample whose single feature tags it with `id`.
+    fn sample(id: f64, reward: f64) -> Sample {
+        Sample {
+            features: DVector::from_element(1, id),
+            theta: DVector::zeros(1),
+            reward,
+        }
+    }
+
+    fn ids(memory: &Memory) -> Vec<f64> {
+        memory.samples().map(|s| s.features[0]).collect()
+    }
+
+    #[test]
+    fn window_drops_the_oldest() {
+        let mut memory = Memory::new(&MemoryConfig::SlidingWindow { capacity: 3 }, 2);
+        for id in 0..5 {
+            memory.push(id % 2, sample(id as f64, 100.0 - id as f64));
+        }
+        assert_eq!(memory.len(), 3);
+        assert_eq!(ids(&memory), [2.0, 3.0, 4.0]);
+    }
+
+    #[test]
+    fn best_per_task_keeps_each_tasks_best_and_older_ties() {
+        let mut memory = Memory::new(&MemoryConfig::BestPerTask { per_task: 2 }, 3);
+        // Task 0 gets rewards 1, 5, 3, 5, 0; task 1 gets -10 only (worse than anything in
+        // task 0, but kept because it is task 1's best); task 2 stays empty.
+        let pushes = [
+            (0, 0.0, 1.0),
+            (0, 1.0, 5.0),
+            (1, 2.0, -10.0),
+            (0, 3.0, 3.0),
+            (0, 4.0, 5.0),
+            (0, 5.0, 0.0),
+        ];
+        for (task, id, reward) in pushes {
+            memory.push(task, sample(id, reward));
+        }
+        assert_eq!(memory.len(), 3);
+        // The two 5s of task 0, the older one first; then task 1's only sample.
+        assert_eq!(ids(&memory), [1.0, 4.0, 2.0]);
+        // A third 5 ties with the kept ones and loses to them.
+        memory.push(0, sample(6.0, 5.0));
+        assert_eq!(ids(&memory), [1.0, 4.0, 2.0]);
+        memory.push(0, sample(7.0, 6.0));
+        assert_eq!(ids(&memory), [7.0, 1.0, 2.0]);
+    }
+}

@@ -1,0 +1,289 @@
+//! Contextual relative entropy policy search (C-REPS; P Algorithm 2 and Appendix A), with the
+//! implementation choices of BOLeRo's `CREPSOptimizer` where the paper is silent.
+//!
+//! The policy `N(theta | W^T phi(s), Sigma)` ([`LinearGaussianPolicy`]) starts at `W = 0` except
+//! for the constant feature's coefficients, which are `theta0` (so the initial mean is `theta0`
+//! in every context), and `Sigma = initial_sigma I`. Rollouts are [`record`](CReps::record)ed into
+//! a [`MemoryConfig`] memory; after every `update_every` recorded rollouts an update runs on the
+//! whole memory (so the first update sees `update_every` samples, as in BOLeRo):
+//!
+//! 1. [`solve_dual`]: minimise the dual over `eta >= eta_min` and `v` (returns not normalised,
+//!    as in BOLeRo) and take `d = softmax((R - Phi v) / eta)`.
+//! 2. [`LinearGaussianPolicy::fit`]: weighted maximum likelihood with ridge `lambda`.
+//!
+//! A failed update (non-finite dual, singular regression, non-finite or non-positive-definite
+//! covariance) is reported as [`UpdateOutcome::Rejected`] and leaves the policy unchanged.
+
+mod dual;
+mod error;
+mod features;
+mod memory;
+mod policy;
+mod solver;
+
+pub use dual::{DualOptions, DualSolution, feature_matching_residual, kl_to_uniform, solve_dual};
+pub use error::CRepsError;
+pub use features::{CustomFeatures, FeatureFn, FeatureMap};
+pub use memory::MemoryConfig;
+pub use policy::LinearGaussianPolicy;
+
+use nalgebra::{DMatrix, DVector};
+use rand::RngCore;
+
+use error::{check_at_least_one, check_finite, check_non_negative, check_positive};
+use memory::{Memory, Sample};
+
+/// C-REPS settings.
+#[derive(Clone, Debug)]
+pub struct CRepsConfig {
+    /// Bound on the KL divergence between successive sample weightings, finite and > 0.
+    pub epsilon: f64,
+    /// Lower bound of eta, finite and > 0 (P suggests 1e-6..1e-4; BOLeRo uses 1e-8).
+    pub eta_min: f64,
+    /// Ridge lambda of the weighted least squares, finite and >= 0 (P and BOLeRo: 1e-4).
+    pub ridge: f64,
+    /// An update runs after every `update_every` recorded rollouts, >= 1.
+    pub update_every: usize,
+    /// Which rollouts an update uses.
+    pub memory: MemoryConfig,
+    /// The context features of the policy mean.
+    pub features: FeatureMap,
+    /// `Sigma_0 = initial_sigma I`, finite and > 0.
+    pub initial_sigma: f64,
+}
+
+impl Default for CRepsConfig {
+    /// BOLeRo's `CREPSOptimizer` defaults: epsilon 2, eta_min 1e-8, ridge 1e-4, an update every
+    /// 25 rollouts on a sliding window of 100, affine features, Sigma_0 = I.
+    fn default() -> Self {
+        Self {
+            epsilon: 2.0,
+            eta_min: 1e-8,
+            ridge: 1e-4,
+            update_every: 25,
+            memory: MemoryConfig::SlidingWindow { capacity: 100 },
+            features: FeatureMap::Affine,
+            initial_sigma: 1.0,
+        }
+    }
+}
+
+/// What an update did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UpdateReport {
+    /// The number of samples in memory that the update ran on.
+    pub samples: usize,
+    /// The result.
+    pub outcome: UpdateOutcome,
+}
+
+/// The result of an update.
+#[derive(Clone, Debug, PartialEq)]
+pub enum UpdateOutcome {
+    /// The policy was replaced.
+    Updated {
+        /// The dual's temperature.
+        eta: f64,
+        /// `KL(d || uniform)` of the sample weights (= epsilon when eta is off its bound).
+        kl: f64,
+        /// Dual solver iterations.
+        iterations: usize,
+        /// Whether eta ended exactly on `eta_min` (the KL bound was then not active).
+        eta_at_bound: bool,
+    },
+    /// The policy was kept; `reason` says why.
+    Rejected {
+        /// The failed step's error message.
+        reason: String,
+    },
+}
+
+/// A C-REPS learner: a contextual Gaussian policy, its sample memory and its update schedule.
+#[derive(Clone, Debug)]
+pub struct CReps {
+    config: CRepsConfig,
+    context_dim: usize,
+    n_tasks: usize,
+    policy: LinearGaussianPolicy,
+    memory: Memory,
+    since_update: usize,
+    dropped: usize,
+}
+
+impl CReps {
+    /// A learner for `context_dim`-dimensional contexts, initial mean `theta0` and `n_tasks`
+    /// training contexts (the buckets of [`MemoryConfig::BestPerTask`]). Every field of `config`
+    /// and every argument is validated.
+    pub fn new(config: CRepsConfig, context_dim: usize, theta0: &[f64], n_tasks: usize) -> Result<Self, CRepsError> {
+        check_positive("epsilon", config.epsilon)?;
+        check_positive("eta_min", config.eta_min)?;
+        check_non_negative("ridge", config.ridge)?;
+        check_at_least_one("update_every", config.update_every)?;
+        match config.memory {
+            MemoryConfig::SlidingWindow { capacity } => check_at_least_one("capacity", capacity)?,
+            MemoryConfig::BestPerTask { per_task } => check_at_least_one("per_task", per_task)?,
+        }
+        check_positive("initial_sigma", config.initial_sigma)?;
+        check_at_least_one("n_tasks", n_tasks)?;
+        check_at_least_one("theta0 length (n_theta)", theta0.len())?;
+        check_finite("theta0", theta0)?;
+        config.features.validate(context_dim, theta0)?;
+
+        let n_phi = config.features.dim(context_dim);
+        let mut weights = DMatrix::zeros(n_phi, theta0.len());
+        if let Some(constant) = config.features.constant_index(context_dim) {
+            weights.row_mut(constant).copy_from_slice(theta0);
+        }
+        let covariance = DMatrix::identity(theta0.len(), theta0.len()) * config.initial_sigma;
+        let policy = LinearGaussianPolicy::new(weights, covariance)?;
+        let memory = Memory::new(&config.memory, n_tasks);
+        Ok(Self {
+            config,
+            context_dim,
+            n_tasks,
+            policy,
+            memory,
+            since_update: 0,
+            dropped: 0,
+        })
+    }
+
+    /// `theta ~ N(W^T phi(s), Sigma)`, as `W^T phi(s) + L z` with `z` drawn in order from `rng`.
+    ///
+    /// # Panics
+    /// If `context.len() != context_dim`.
+    pub fn sample(&self, context: &[f64], rng: &mut dyn RngCore) -> Vec<f64> {
+        let features = self.features(context);
+        self.policy.sample(&features, rng).data.into()
+    }
+
+    /// The mean `W^T phi(s)` (exploration off).
+    ///
+    /// # Panics
+    /// If `context.len() != context_dim`.
+    pub fn greedy(&self, context: &[f64]) -> Vec<f64> {
+        self.policy.mean(&self.features(context)).data.into()
+    }
+
+    /// Stores one rollout of training task `task` and, after every `update_every` stored
+    /// rollouts, runs an update on the memory and returns its report.
+    ///
+    /// A rollout with a non-finite reward, theta, context or feature vector is not stored, does
+    /// not count towards `update_every` and returns `None`; [`dropped`](CReps::dropped) counts
+    /// them. (The learner filters failed rollouts before they get here, so this is a guard.)
+    ///
+    /// # Panics
+    /// If `task >= n_tasks`, `context.len() != context_dim` or `theta.len() != n_theta`.
+    pub fn record(&mut self, task: usize, context: &[f64], theta: &[f64], reward: f64) -> Option<UpdateReport> {
+        assert!(
+            task < self.n_tasks,
+            "task {task} out of range, n_tasks is {}",
+            self.n_tasks
+        );
+        assert_eq!(
+            theta.len(),
+            self.policy.n_params(),
+            "theta has {} entries, n_theta is {}",
+            theta.len(),
+            self.policy.n_params()
+        );
+        let features = self.features(context);
+        let finite = reward.is_finite()
+            && theta.iter().all(|t| t.is_finite())
+            && context.iter().all(|s| s.is_finite())
+            && features.iter().all(|f| f.is_finite());
+        if !finite {
+            self.dropped += 1;
+            return None;
+        }
+        let sample = Sample {
+            features,
+            theta: DVector::from_column_slice(theta),
+            reward,
+        };
+        self.memory.push(task, sample);
+        self.since_update += 1;
+        if self.since_update < self.config.update_every {
+            return None;
+        }
+        self.since_update = 0;
+        Some(self.update())
+    }
+
+    /// The current policy.
+    pub fn policy(&self) -> &LinearGaussianPolicy {
+        &self.policy
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CRepsConfig {
+        &self.config
+    }
+
+    /// The context dimension.
+    pub fn context_dim(&self) -> usize {
+        self.context_dim
+    }
+
+    /// The number of rollouts currently in memory.
+    pub fn memory_len(&self) -> usize {
+        self.memory.len()
+    }
+
+    /// The number of rollouts [`record`](CReps::record) refused because of non-finite values.
+    pub fn dropped(&self) -> usize {
+        self.dropped
+    }
+
+    fn features(&self, context: &[f64]) -> DVector<f64> {
+        assert_eq!(
+            context.len(),
+            self.context_dim,
+            "context has {} entries, context_dim is {}",
+            context.len(),
+            self.context_dim
+        );
+        self.config.features.apply(context)
+    }
+
+    /// One C-REPS update on everything in memory.
+    fn update(&mut self) -> UpdateReport {
+        let samples: Vec<&Sample> = self.memory.samples().collect();
+        let n = samples.len();
+        let features = DMatrix::from_fn(n, self.policy.n_features(), |i, j| samples[i].features[j]);
+        let thetas = DMatrix::from_fn(n, self.policy.n_params(), |i, j| samples[i].theta[j]);
+        let returns: Vec<f64> = samples.iter().map(|s| s.reward).collect();
+        let config = &self.config;
+        let result = solve_dual(
+            &features,
+            &returns,
+            config.epsilon,
+            config.eta_min,
+            &DualOptions::default(),
+        )
+        .and_then(|dual| {
+            let policy = self
+                .policy
+                .fit(&features, &thetas, dual.weights.as_slice(), config.ridge)?;
+            Ok((dual, policy))
+        });
+        let outcome = match result {
+            Ok((dual, policy)) => {
+                self.policy = policy;
+                UpdateOutcome::Updated {
+                    eta: dual.eta,
+                    kl: dual.kl,
+                    iterations: dual.iterations,
+                    eta_at_bound: dual.eta <= config.eta_min,
+                }
+            }
+            Err(error) => UpdateOutcome::Rejected {
+                reason: error.to_string(),
+            },
+        };
+        UpdateReport { samples: n, outcome }
+    }
+}
+
+#[cfg(test)]
+mod tests;

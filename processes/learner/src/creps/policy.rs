@@ -1,0 +1,332 @@
+//! The upper-level policy `pi(theta | s) = N(theta | W^T phi(s), Sigma)` and its weighted
+//! maximum-likelihood update (P Alg. 2 lines 11-17, with BOLeRo's choices).
+
+use nalgebra::{Cholesky, DMatrix, DVector};
+use rand::RngCore;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::error::{CRepsError, check_finite, check_non_negative};
+
+/// A Gaussian over parameter vectors whose mean is linear in the context features.
+///
+/// `W` is stored as n_phi x n_theta (the paper's orientation: the mean is `W^T phi`); BOLeRo
+/// stores its transpose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearGaussianPolicy {
+    weights: DMatrix<f64>,
+    covariance: DMatrix<f64>,
+    /// Lower Cholesky factor L of the covariance (`Sigma = L L^T`).
+    cholesky_factor: DMatrix<f64>,
+}
+
+impl LinearGaussianPolicy {
+    /// A policy with mean coefficients `weights` (n_phi x n_theta) and covariance `covariance`
+    /// (n_theta x n_theta), which must be finite, symmetric (to 1e-12 relative) and positive
+    /// definite. The covariance is stored symmetrised.
+    pub fn new(weights: DMatrix<f64>, covariance: DMatrix<f64>) -> Result<Self, CRepsError> {
+        check_len(
+            "the covariance's row count",
+            covariance.nrows(),
+            "its column count",
+            covariance.ncols(),
+        )?;
+        check_len(
+            "the number of columns of W (n_theta)",
+            weights.ncols(),
+            "the covariance's size",
+            covariance.nrows(),
+        )?;
+        check_finite("W", weights.as_slice())?;
+        check_finite("covariance", covariance.as_slice())?;
+        let not_pd = CRepsError::NotPositiveDefinite { name: "covariance" };
+        let asymmetry = (&covariance - covariance.transpose()).amax();
+        if asymmetry > 1e-12 * covariance.amax() {
+            return Err(not_pd);
+        }
+        let covariance = (&covariance + covariance.transpose()) * 0.5;
+        let cholesky_factor = Cholesky::new(covariance.clone()).ok_or(not_pd)?.unpack();
+        Ok(Self {
+            weights,
+            covariance,
+            cholesky_factor,
+        })
+    }
+
+    /// W, n_phi x n_theta.
+    pub fn weights(&self) -> &DMatrix<f64> {
+        &self.weights
+    }
+
+    /// Sigma, n_theta x n_theta.
+    pub fn covariance(&self) -> &DMatrix<f64> {
+        &self.covariance
+    }
+
+    /// The lower Cholesky factor L of Sigma.
+    pub fn cholesky_factor(&self) -> &DMatrix<f64> {
+        &self.cholesky_factor
+    }
+
+    /// n_phi.
+    pub fn n_features(&self) -> usize {
+        self.weights.nrows()
+    }
+
+    /// n_theta.
+    pub fn n_params(&self) -> usize {
+        self.weights.ncols()
+    }
+
+    /// The mean `W^T phi`.
+    pub fn mean(&self, features: &DVector<f64>) -> DVector<f64> {
+        self.weights.tr_mul(features)
+    }
+
+    /// `W^T phi + L z` with `z ~ N(0, I)` drawn component by component, in order, from `rng`.
+    pub fn sample(&self, features: &DVector<f64>, rng: &mut dyn RngCore) -> DVector<f64> {
+        let z = DVector::from_iterator(
+            self.n_params(),
+            (0..self.n_params()).map(|_| StandardNormal.sample(rng)),
+        );
+        self.mean(features) + &self.cholesky_factor * z
+    }
+
+    /// Weighted maximum likelihood on samples (rows of `features` and `thetas`) with weights
+    /// `weights` (>= 0; C-REPS passes the softmax weights, which sum to 1), following BOLeRo:
+    ///
+    /// - weights that are exactly 0 become `f64::EPSILON`, so that a single dominant sample
+    ///   does not make the covariance estimate singular outright;
+    /// - `W_new = (Phi^T D Phi + ridge I)^-1 Phi^T D Theta`, solved by Cholesky (never inverted);
+    ///   the ridge acts on every feature including the constant one, and its strength relative
+    ///   to the data depends on the weights' scale;
+    /// - `Sigma_new = [sum d / ((sum d)^2 - sum d^2)] sum_i d_i e_i e_i^T` with the residuals
+    ///   `e_i = theta_i - W_old^T phi_i` of the **old** mean (P Alg. 2 line 17 does not say which
+    ///   W it means; BOLeRo uses the old one, before the mean update).
+    ///
+    /// Returns the new policy, or an error (and no change) if the weighted least-squares matrix
+    /// or the new covariance is not positive definite, or anything is non-finite.
+    pub fn fit(
+        &self,
+        features: &DMatrix<f64>,
+        thetas: &DMatrix<f64>,
+        weights: &[f64],
+        ridge: f64,
+    ) -> Result<Self, CRepsError> {
+        check_len(
+            "the number of feature rows",
+            features.nrows(),
+            "the number of weights",
+            weights.len(),
+        )?;
+        check_len(
+            "the number of theta rows",
+            thetas.nrows(),
+            "the number of weights",
+            weights.len(),
+        )?;
+        check_len(
+            "the number of feature columns",
+            features.ncols(),
+            "the policy's n_phi",
+            self.n_features(),
+        )?;
+        check_len(
+            "the number of theta columns",
+            thetas.ncols(),
+            "the policy's n_theta",
+            self.n_params(),
+        )?;
+        check_non_negative("ridge", ridge)?;
+        check_finite("weights", weights)?;
+        if let Some(&value) = weights.iter().find(|&&w| w < 0.0) {
+            return Err(CRepsError::Negative { name: "weights", value });
+        }
+
+        let d = DVector::from_iterator(
+            weights.len(),
+            weights.iter().map(|&w| if w == 0.0 { f64::EPSILON } else { w }),
+        );
+        let sum = d.sum();
+        let scale = sum / (sum * sum - d.norm_squared());
+        let residuals = thetas - features * &self.weights;
+        let weighted_residuals = scale_rows(&residuals, &d);
+        let covariance = residuals.tr_mul(&weighted_residuals) * scale;
+
+        let mut normal_matrix = features.tr_mul(&scale_rows(features, &d));
+        for i in 0..normal_matrix.nrows() {
+            normal_matrix[(i, i)] += ridge;
+        }
+        let right_hand_side = features.tr_mul(&scale_rows(thetas, &d));
+        let weights = Cholesky::new(normal_matrix)
+            .ok_or(CRepsError::SingularRegression)?
+            .solve(&right_hand_side);
+        Self::new(weights, covariance)
+    }
+}
+
+/// `diag(d) m`.
+fn scale_rows(m: &DMatrix<f64>, d: &DVector<f64>) -> DMatrix<f64> {
+    let mut scaled = m.clone();
+    for (mut row, &di) in scaled.row_iter_mut().zip(d.iter()) {
+        row *= di;
+    }
+    scaled
+}
+
+fn check_len(first: &'static str, first_len: usize, second: &'static str, second_len: usize) -> Result<(), CRepsError> {
+    if first_len == second_len {
+        Ok(())
+    } else {
+        Err(CRepsError::LengthMismatch {
+            first,
+            first_len,
+            second,
+            second_len,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::creps::FeatureMap;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn policy(n_phi: usize, n_theta: usize) -> LinearGaussianPolicy {
+        LinearGaussianPolicy::new(DMatrix::zeros(n_phi, n_theta), DMatrix::identity(n_theta, n_theta)).unwrap()
+    }
+
+    /// Rows `phi(x_i)` for x = linspace(0, 1, n).
+    fn design(map: &FeatureMap, n: usize) -> (Vec<f64>, DMatrix<f64>) {
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / (n - 1) as f64).collect();
+        let rows: Vec<_> = x.iter().map(|&xi| map.apply(&[xi]).transpose()).collect();
+        (x, DMatrix::from_rows(&rows))
+    }
+
+    /// BOLeRo's test_linear_gaussian: 3x + 10 with noise 0.05, unit weights, no ridge; "2
+    /// decimals" in numpy's sense (|error| < 1.5e-2). The slope's standard error is
+    /// 0.05 / sqrt(1001 / 12) = 0.0055, so unittest's stricter 0.005 would be a 1-sigma test.
+    #[test]
+    fn noisy_line_fit_recovers_w() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let (x, phi) = design(&FeatureMap::Affine, 1001);
+        let thetas = DMatrix::from_fn(1001, 1, |i, _| {
+            3.0 * x[i] + 10.0 + 0.05 * rng.sample::<f64, _>(StandardNormal)
+        });
+        let fitted = policy(2, 1).fit(&phi, &thetas, &[1.0; 1001], 0.0).unwrap();
+        assert!((fitted.weights()[(0, 0)] - 3.0).abs() < 1.5e-2, "{}", fitted.weights());
+        assert!((fitted.weights()[(1, 0)] - 10.0).abs() < 1.5e-2, "{}", fitted.weights());
+    }
+
+    /// BOLeRo's test_context_transformation: an exact quadratic is recovered to 7 places.
+    #[test]
+    fn quadratic_fit_is_exact() {
+        let (x, phi) = design(&FeatureMap::Quadratic, 101);
+        let thetas = DMatrix::from_fn(101, 1, |i, _| 3.0 * x[i] * x[i] + 2.0 * x[i] + 10.0);
+        let fitted = policy(3, 1).fit(&phi, &thetas, &[1.0; 101], 0.0).unwrap();
+        for (got, want) in fitted.weights().iter().zip([3.0, 2.0, 10.0]) {
+            assert!((got - want).abs() < 1e-7, "{}", fitted.weights());
+        }
+    }
+
+    /// With uniform normalised weights 1/N the update is ridge regression with penalty
+    /// `N ridge` on the unnormalised data, computed here independently as the least-squares
+    /// solution of the augmented system `[Phi; sqrt(N ridge) I] W = [Theta; 0]` by SVD.
+    #[test]
+    fn uniform_weights_reproduce_ridge_regression() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let n = 40;
+        let ridge = 0.05;
+        let phi = DMatrix::from_fn(n, 3, |_, j| if j == 2 { 1.0 } else { rng.random_range(-1.0..1.0) });
+        let thetas = DMatrix::from_fn(n, 2, |_, _| rng.random_range(-2.0..2.0));
+        let fitted = policy(3, 2)
+            .fit(&phi, &thetas, &vec![1.0 / n as f64; n], ridge)
+            .unwrap();
+
+        let penalty = (n as f64 * ridge).sqrt();
+        let augmented = DMatrix::from_fn(n + 3, 3, |i, j| {
+            if i < n {
+                phi[(i, j)]
+            } else if i - n == j {
+                penalty
+            } else {
+                0.0
+            }
+        });
+        let target = DMatrix::from_fn(n + 3, 2, |i, j| if i < n { thetas[(i, j)] } else { 0.0 });
+        let expected = augmented.svd(true, true).solve(&target, 1e-14).unwrap();
+        assert!(
+            (fitted.weights() - &expected).amax() < 1e-12,
+            "{} vs {expected}",
+            fitted.weights()
+        );
+    }
+
+    /// Noise-free data on a line: the new mean fits it exactly (new-W residuals are 0), so a
+    /// non-zero Sigma can only come from the old W = 0, whose residuals are the thetas.
+    #[test]
+    fn covariance_uses_the_old_mean() {
+        let n = 11;
+        let (x, phi) = design(&FeatureMap::Affine, n);
+        let thetas = DMatrix::from_fn(n, 1, |i, _| 3.0 * x[i] + 10.0);
+        let d = vec![1.0 / n as f64; n];
+        let fitted = policy(2, 1).fit(&phi, &thetas, &d, 0.0).unwrap();
+        let new_residuals = &thetas - &phi * fitted.weights();
+        assert!(new_residuals.amax() < 1e-10);
+        let sum_d2: f64 = d.iter().map(|d| d * d).sum();
+        let expected = thetas.iter().map(|t| t * t / n as f64).sum::<f64>() / (1.0 - sum_d2);
+        assert!((fitted.covariance()[(0, 0)] - expected).abs() < 1e-10 * expected);
+    }
+
+    /// BOLeRo: samples around mean 10 with Sigma = I have mean 10 +- 0.1 and std 1 +- 0.1.
+    #[test]
+    fn samples_follow_the_gaussian() {
+        let mut weights = DMatrix::zeros(2, 1);
+        weights[(1, 0)] = 10.0;
+        let policy = LinearGaussianPolicy::new(weights, DMatrix::identity(1, 1)).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let phi = DVector::from_vec(vec![0.3, 1.0]);
+        let samples: Vec<f64> = (0..1001).map(|_| policy.sample(&phi, &mut rng)[0]).collect();
+        let mean = samples.iter().sum::<f64>() / 1001.0;
+        let std = (samples.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / 1001.0).sqrt();
+        assert!((mean - 10.0).abs() < 0.1 && (std - 1.0).abs() < 0.1, "{mean} {std}");
+    }
+
+    #[test]
+    fn degenerate_fits_are_errors() {
+        let (_, phi) = design(&FeatureMap::Affine, 5);
+        let thetas = DMatrix::from_element(5, 1, 1e200);
+        // Squared residuals of 1e200 overflow.
+        let error = policy(2, 1).fit(&phi, &thetas, &[0.2; 5], 1e-4).unwrap_err();
+        assert!(error.to_string().starts_with("covariance must be finite"), "{error}");
+        // One sample: sum d = sum d^2, the normaliser divides by zero.
+        let one = policy(2, 1).fit(
+            &phi.rows(0, 1).into_owned(),
+            &thetas.rows(0, 1).into_owned(),
+            &[1.0],
+            1e-4,
+        );
+        assert!(one.is_err());
+        // Identical contexts without ridge: Phi^T D Phi is singular.
+        let same = DMatrix::from_fn(5, 2, |_, j| if j == 0 { 0.5 } else { 1.0 });
+        let error = policy(2, 1)
+            .fit(&same, &DMatrix::zeros(5, 1), &[0.2; 5], 0.0)
+            .unwrap_err();
+        assert_eq!(error, CRepsError::SingularRegression);
+        let error = policy(2, 1)
+            .fit(&phi, &DMatrix::zeros(4, 1), &[0.2; 5], 0.0)
+            .unwrap_err();
+        assert!(error.to_string().contains("(4) must equal the number of weights (5)"));
+    }
+
+    #[test]
+    fn new_rejects_bad_covariances() {
+        let bad = |covariance: DMatrix<f64>| LinearGaussianPolicy::new(DMatrix::zeros(2, 2), covariance);
+        assert!(bad(DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0])).is_err());
+        assert!(bad(DMatrix::from_row_slice(2, 2, &[1.0, 0.5, 0.0, 1.0])).is_err());
+        assert!(bad(DMatrix::identity(3, 3)).is_err());
+        assert!(bad(DMatrix::from_row_slice(2, 2, &[f64::NAN, 0.0, 0.0, 1.0])).is_err());
+        assert!(bad(DMatrix::identity(2, 2)).is_ok());
+    }
+}

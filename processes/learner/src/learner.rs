@@ -1,0 +1,451 @@
+//! The learner core: a deterministic ask/tell state machine (pycma style: the caller owns the
+//! loop). In-process runs and the worker fleet drive this same type.
+//!
+//! # Determinism
+//! Task ids form one sequence. Training task `t` is created from the learner state right after
+//! training outcome `t - P` has been consumed (P = `in_flight`), and outcomes are consumed strictly
+//! in id order through a reorder buffer. Tasks are created eagerly inside [`Learner::tell`], never
+//! lazily in [`Learner::ask`], so the time at which a caller asks cannot change what is created:
+//! the whole run depends on (config, seed, P) only. P = 1 is the paper's sequential algorithm.
+//!
+//! # Task kinds
+//! - `Baseline`: before training, one greedy rollout of the initial policy per training context
+//!   when the selector uses first-visit baselines (progress heuristics).
+//! - `Train`: an explorative rollout in the context the selector chose.
+//! - `Evaluate`: greedy rollouts on every test context after 0, `eval_every`, 2 `eval_every`, ...
+//!   consumed training episodes and after the last one.
+//!
+//! # Failed rollouts
+//! A failed training rollout (simulation failure or a non-finite return) is counted, kept out of
+//! the C-REPS memory, and the selector observes the lowest return consumed so far in the run
+//! (0 before any). A failed evaluation rollout is left out of that evaluation's aggregate and
+//! counted in [`Evaluation::failed`].
+
+use crate::creps::{CReps, CRepsConfig, CRepsError, UpdateOutcome};
+use crate::selection::{Choice, ContextSelector};
+use acps_shared::{Outcome, Problem, Stream, Task, TaskKind, derive_seed};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, VecDeque};
+
+/// How the learner runs, independent of the selection method.
+#[derive(Debug, Clone)]
+pub struct LearnerConfig {
+    /// Seed of every random stream of the run.
+    pub seed: u64,
+    /// Number of training episodes (rollouts), >= 1.
+    pub episodes: u64,
+    /// Training tasks in flight, P >= 1: task t is created after outcome t - P is consumed.
+    pub in_flight: usize,
+    /// Evaluate the greedy policy every this many consumed training episodes, >= 1.
+    pub eval_every: u64,
+    /// The upper-level policy search; `None` for problems without policy parameters.
+    pub creps: Option<CRepsConfig>,
+}
+
+/// A configuration the learner cannot run with.
+#[derive(Debug, thiserror::Error)]
+pub enum LearnerError {
+    /// A field outside its accepted range.
+    #[error("learner config: {field} must be {accepted}, got {got}")]
+    Config {
+        /// The offending field.
+        field: &'static str,
+        /// The accepted range.
+        accepted: &'static str,
+        /// The given value.
+        got: String,
+    },
+    /// The problem and the policy configuration do not fit together.
+    #[error("problem '{problem}': {reason}")]
+    Problem {
+        /// The problem's name.
+        problem: String,
+        /// What does not fit.
+        reason: String,
+    },
+    /// C-REPS refused its configuration.
+    #[error(transparent)]
+    CReps(#[from] CRepsError),
+}
+
+/// An outcome the learner cannot accept.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TellError {
+    /// No task with this id is waiting for its outcome (never issued, or already consumed).
+    #[error("outcome for task {task_id}, which is not waiting for an outcome")]
+    UnknownTask {
+        /// The outcome's task id.
+        task_id: u64,
+    },
+    /// An outcome for this task is already buffered.
+    #[error("second outcome for task {task_id}")]
+    Duplicate {
+        /// The outcome's task id.
+        task_id: u64,
+    },
+}
+
+/// One evaluation of the greedy policy on the test contexts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Evaluation {
+    /// Training episodes consumed before the policy was evaluated.
+    pub episode: u64,
+    /// The aggregated score (problem-defined), `None` while incomplete or if every rollout failed.
+    pub score: Option<f64>,
+    /// Failed rollouts, left out of the score.
+    pub failed: usize,
+    scores: Vec<f64>,
+    remaining: usize,
+}
+
+/// A consumed training episode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Episode {
+    /// The chosen training context, `None` for a context drawn from the continuous space.
+    pub arm: Option<usize>,
+    /// The context.
+    pub context: Vec<f64>,
+    /// The return (NaN when the rollout failed).
+    pub reward: f64,
+}
+
+/// Counters of a run.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct LearnerStats {
+    /// C-REPS updates applied.
+    pub updates: u64,
+    /// C-REPS updates rejected (old policy kept).
+    pub rejected_updates: u64,
+    /// Failed training rollouts.
+    pub failed_episodes: u64,
+    /// Why the latest rejected update was rejected.
+    pub last_rejection: Option<String>,
+}
+
+enum Role {
+    Train { choice: Choice, bucket: usize },
+    Evaluate { evaluation: usize },
+    Baseline { arm: usize },
+}
+
+struct Pending {
+    task: Task,
+    role: Role,
+}
+
+/// The learner: context selection plus C-REPS behind an ask/tell interface.
+pub struct Learner {
+    config: LearnerConfig,
+    problem: Problem,
+    selector: Box<dyn ContextSelector>,
+    policy: Option<CReps>,
+    selection_rng: ChaCha8Rng,
+    exploration_rng: ChaCha8Rng,
+    next_id: u64,
+    train_issued: u64,
+    train_consumed: u64,
+    next_to_consume: u64,
+    outbox: VecDeque<u64>,
+    pending: BTreeMap<u64, Pending>,
+    arrived: BTreeMap<u64, Outcome>,
+    evaluations: Vec<Evaluation>,
+    episodes: Vec<Episode>,
+    lowest_reward: Option<f64>,
+    stats: LearnerStats,
+}
+
+impl Learner {
+    /// A learner for `problem` choosing contexts with `selector`.
+    pub fn new(
+        config: LearnerConfig,
+        problem: Problem,
+        selector: Box<dyn ContextSelector>,
+    ) -> Result<Self, LearnerError> {
+        let check = |ok: bool, field, accepted, got: String| {
+            if ok {
+                Ok(())
+            } else {
+                Err(LearnerError::Config { field, accepted, got })
+            }
+        };
+        check(config.episodes >= 1, "episodes", ">= 1", config.episodes.to_string())?;
+        check(config.in_flight >= 1, "in_flight", ">= 1", config.in_flight.to_string())?;
+        check(
+            config.eval_every >= 1,
+            "eval_every",
+            ">= 1",
+            config.eval_every.to_string(),
+        )?;
+        let problem_error = |reason: String| LearnerError::Problem {
+            problem: problem.name.clone(),
+            reason,
+        };
+        if problem.training_contexts.is_empty() {
+            return Err(problem_error("has no training contexts".into()));
+        }
+        if let Some(bad) = problem
+            .training_contexts
+            .iter()
+            .chain(&problem.test_contexts)
+            .find(|s| s.len() != problem.context_dim())
+        {
+            return Err(problem_error(format!(
+                "context {bad:?} does not have the space's dimension {}",
+                problem.context_dim()
+            )));
+        }
+        let policy = match (&config.creps, problem.theta0.is_empty()) {
+            (Some(creps), false) => Some(CReps::new(
+                creps.clone(),
+                problem.context_dim(),
+                &problem.theta0,
+                problem.training_contexts.len(),
+            )?),
+            (None, true) => None,
+            (Some(_), true) => {
+                return Err(problem_error(
+                    "has no policy parameters, so C-REPS cannot be configured".into(),
+                ));
+            }
+            (None, false) => {
+                return Err(problem_error(format!(
+                    "has {} policy parameters but no C-REPS configuration",
+                    problem.theta0.len()
+                )));
+            }
+        };
+        let mut learner = Self {
+            selection_rng: ChaCha8Rng::seed_from_u64(derive_seed(config.seed, Stream::Selection, 0)),
+            exploration_rng: ChaCha8Rng::seed_from_u64(derive_seed(config.seed, Stream::Exploration, 0)),
+            config,
+            problem,
+            selector,
+            policy,
+            next_id: 0,
+            train_issued: 0,
+            train_consumed: 0,
+            next_to_consume: 0,
+            outbox: VecDeque::new(),
+            pending: BTreeMap::new(),
+            arrived: BTreeMap::new(),
+            evaluations: Vec::new(),
+            episodes: Vec::new(),
+            lowest_reward: None,
+            stats: LearnerStats::default(),
+        };
+        if learner.selector.wants_initial_returns() {
+            for arm in 0..learner.problem.training_contexts.len() {
+                let context = learner.problem.training_contexts[arm].clone();
+                learner.create(TaskKind::Baseline, context, Role::Baseline { arm });
+            }
+        }
+        learner.create_evaluation();
+        while learner.train_issued < learner.config.episodes.min(learner.config.in_flight as u64) {
+            learner.create_training_task();
+        }
+        Ok(learner)
+    }
+
+    /// The next task to perform, or `None` when every created task has been handed out (wait for
+    /// outcomes, or the run is done).
+    pub fn ask(&mut self) -> Option<Task> {
+        let id = self.outbox.pop_front()?;
+        Some(self.pending[&id].task.clone())
+    }
+
+    /// Hand a task out again (for example after the worker that had it died). Returns false when
+    /// the task is not waiting for an outcome.
+    pub fn reissue(&mut self, task_id: u64) -> bool {
+        let waiting = self.pending.contains_key(&task_id)
+            && !self.arrived.contains_key(&task_id)
+            && !self.outbox.contains(&task_id);
+        if waiting {
+            self.outbox.push_back(task_id);
+        }
+        waiting
+    }
+
+    /// Report the outcome of a task. Outcomes may arrive in any order; they are consumed in task
+    /// order, and consuming them may create new tasks.
+    pub fn tell(&mut self, outcome: Outcome) -> Result<(), TellError> {
+        let task_id = outcome.task_id;
+        if !self.pending.contains_key(&task_id) {
+            return Err(TellError::UnknownTask { task_id });
+        }
+        if self.arrived.contains_key(&task_id) {
+            return Err(TellError::Duplicate { task_id });
+        }
+        self.arrived.insert(task_id, outcome);
+        self.outbox.retain(|id| *id != task_id);
+        while let Some(outcome) = self.arrived.remove(&self.next_to_consume) {
+            let pending = self
+                .pending
+                .remove(&self.next_to_consume)
+                .expect("arrived outcomes belong to pending tasks");
+            self.next_to_consume += 1;
+            self.consume(pending, outcome);
+        }
+        Ok(())
+    }
+
+    /// True when every training episode and every evaluation has been consumed.
+    pub fn is_done(&self) -> bool {
+        self.train_consumed == self.config.episodes && self.pending.is_empty()
+    }
+
+    /// Evaluations so far, complete ones first in episode order.
+    pub fn evaluations(&self) -> &[Evaluation] {
+        &self.evaluations
+    }
+
+    /// The consumed training episodes in order.
+    pub fn episodes(&self) -> &[Episode] {
+        &self.episodes
+    }
+
+    /// Counters of the run.
+    pub fn stats(&self) -> &LearnerStats {
+        &self.stats
+    }
+
+    /// The problem being learned.
+    pub fn problem(&self) -> &Problem {
+        &self.problem
+    }
+
+    /// The upper-level policy search, if the problem has parameters.
+    pub fn policy(&self) -> Option<&CReps> {
+        self.policy.as_ref()
+    }
+
+    /// Tasks created but not yet consumed.
+    pub fn tasks_in_flight(&self) -> usize {
+        self.pending.len()
+    }
+
+    fn create(&mut self, kind: TaskKind, context: Vec<f64>, role: Role) {
+        let theta = match (&self.policy, kind) {
+            (None, _) => Vec::new(),
+            (Some(policy), TaskKind::Train) => policy.sample(&context, &mut self.exploration_rng),
+            (Some(policy), _) => policy.greedy(&context),
+        };
+        let id = self.next_id;
+        self.next_id += 1;
+        let task = Task {
+            id,
+            kind,
+            seed: derive_seed(self.config.seed, Stream::Environment, id),
+            context,
+            theta,
+        };
+        self.pending.insert(id, Pending { task, role });
+        self.outbox.push_back(id);
+    }
+
+    fn create_training_task(&mut self) {
+        let choice = self.selector.choose(&mut self.selection_rng);
+        let bucket = choice
+            .arm
+            .unwrap_or_else(|| nearest(&self.problem.training_contexts, &choice.context));
+        self.train_issued += 1;
+        self.create(TaskKind::Train, choice.context.clone(), Role::Train { choice, bucket });
+    }
+
+    fn create_evaluation(&mut self) {
+        let contexts = self.problem.test_contexts.clone();
+        if contexts.is_empty() {
+            return;
+        }
+        let evaluation = self.evaluations.len();
+        self.evaluations.push(Evaluation {
+            episode: self.train_consumed,
+            score: None,
+            failed: 0,
+            scores: Vec::new(),
+            remaining: contexts.len(),
+        });
+        for context in contexts {
+            self.create(TaskKind::Evaluate, context, Role::Evaluate { evaluation });
+        }
+    }
+
+    fn consume(&mut self, pending: Pending, outcome: Outcome) {
+        match pending.role {
+            Role::Baseline { arm } => {
+                if outcome.is_ok() {
+                    self.selector.prime(arm, outcome.reward);
+                }
+            }
+            Role::Evaluate { evaluation } => {
+                let aggregate = self.problem.score;
+                let evaluation = &mut self.evaluations[evaluation];
+                if outcome.is_ok() {
+                    evaluation.scores.push(outcome.score);
+                } else {
+                    evaluation.failed += 1;
+                }
+                evaluation.remaining -= 1;
+                if evaluation.remaining == 0 {
+                    evaluation.score = aggregate.apply(&evaluation.scores);
+                }
+            }
+            Role::Train { choice, bucket } => self.consume_training(pending.task, choice, bucket, &outcome),
+        }
+    }
+
+    fn consume_training(&mut self, task: Task, choice: Choice, bucket: usize, outcome: &Outcome) {
+        self.train_consumed += 1;
+        let reward = if outcome.is_ok() {
+            self.lowest_reward = Some(self.lowest_reward.map_or(outcome.reward, |low| low.min(outcome.reward)));
+            let report = self
+                .policy
+                .as_mut()
+                .and_then(|p| p.record(bucket, &task.context, &task.theta, outcome.reward));
+            match report.map(|r| r.outcome) {
+                Some(UpdateOutcome::Updated { .. }) => self.stats.updates += 1,
+                Some(UpdateOutcome::Rejected { reason }) => {
+                    self.stats.rejected_updates += 1;
+                    self.stats.last_rejection = Some(reason);
+                }
+                None => {}
+            }
+            outcome.reward
+        } else {
+            self.stats.failed_episodes += 1;
+            self.lowest_reward.unwrap_or(0.0)
+        };
+        self.selector.observe(&choice, reward);
+        self.episodes.push(Episode {
+            arm: choice.arm,
+            context: choice.context,
+            reward: if outcome.is_ok() { reward } else { f64::NAN },
+        });
+        if self.train_consumed.is_multiple_of(self.config.eval_every) || self.train_consumed == self.config.episodes {
+            self.create_evaluation();
+        }
+        if self.train_issued < self.config.episodes {
+            self.create_training_task();
+        }
+    }
+}
+
+/// Index of the context nearest to `s` (ties to the lowest index).
+fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
+    let distance = |c: &Vec<f64>| c.iter().zip(s).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+    (0..contexts.len())
+        .min_by(|&a, &b| distance(&contexts[a]).total_cmp(&distance(&contexts[b])))
+        .unwrap_or(0)
+}
+
+/// Drive `learner` to the end with `environment` in this thread.
+pub fn run_in_process(learner: &mut Learner, environment: &mut dyn acps_shared::Environment) {
+    while let Some(task) = learner.ask() {
+        let outcome = environment.rollout(&task);
+        learner
+            .tell(outcome)
+            .expect("the outcome answers a task just handed out");
+    }
+    debug_assert!(learner.is_done());
+}

@@ -1,0 +1,249 @@
+//! The ask/tell core: determinism, in-flight window, reordering, bad input.
+
+use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
+use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, TellError};
+use acps_models::contextual_function::ContextualFunction;
+use acps_shared::{Environment, Outcome, TaskKind};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+
+fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) -> (Learner, ContextualFunction) {
+    let problem = ContextualFunction::grid_problem(6, seed);
+    let selector = SelectorConfig {
+        method,
+        ducb: DUcbConfig {
+            gamma: 0.99,
+            xi: 1e-8,
+            b: 1.0,
+        },
+        first_visit: FirstVisit::InitialReturn,
+        sagg_riac: SaggRiacConfig::default(),
+    }
+    .build(&problem)
+    .unwrap();
+    let creps = CRepsConfig {
+        epsilon: 1.0,
+        eta_min: 1e-8,
+        ridge: 1e-4,
+        update_every: 25,
+        memory: MemoryConfig::SlidingWindow { capacity: 50 },
+        features: FeatureMap::Quadratic,
+        initial_sigma: 1.0,
+    };
+    let config = LearnerConfig {
+        seed,
+        episodes,
+        in_flight,
+        eval_every: 50,
+        creps: Some(creps),
+    };
+    (
+        Learner::new(config, problem, selector).unwrap(),
+        ContextualFunction::new(2, 6, seed).unwrap(),
+    )
+}
+
+/// Everything observable about a finished run, as bits.
+fn fingerprint(learner: &Learner) -> Vec<u64> {
+    let mut bits = Vec::new();
+    for evaluation in learner.evaluations() {
+        bits.push(evaluation.episode);
+        bits.push(evaluation.score.unwrap().to_bits());
+    }
+    for episode in learner.episodes() {
+        bits.push(episode.arm.map_or(u64::MAX, |a| a as u64));
+        bits.push(episode.reward.to_bits());
+    }
+    bits
+}
+
+/// Drive a learner by handing out everything available, performing the rollouts, and telling the
+/// outcomes back in an order shuffled by `order_seed`.
+fn run_shuffled(learner: &mut Learner, environment: &mut ContextualFunction, order_seed: u64) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(order_seed);
+    while !learner.is_done() {
+        let mut outcomes: Vec<Outcome> = std::iter::from_fn(|| learner.ask())
+            .map(|task| environment.rollout(&task))
+            .collect();
+        assert!(!outcomes.is_empty(), "the learner stalled");
+        outcomes.shuffle(&mut rng);
+        for outcome in outcomes {
+            learner.tell(outcome).unwrap();
+        }
+    }
+}
+
+#[test]
+fn same_seed_gives_the_same_bits() {
+    for method in [Method::MonotonicProgress, Method::Random, Method::RandomContinuous] {
+        let (mut a, mut env_a) = function_learner(method, 5, 1, 300);
+        let (mut b, mut env_b) = function_learner(method, 5, 1, 300);
+        acps_learner::run_in_process(&mut a, &mut env_a);
+        acps_learner::run_in_process(&mut b, &mut env_b);
+        assert_eq!(fingerprint(&a), fingerprint(&b), "{method}");
+        let (mut c, mut env_c) = function_learner(method, 6, 1, 300);
+        acps_learner::run_in_process(&mut c, &mut env_c);
+        assert_ne!(
+            fingerprint(&a),
+            fingerprint(&c),
+            "{method}: another seed must change the run"
+        );
+    }
+}
+
+#[test]
+fn outcome_order_does_not_change_the_run() {
+    for in_flight in [1, 4, 16] {
+        let (mut reference, mut env) = function_learner(Method::MonotonicProgress, 3, in_flight, 400);
+        acps_learner::run_in_process(&mut reference, &mut env);
+        for order_seed in 0..3 {
+            let (mut shuffled, mut env) = function_learner(Method::MonotonicProgress, 3, in_flight, 400);
+            run_shuffled(&mut shuffled, &mut env, order_seed);
+            assert_eq!(
+                fingerprint(&reference),
+                fingerprint(&shuffled),
+                "P = {in_flight}, order {order_seed}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_window_holds_exactly_p_training_tasks() {
+    for in_flight in [1, 3, 8] {
+        let (mut learner, mut env) = function_learner(Method::Random, 1, in_flight, 100);
+        let mut held = Vec::new();
+        // Take everything offered without answering: exactly P training tasks come out.
+        while let Some(task) = learner.ask() {
+            held.push(task);
+        }
+        let training = held.iter().filter(|t| t.kind == TaskKind::Train).count();
+        assert_eq!(training, in_flight);
+        // Answering the first training task (and everything before it) releases exactly one more.
+        let first_train = held.iter().position(|t| t.kind == TaskKind::Train).unwrap();
+        for task in &held[..=first_train] {
+            learner.tell(env.rollout(task)).unwrap();
+        }
+        let released: Vec<_> = std::iter::from_fn(|| learner.ask()).collect();
+        assert_eq!(
+            released.iter().filter(|t| t.kind == TaskKind::Train).count(),
+            1,
+            "P = {in_flight}"
+        );
+    }
+}
+
+#[test]
+fn in_flight_one_matches_the_sequential_algorithm_and_larger_p_differs() {
+    let (mut sequential, mut env) = function_learner(Method::MonotonicProgress, 2, 1, 300);
+    acps_learner::run_in_process(&mut sequential, &mut env);
+    let (mut batched, mut env) = function_learner(Method::MonotonicProgress, 2, 8, 300);
+    acps_learner::run_in_process(&mut batched, &mut env);
+    assert_eq!(sequential.episodes().len(), 300);
+    assert_eq!(batched.episodes().len(), 300);
+    assert_ne!(fingerprint(&sequential), fingerprint(&batched));
+}
+
+#[test]
+fn failed_rollouts_never_reach_the_policy() {
+    let (mut learner, mut env) = function_learner(Method::Random, 4, 1, 200);
+    let mut failures = 0;
+    while let Some(task) = learner.ask() {
+        let outcome = if task.kind == TaskKind::Train && task.id % 7 == 0 {
+            failures += 1;
+            Outcome::new(task.id, f64::NAN, f64::NAN)
+        } else {
+            env.rollout(&task)
+        };
+        learner.tell(outcome).unwrap();
+    }
+    assert!(learner.is_done());
+    assert_eq!(learner.stats().failed_episodes, failures);
+    assert!(failures > 10);
+    assert_eq!(learner.stats().rejected_updates, 0);
+    assert!(
+        learner
+            .evaluations()
+            .iter()
+            .all(|e| e.score.is_some_and(f64::is_finite))
+    );
+    let policy = learner.policy().unwrap();
+    assert!(policy.greedy(&[0.5, 0.5]).iter().all(|x| x.is_finite()));
+}
+
+#[test]
+fn unknown_and_duplicate_outcomes_are_refused() {
+    let (mut learner, mut env) = function_learner(Method::Random, 1, 2, 10);
+    let first = learner.ask().unwrap();
+    let second = learner.ask().unwrap();
+    assert_eq!(
+        learner.tell(Outcome::new(999, 0.0, 0.0)),
+        Err(TellError::UnknownTask { task_id: 999 })
+    );
+    learner.tell(env.rollout(&second)).unwrap();
+    assert_eq!(
+        learner.tell(env.rollout(&second)),
+        Err(TellError::Duplicate { task_id: second.id })
+    );
+    learner.tell(env.rollout(&first)).unwrap();
+    // Consumed now: a late copy is unknown.
+    assert_eq!(
+        learner.tell(env.rollout(&first)),
+        Err(TellError::UnknownTask { task_id: first.id })
+    );
+}
+
+#[test]
+fn reissued_tasks_come_out_again_unchanged() {
+    let (mut learner, _) = function_learner(Method::Random, 1, 2, 10);
+    let task = learner.ask().unwrap();
+    assert!(learner.reissue(task.id));
+    assert!(!learner.reissue(task.id), "already waiting in the outbox");
+    let mut again = std::iter::from_fn(|| learner.ask()).filter(|t| t.id == task.id);
+    assert_eq!(again.next(), Some(task));
+    assert!(!learner.reissue(12345));
+}
+
+#[test]
+fn bad_configs_are_refused_with_the_field_name() {
+    let problem = ContextualFunction::grid_problem(6, 0);
+    let selector = || {
+        SelectorConfig {
+            method: Method::Random,
+            ducb: DUcbConfig {
+                gamma: 0.99,
+                xi: 1e-8,
+                b: 1.0,
+            },
+            first_visit: FirstVisit::InitialReturn,
+            sagg_riac: SaggRiacConfig::default(),
+        }
+        .build(&problem)
+        .unwrap()
+    };
+    let config = LearnerConfig {
+        seed: 0,
+        episodes: 10,
+        in_flight: 0,
+        eval_every: 5,
+        creps: None,
+    };
+    let error = Learner::new(config, problem.clone(), selector())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(error.contains("in_flight") && error.contains(">= 1"), "{error}");
+    let config = LearnerConfig {
+        seed: 0,
+        episodes: 10,
+        in_flight: 1,
+        eval_every: 5,
+        creps: None,
+    };
+    let error = Learner::new(config, problem.clone(), selector())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(error.contains("no C-REPS configuration"), "{error}");
+}

@@ -1,0 +1,1 @@
+//! The paper's qualitative claims, on few fixed seeds.
