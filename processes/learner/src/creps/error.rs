@@ -87,9 +87,9 @@ pub enum CRepsError {
         "the dual objective or its gradient is not finite at the start point (eta = max(1, eta_min), v = 1); the returns or features are too large"
     )]
     NonFiniteDual,
-    /// A covariance that is not symmetric positive definite.
-    #[error("{name} must be symmetric positive definite (its Cholesky factorisation failed)")]
-    NotPositiveDefinite {
+    /// A covariance that is not symmetric positive semi-definite.
+    #[error("{name} must be symmetric positive semi-definite")]
+    NotPositiveSemiDefinite {
         /// The matrix.
         name: &'static str,
     },

@@ -1,7 +1,7 @@
 //! The upper-level policy `pi(theta | s) = N(theta | W^T phi(s), Sigma)` and its weighted
 //! maximum-likelihood update (P Alg. 2 lines 11-17, with BOLeRo's choices).
 
-use nalgebra::{Cholesky, DMatrix, DVector};
+use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
 use rand::RngCore;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -15,14 +15,22 @@ use super::error::{CRepsError, check_finite, check_non_negative};
 pub struct LinearGaussianPolicy {
     weights: DMatrix<f64>,
     covariance: DMatrix<f64>,
-    /// Lower Cholesky factor L of the covariance (`Sigma = L L^T`).
-    cholesky_factor: DMatrix<f64>,
+    /// A factor L with `Sigma = L L^T`, for sampling.
+    sampling_factor: DMatrix<f64>,
 }
 
 impl LinearGaussianPolicy {
     /// A policy with mean coefficients `weights` (n_phi x n_theta) and covariance `covariance`
     /// (n_theta x n_theta), which must be finite, symmetric (to 1e-12 relative) and positive
-    /// definite. The covariance is stored symmetrised.
+    /// semi-definite. The covariance is stored symmetrised.
+    ///
+    /// The sampling factor is `V sqrt(Lambda)` from the symmetric eigendecomposition, with
+    /// eigenvalues that rounding made slightly negative clipped to 0. Weighted ML on fewer
+    /// effective samples than parameters (epsilon = 2 keeps about N e^-2 of them) makes Sigma
+    /// numerically singular; BOLeRo samples such covariances through numpy's SVD-based
+    /// `multivariate_normal`, so refusing them (as a Cholesky factorisation would) would throw
+    /// away most updates of the paper's Section 5.1 setting. A clearly negative eigenvalue
+    /// (below -1e-9 times the largest) is still refused.
     pub fn new(weights: DMatrix<f64>, covariance: DMatrix<f64>) -> Result<Self, CRepsError> {
         check_len(
             "the covariance's row count",
@@ -38,17 +46,23 @@ impl LinearGaussianPolicy {
         )?;
         check_finite("W", weights.as_slice())?;
         check_finite("covariance", covariance.as_slice())?;
-        let not_pd = CRepsError::NotPositiveDefinite { name: "covariance" };
+        let not_psd = CRepsError::NotPositiveSemiDefinite { name: "covariance" };
         let asymmetry = (&covariance - covariance.transpose()).amax();
         if asymmetry > 1e-12 * covariance.amax() {
-            return Err(not_pd);
+            return Err(not_psd);
         }
         let covariance = (&covariance + covariance.transpose()) * 0.5;
-        let cholesky_factor = Cholesky::new(covariance.clone()).ok_or(not_pd)?.unpack();
+        let eigen = SymmetricEigen::new(covariance.clone());
+        let largest = eigen.eigenvalues.max();
+        if eigen.eigenvalues.min() < -1e-9 * largest.max(0.0) || !eigen.eigenvalues.iter().all(|l| l.is_finite()) {
+            return Err(not_psd);
+        }
+        let roots = eigen.eigenvalues.map(|l| l.max(0.0).sqrt());
+        let sampling_factor = eigen.eigenvectors * DMatrix::from_diagonal(&roots);
         Ok(Self {
             weights,
             covariance,
-            cholesky_factor,
+            sampling_factor,
         })
     }
 
@@ -62,9 +76,9 @@ impl LinearGaussianPolicy {
         &self.covariance
     }
 
-    /// The lower Cholesky factor L of Sigma.
-    pub fn cholesky_factor(&self) -> &DMatrix<f64> {
-        &self.cholesky_factor
+    /// The factor L with `Sigma = L L^T` used for sampling.
+    pub fn sampling_factor(&self) -> &DMatrix<f64> {
+        &self.sampling_factor
     }
 
     /// n_phi.
@@ -88,7 +102,7 @@ impl LinearGaussianPolicy {
             self.n_params(),
             (0..self.n_params()).map(|_| StandardNormal.sample(rng)),
         );
-        self.mean(features) + &self.cholesky_factor * z
+        self.mean(features) + &self.sampling_factor * z
     }
 
     /// Weighted maximum likelihood on samples (rows of `features` and `thetas`) with weights
@@ -328,5 +342,10 @@ mod tests {
         assert!(bad(DMatrix::identity(3, 3)).is_err());
         assert!(bad(DMatrix::from_row_slice(2, 2, &[f64::NAN, 0.0, 0.0, 1.0])).is_err());
         assert!(bad(DMatrix::identity(2, 2)).is_ok());
+        // Singular but positive semi-definite: accepted, and the factor reproduces it.
+        let singular = DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 1.0, 1.0]);
+        let policy = bad(singular.clone()).unwrap();
+        let factor = policy.sampling_factor();
+        assert!((factor * factor.transpose() - singular).amax() < 1e-12);
     }
 }
