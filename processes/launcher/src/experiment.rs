@@ -104,8 +104,10 @@ pub struct Summary {
     pub selection_window: usize,
     /// The training contexts (indices in `selections_run0` refer to these).
     pub training_contexts: Vec<Vec<f64>>,
-    /// Mean optimal score over runs, when known (Section 4: J_opt).
-    pub optimal_score_mean: Option<f64>,
+    /// Mean over runs of the best achievable score, when the problem knows it (Section 4's
+    /// J_opt = 10 + sum_s b_s); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub j_opt_mean: Option<f64>,
     /// Recorded settings.
     pub settings: serde_json::Value,
     /// Results per method.
@@ -147,7 +149,7 @@ impl Experiment {
             in_flight: self.learner.in_flight,
             selection_window: self.selection_window,
             training_contexts: problem.training_contexts,
-            optimal_score_mean: (!optimal.is_empty()).then(|| mean(&optimal)),
+            j_opt_mean: (!optimal.is_empty()).then(|| mean(&optimal)),
             settings: self.settings.clone(),
             methods,
         })

@@ -1,8 +1,9 @@
 //! `acps`: the command line of Active Contextual Policy Search.
 
 use acps::experiment::{Experiment, progress_bar};
-use acps::paper::{self, Options};
+use acps::paper::{self, Options, Overrides};
 use acps_learner::Method;
+use acps_learner::selection::FirstVisit;
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
@@ -63,12 +64,46 @@ struct ExperimentArgs {
     /// dims only: one context dimension (1..=4) into DIR; without it all four go to DIR/ns-1 .. DIR/ns-4.
     #[arg(long)]
     n_s: Option<usize>,
+    /// Number of low-level parameters n_theta of the contextual function (the paper does not say;
+    /// default 20). Must exceed the context dimension.
+    #[arg(long)]
+    n_theta: Option<usize>,
+    /// Baseline of a context's first visit for the progress heuristics: the initial greedy
+    /// policy's return there (default), or none (the first visit scores 0).
+    #[arg(long, value_enum)]
+    first_visit: Option<FirstVisitArg>,
+    /// C-REPS sample memory: the last N rollouts (default, as BOLeRo) or the paper's Section 5.2
+    /// per-task memory of the best N/K rollouts.
+    #[arg(long, value_enum)]
+    memory: Option<MemoryArg>,
+    /// Initial exploration covariance Sigma_0 = X I (default 1).
+    #[arg(long, value_name = "X")]
+    initial_sigma: Option<f64>,
+    /// C-REPS KL bound epsilon (default: the experiment's).
+    #[arg(long)]
+    epsilon: Option<f64>,
+    /// D-UCB padding strength xi (default: the experiment's).
+    #[arg(long)]
+    xi: Option<f64>,
     /// Output directory (default: runs/NAME).
     #[arg(long)]
     out: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FirstVisitArg {
+    InitialReturn,
+    Zero,
+    Optimistic,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum MemoryArg {
+    Window,
+    BestPerTask,
 }
 
 fn main() -> ExitCode {
@@ -97,12 +132,29 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         .map(|name| name.parse::<Method>())
         .collect::<Result<Vec<_>, _>>()
         .context("--method")?;
+    if let Some(n_theta) = args.n_theta
+        && n_theta <= 4
+    {
+        bail!("--n-theta must be > the context dimension (up to 4), got {n_theta}");
+    }
     let options = Options {
         runs: args.runs,
         episodes: args.episodes,
         seed: args.seed,
         in_flight: args.in_flight,
         methods: (!methods.is_empty()).then_some(methods),
+        overrides: Overrides {
+            n_theta: args.n_theta,
+            first_visit: args.first_visit.map(|f| match f {
+                FirstVisitArg::InitialReturn => FirstVisit::InitialReturn,
+                FirstVisitArg::Zero => FirstVisit::Zero,
+                FirstVisitArg::Optimistic => FirstVisit::Optimistic,
+            }),
+            best_per_task: args.memory.map(|m| matches!(m, MemoryArg::BestPerTask)),
+            initial_sigma: args.initial_sigma,
+            xi: args.xi,
+            epsilon: args.epsilon,
+        },
     };
     let (name, default_dir) = match args.name {
         ExperimentName::Toy => ("toy", "runs/toy"),

@@ -8,6 +8,7 @@ use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::learning_model::{LearningModel, LearningModelConfig};
+use acps_shared::Problem;
 use serde_json::json;
 
 /// Choices shared by every experiment command.
@@ -23,6 +24,8 @@ pub struct Options {
     pub in_flight: usize,
     /// Only these methods (default: the methods of the paper's figure).
     pub methods: Option<Vec<Method>>,
+    /// Settings the paper does not state, overriding the experiment's defaults.
+    pub overrides: Overrides,
 }
 
 impl Default for Options {
@@ -33,7 +36,45 @@ impl Default for Options {
             seed: 0,
             in_flight: 1,
             methods: None,
+            overrides: Overrides::default(),
         }
+    }
+}
+
+/// Overrides of settings the paper leaves open or that are worth varying.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    /// Number of low-level parameters n_theta of the contextual function (must exceed n_s).
+    pub n_theta: Option<usize>,
+    /// Baseline of a context's first visit.
+    pub first_visit: Option<FirstVisit>,
+    /// True: the paper's Section 5.2 per-task memory of the best N/K rollouts instead of the
+    /// sliding window of the last N.
+    pub best_per_task: Option<bool>,
+    /// Initial covariance Sigma_0 = initial_sigma I.
+    pub initial_sigma: Option<f64>,
+    /// D-UCB padding strength xi.
+    pub xi: Option<f64>,
+    /// C-REPS epsilon.
+    pub epsilon: Option<f64>,
+}
+
+impl Options {
+    fn first_visit(&self) -> FirstVisit {
+        self.overrides.first_visit.unwrap_or(FirstVisit::InitialReturn)
+    }
+
+    fn methods(&self, defaults: &[Method], ducb: impl Fn(Method) -> DUcbConfig) -> Vec<SelectorConfig> {
+        let methods = self.methods.clone().unwrap_or_else(|| defaults.to_vec());
+        methods
+            .into_iter()
+            .map(|method| SelectorConfig {
+                method,
+                ducb: ducb(method),
+                first_visit: self.first_visit(),
+                sagg_riac: SaggRiacConfig::default(),
+            })
+            .collect()
     }
 }
 
@@ -52,7 +93,7 @@ pub fn toy_panel(panel: char) -> Option<LearningModelConfig> {
 /// Section 4, one panel of Fig. 2: D-UCB with gamma 0.95, xi 1e-8, B = 1 for best reward and
 /// diversity and 0.25 for the progress heuristics; SAGG-RIAC with split threshold 8, window 10.
 pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
-    let default_methods = [
+    let defaults = [
         Method::RoundRobin,
         Method::BestReward,
         Method::Diversity,
@@ -60,28 +101,22 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
         Method::MonotonicProgress,
         Method::SaggRiac,
     ];
-    let methods = selected(options, &default_methods)
-        .into_iter()
-        .map(|method| {
-            let b = if matches!(method, Method::BestReward | Method::Diversity) {
-                1.0
-            } else {
-                0.25
-            };
-            selector(
-                method,
-                DUcbConfig {
-                    gamma: 0.95,
-                    xi: 1e-8,
-                    b,
-                },
-            )
-        })
-        .collect();
+    let xi = options.overrides.xi.unwrap_or(1e-8);
+    let b = |method| {
+        if matches!(method, Method::BestReward | Method::Diversity) {
+            1.0
+        } else {
+            0.25
+        }
+    };
     let episodes = options.episodes.unwrap_or(1000);
     Experiment {
         name: "toy".into(),
-        methods,
+        methods: options.methods(&defaults, |method| DUcbConfig {
+            gamma: 0.95,
+            xi,
+            b: b(method),
+        }),
         runs: options.runs,
         base_seed: options.seed,
         learner: LearnerConfig {
@@ -102,8 +137,8 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
         selection_window: episodes as usize,
         settings: json!({
             "model": { "sigma_r": model.sigma_r, "sigma_b": model.sigma_b, "contexts": 10 },
-            "ducb": { "gamma": 0.95, "xi": 1e-8, "b_best_reward_diversity": 1.0, "b_progress": 0.25 },
-            "first_visit": "initial-return",
+            "ducb": { "gamma": 0.95, "xi": xi, "b_best_reward_diversity": 1.0, "b_progress": 0.25 },
+            "first_visit": options.first_visit(),
             "sagg_riac": SaggRiacConfig::default(),
             "eval_every": 10,
         }),
@@ -114,7 +149,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
 /// an update every 25, quadratic features, W = 0 and Sigma = I; D-UCB B 1, gamma 0.99, xi 1e-8;
 /// evaluation every 50 rollouts on 100 test contexts.
 pub fn function(options: &Options) -> Experiment {
-    let default_methods = [
+    let defaults = [
         Method::BestReward,
         Method::Diversity,
         Method::OneStepProgress,
@@ -122,118 +157,108 @@ pub fn function(options: &Options) -> Experiment {
         Method::Corners,
         Method::Random,
     ];
-    let creps = CRepsConfig {
+    let setting = FunctionSetting {
         epsilon: 2.0,
-        eta_min: 1e-8,
-        ridge: 1e-4,
+        samples: 50,
         update_every: 25,
-        memory: MemoryConfig::SlidingWindow { capacity: 50 },
-        features: FeatureMap::Quadratic,
-        initial_sigma: 1.0,
+        episodes: 2500,
+        eval_every: 50,
     };
-    contextual_function_experiment(
-        "function",
-        options,
-        &default_methods,
-        2500,
-        50,
-        creps,
-        Box::new(|seed| ContextualFunction::grid_problem(DEFAULT_N_THETA, seed)),
-        2,
-        250,
-    )
+    function_experiment("function", 2, setting, &defaults, options, |seed, n_theta| {
+        ContextualFunction::grid_problem(n_theta, seed)
+    })
 }
 
 /// Section 5.1.3 (Fig. 6) for `n_s` context dimensions: C-REPS epsilon 1.0 over the last
 /// 25 n_s^2 rollouts, an update every 13 n_s^2; D-UCB with monotonic progress.
 pub fn dims(n_s: usize, options: &Options) -> Experiment {
-    let default_methods = [Method::MonotonicProgress, Method::Random, Method::RandomContinuous];
+    let defaults = [Method::MonotonicProgress, Method::Random, Method::RandomContinuous];
     let n2 = n_s * n_s;
-    let creps = CRepsConfig {
+    let setting = FunctionSetting {
         epsilon: 1.0,
-        eta_min: 1e-8,
-        ridge: 1e-4,
+        samples: 25 * n2,
         update_every: 13 * n2,
-        memory: MemoryConfig::SlidingWindow { capacity: 25 * n2 },
-        features: FeatureMap::Quadratic,
-        initial_sigma: 1.0,
+        episodes: 5000,
+        eval_every: 100,
     };
-    contextual_function_experiment(
-        "dims",
-        options,
-        &default_methods,
-        5000,
-        100,
-        creps,
-        Box::new(move |seed| ContextualFunction::shell_problem(n_s, DEFAULT_N_THETA, seed)),
-        n_s,
-        250,
-    )
+    function_experiment("dims", n_s, setting, &defaults, options, move |seed, n_theta| {
+        ContextualFunction::shell_problem(n_s, n_theta, seed)
+    })
 }
 
-#[allow(clippy::too_many_arguments)]
-fn contextual_function_experiment(
-    name: &str,
-    options: &Options,
-    default_methods: &[Method],
-    default_episodes: u64,
+/// The C-REPS schedule of a Section 5.1 experiment.
+struct FunctionSetting {
+    epsilon: f64,
+    samples: usize,
+    update_every: usize,
+    episodes: u64,
     eval_every: u64,
-    creps: CRepsConfig,
-    problem: Box<dyn Fn(u64) -> acps_shared::Problem + Send + Sync>,
+}
+
+fn function_experiment(
+    name: &str,
     n_s: usize,
-    selection_window: usize,
+    setting: FunctionSetting,
+    defaults: &[Method],
+    options: &Options,
+    problem: impl Fn(u64, usize) -> Problem + Send + Sync + 'static,
 ) -> Experiment {
+    let overrides = &options.overrides;
+    let n_theta = overrides.n_theta.unwrap_or(DEFAULT_N_THETA);
+    let n_tasks = 25;
+    let memory = if overrides.best_per_task == Some(true) {
+        MemoryConfig::BestPerTask {
+            per_task: (setting.samples / n_tasks).max(1),
+        }
+    } else {
+        MemoryConfig::SlidingWindow {
+            capacity: setting.samples,
+        }
+    };
+    let creps = CRepsConfig {
+        epsilon: overrides.epsilon.unwrap_or(setting.epsilon),
+        eta_min: 1e-8,
+        ridge: 1e-4,
+        update_every: setting.update_every,
+        memory,
+        features: FeatureMap::Quadratic,
+        initial_sigma: overrides.initial_sigma.unwrap_or(1.0),
+    };
     let ducb = DUcbConfig {
         gamma: 0.99,
-        xi: 1e-8,
+        xi: overrides.xi.unwrap_or(1e-8),
         b: 1.0,
     };
     let settings = json!({
         "n_s": n_s,
-        "n_theta": DEFAULT_N_THETA,
+        "n_theta": n_theta,
         "creps": {
             "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
-            "update_every": creps.update_every, "memory": creps.memory, "features": format!("{:?}", creps.features),
+            "update_every": creps.update_every, "memory": creps.memory, "features": "quadratic",
             "initial_sigma": creps.initial_sigma, "initial_mean": "0",
         },
         "ducb": ducb,
-        "first_visit": "initial-return",
-        "eval_every": eval_every,
+        "first_visit": options.first_visit(),
+        "eval_every": setting.eval_every,
     });
     Experiment {
         name: name.into(),
-        methods: selected(options, default_methods)
-            .into_iter()
-            .map(|m| selector(m, ducb.clone()))
-            .collect(),
+        methods: options.methods(defaults, |_| ducb.clone()),
         runs: options.runs,
         base_seed: options.seed,
         learner: LearnerConfig {
             seed: options.seed,
-            episodes: options.episodes.unwrap_or(default_episodes),
+            episodes: options.episodes.unwrap_or(setting.episodes),
             in_flight: options.in_flight,
-            eval_every,
+            eval_every: setting.eval_every,
             creps: Some(creps),
         },
         instance: Box::new(move |seed| Instance {
-            problem: problem(seed),
-            environment: Box::new(ContextualFunction::new(n_s, DEFAULT_N_THETA, seed).expect("n_theta > n_s")),
+            problem: problem(seed, n_theta),
+            environment: Box::new(ContextualFunction::new(n_s, n_theta, seed).expect("n_theta > n_s was checked")),
             optimal_score: None,
         }),
-        selection_window,
+        selection_window: 250,
         settings,
-    }
-}
-
-fn selected(options: &Options, defaults: &[Method]) -> Vec<Method> {
-    options.methods.clone().unwrap_or_else(|| defaults.to_vec())
-}
-
-fn selector(method: Method, ducb: DUcbConfig) -> SelectorConfig {
-    SelectorConfig {
-        method,
-        ducb,
-        first_visit: FirstVisit::InitialReturn,
-        sagg_riac: SaggRiacConfig::default(),
     }
 }

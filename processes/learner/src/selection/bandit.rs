@@ -23,9 +23,10 @@ impl BanditSelector {
     ) -> Result<Self, SelectionError> {
         check_contexts(&contexts, None)?;
         let arms = contexts.len();
+        let bound = ducb.b;
         Ok(Self {
             ducb: DUcb::new(arms, ducb)?,
-            intrinsic: IntrinsicTracker::new(heuristic, first_visit, arms),
+            intrinsic: IntrinsicTracker::new(heuristic, first_visit, arms, bound),
             contexts,
         })
     }

@@ -77,6 +77,9 @@ pub enum FirstVisit {
     InitialReturn,
     /// The first visit scores r_beta = 0 and only sets the baseline.
     Zero,
+    /// The first visit scores the optimistic value given to the tracker (D-UCB's reward bound
+    /// B) and sets the baseline.
+    Optimistic,
 }
 
 /// Turns returns into intrinsic rewards, keeping each context's baseline.
@@ -84,6 +87,8 @@ pub enum FirstVisit {
 pub struct IntrinsicTracker {
     heuristic: IntrinsicReward,
     first_visit: FirstVisit,
+    /// What a first visit scores under [`FirstVisit::Optimistic`].
+    optimistic_value: f64,
     /// Per arm: the previous return (1-step) or the running maximum of the previous returns
     /// (monotonic); `None` until the arm is primed or first visited. Unused otherwise.
     baselines: Vec<Option<f64>>,
@@ -91,10 +96,11 @@ pub struct IntrinsicTracker {
 
 impl IntrinsicTracker {
     /// A tracker for `arms` contexts, none of which has a baseline yet.
-    pub fn new(heuristic: IntrinsicReward, first_visit: FirstVisit, arms: usize) -> Self {
+    pub fn new(heuristic: IntrinsicReward, first_visit: FirstVisit, arms: usize, optimistic_value: f64) -> Self {
         Self {
             heuristic,
             first_visit,
+            optimistic_value,
             baselines: vec![None; arms],
         }
     }
@@ -127,16 +133,21 @@ impl IntrinsicTracker {
             .baselines
             .get_mut(arm)
             .ok_or(SelectionError::ArmOutOfRange { arm, arms })?;
+        let first = if self.first_visit == FirstVisit::Optimistic {
+            self.optimistic_value
+        } else {
+            0.0
+        };
         Ok(match self.heuristic {
             IntrinsicReward::BestReward => r,
             IntrinsicReward::Diversity => -r,
             IntrinsicReward::OneStepProgress => {
-                let progress = baseline.map_or(0.0, |previous| r - previous);
+                let progress = baseline.map_or(first, |previous| r - previous);
                 *baseline = Some(r);
                 progress
             }
             IntrinsicReward::MonotonicProgress => {
-                let progress = baseline.map_or(0.0, |best| (r - best).max(0.0));
+                let progress = baseline.map_or(first, |best| (r - best).max(0.0));
                 *baseline = Some(baseline.map_or(r, |best| best.max(r)));
                 progress
             }
@@ -169,7 +180,7 @@ mod tests {
 
     /// Rewards for RETURNS in arm 0, with arm 0 primed at `primed` (if any).
     fn rewards(heuristic: IntrinsicReward, first_visit: FirstVisit, primed: Option<f64>) -> Vec<f64> {
-        let mut tracker = IntrinsicTracker::new(heuristic, first_visit, 2);
+        let mut tracker = IntrinsicTracker::new(heuristic, first_visit, 2, 7.0);
         if let Some(r0) = primed {
             tracker.prime(0, r0).unwrap();
         }
@@ -178,14 +189,14 @@ mod tests {
 
     #[test]
     fn hand_computed_sequences() {
-        use FirstVisit::{InitialReturn, Zero};
+        use FirstVisit::{InitialReturn, Optimistic, Zero};
         use IntrinsicReward::*;
-        for first_visit in [InitialReturn, Zero] {
+        for first_visit in [InitialReturn, Zero, Optimistic] {
             for primed in [None, Some(0.5)] {
                 // No baseline: priming and the first-visit rule change nothing.
                 assert_eq!(rewards(BestReward, first_visit, primed), [1.0, 3.0, 2.0, 5.0]);
                 assert_eq!(rewards(Diversity, first_visit, primed), [-1.0, -3.0, -2.0, -5.0]);
-                let mut tracker = IntrinsicTracker::new(BestReward, first_visit, 1);
+                let mut tracker = IntrinsicTracker::new(BestReward, first_visit, 1, 7.0);
                 tracker.prime(0, 0.5).unwrap();
                 assert_eq!(tracker.baseline(0), None);
             }
@@ -196,6 +207,11 @@ mod tests {
             assert_eq!(rewards(OneStepProgress, first_visit, primed), [0.0, 2.0, -1.0, 3.0]);
             // Monotonic: 0, max(0, 3-1), max(0, 2-3), max(0, 5-max(1,3,2)).
             assert_eq!(rewards(MonotonicProgress, first_visit, primed), [0.0, 2.0, 0.0, 2.0]);
+        }
+        // Optimistic: the first visit scores the optimistic value (7 here), priming is ignored.
+        for primed in [None, Some(0.5)] {
+            assert_eq!(rewards(OneStepProgress, Optimistic, primed), [7.0, 2.0, -1.0, 3.0]);
+            assert_eq!(rewards(MonotonicProgress, Optimistic, primed), [7.0, 2.0, 0.0, 2.0]);
         }
         // Primed at 0.5: the first visit is compared with the initial return.
         assert_eq!(
@@ -219,7 +235,7 @@ mod tests {
 
     #[test]
     fn baselines_are_per_arm_and_priming_only_sets_a_missing_one() {
-        let mut tracker = IntrinsicTracker::new(IntrinsicReward::MonotonicProgress, FirstVisit::InitialReturn, 2);
+        let mut tracker = IntrinsicTracker::new(IntrinsicReward::MonotonicProgress, FirstVisit::InitialReturn, 2, 7.0);
         assert!(tracker.wants_initial_returns());
         tracker.prime(1, 2.0).unwrap();
         assert_eq!(tracker.reward(0, 4.0), Ok(0.0));
@@ -241,8 +257,8 @@ mod tests {
     #[test]
     fn initial_returns_are_wanted_only_by_progress_heuristics_with_the_initial_return_rule() {
         for heuristic in IntrinsicReward::ALL {
-            for first_visit in [FirstVisit::InitialReturn, FirstVisit::Zero] {
-                let wanted = IntrinsicTracker::new(heuristic, first_visit, 1).wants_initial_returns();
+            for first_visit in [FirstVisit::InitialReturn, FirstVisit::Zero, FirstVisit::Optimistic] {
+                let wanted = IntrinsicTracker::new(heuristic, first_visit, 1, 7.0).wants_initial_returns();
                 assert_eq!(
                     wanted,
                     heuristic.has_baseline() && first_visit == FirstVisit::InitialReturn
@@ -270,6 +286,7 @@ mod tests {
         for (rule, name) in [
             (FirstVisit::InitialReturn, "initial-return"),
             (FirstVisit::Zero, "zero"),
+            (FirstVisit::Optimistic, "optimistic"),
         ] {
             let deserializer: StrDeserializer<'_, ValueError> = name.into_deserializer();
             assert_eq!(FirstVisit::deserialize(deserializer), Ok(rule));

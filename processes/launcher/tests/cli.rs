@@ -1,0 +1,170 @@
+//! The `acps experiment` command-line contract: files written, summary.json fields, and errors
+//! that name the bad option.
+
+use std::path::Path;
+use std::process::Command;
+
+fn acps(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_acps"))
+        .args(args)
+        .output()
+        .expect("acps runs")
+}
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("acps-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn summary(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn toy_panel_writes_the_summary_contract() {
+    let dir = temp_dir("toy");
+    let out = acps(&[
+        "experiment",
+        "toy",
+        "--panel",
+        "b",
+        "--runs",
+        "3",
+        "--episodes",
+        "120",
+        "--seed",
+        "4",
+        "-q",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = summary(&dir.join("summary.json"));
+    assert_eq!(s["experiment"], "toy");
+    assert_eq!(s["runs"], 3);
+    assert!(s["metric"].as_str().unwrap().contains("J ="));
+    assert!(s["j_opt_mean"].as_f64().unwrap() > 9.0);
+    let methods = s["methods"].as_object().unwrap();
+    let names: Vec<&str> = methods.keys().map(String::as_str).collect();
+    for name in [
+        "round-robin",
+        "best-reward",
+        "diversity",
+        "one-step-progress",
+        "monotonic-progress",
+        "sagg-riac",
+    ] {
+        assert!(names.contains(&name), "{name} missing from {names:?}");
+    }
+    for (name, m) in methods {
+        let episodes = m["episodes"].as_array().unwrap();
+        // Evaluations at 0, 10, ..., 120.
+        assert_eq!(episodes.len(), 13, "{name}");
+        assert_eq!(m["mean"].as_array().unwrap().len(), 13);
+        assert_eq!(m["sem"].as_array().unwrap().len(), 13);
+        assert_eq!(m["final_mean"], *m["mean"].as_array().unwrap().last().unwrap());
+        assert!(m["final_sem"].as_f64().unwrap() >= 0.0);
+        assert_eq!(m["selections_run0"].as_array().unwrap().len(), 120);
+    }
+    // Same command, same bits.
+    let again = temp_dir("toy-again");
+    let out = acps(&[
+        "experiment",
+        "toy",
+        "--panel",
+        "b",
+        "--runs",
+        "3",
+        "--episodes",
+        "120",
+        "--seed",
+        "4",
+        "-q",
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    assert_eq!(
+        std::fs::read(dir.join("summary.json")).unwrap(),
+        std::fs::read(again.join("summary.json")).unwrap()
+    );
+    let _ = std::fs::remove_dir_all(dir);
+    let _ = std::fs::remove_dir_all(again);
+}
+
+#[test]
+fn toy_without_panel_writes_all_four_and_function_runs_one_method() {
+    let dir = temp_dir("panels");
+    let out = acps(&[
+        "experiment",
+        "toy",
+        "--runs",
+        "1",
+        "--episodes",
+        "20",
+        "-q",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for panel in ["a", "b", "c", "d"] {
+        assert!(dir.join(panel).join("summary.json").is_file(), "panel {panel}");
+    }
+    let out = acps(&[
+        "experiment",
+        "function",
+        "--runs",
+        "2",
+        "--episodes",
+        "100",
+        "--method",
+        "corners",
+        "-q",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = summary(&dir.join("summary.json"));
+    assert_eq!(
+        s["methods"].as_object().unwrap().keys().collect::<Vec<_>>(),
+        ["corners"]
+    );
+    assert_eq!(s["methods"]["corners"]["episodes"], serde_json::json!([0, 50, 100]));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn bad_options_are_refused_naming_the_option() {
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["experiment", "toy", "--panel", "e"],
+            "--panel must be one of a, b, c, d",
+        ),
+        (
+            &["experiment", "function", "--method", "monotonic"],
+            "unknown method 'monotonic'",
+        ),
+        (&["experiment", "dims", "--n-s", "5"], "--n-s must be in 1..=4"),
+        (&["experiment", "function", "--runs", "0"], "--runs must be >= 1"),
+        (
+            &[
+                "experiment",
+                "function",
+                "--in-flight",
+                "0",
+                "--runs",
+                "1",
+                "--episodes",
+                "10",
+            ],
+            "in_flight must be >= 1",
+        ),
+    ];
+    for (args, expected) in cases {
+        let out = acps(args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+    }
+}
