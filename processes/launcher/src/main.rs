@@ -82,6 +82,10 @@ struct ExperimentArgs {
     /// C-REPS KL bound epsilon (default: the experiment's).
     #[arg(long)]
     epsilon: Option<f64>,
+    /// toy only: use the learning factors of the paper's Fig. 3 in every run instead of a random
+    /// permutation per run.
+    #[arg(long)]
+    fig3_learning_factors: bool,
     /// D-UCB padding strength xi (default: the experiment's).
     #[arg(long)]
     xi: Option<f64>,
@@ -154,6 +158,7 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
             initial_sigma: args.initial_sigma,
             xi: args.xi,
             epsilon: args.epsilon,
+            learning_factors: args.fig3_learning_factors.then_some(paper::FIG3_LEARNING_FACTORS),
         },
     };
     let (name, default_dir) = match args.name {
@@ -213,6 +218,7 @@ fn run_and_write(experiment: &Experiment, dir: &Path, quiet: bool) -> anyhow::Re
     summary
         .write(dir)
         .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
+    acps::plot::write_all(&summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
         for (method, result) in &summary.methods {

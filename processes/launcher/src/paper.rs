@@ -7,7 +7,7 @@ use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
-use acps_models::learning_model::{LearningModel, LearningModelConfig};
+use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
 use acps_shared::Problem;
 use serde_json::json;
 
@@ -57,7 +57,14 @@ pub struct Overrides {
     pub xi: Option<f64>,
     /// C-REPS epsilon.
     pub epsilon: Option<f64>,
+    /// Section 4 model: fixed learning factors instead of a random permutation per run.
+    pub learning_factors: Option<[f64; CONTEXTS]>,
 }
+
+/// The learning factors of the paper's Fig. 3 (context 3 learns fastest, its neighbour 4 hardly
+/// at all), as read off the figure; they equal numpy's `RandomState(0).permutation` of
+/// {0.1^2, ..., 1.0^2}.
+pub const FIG3_LEARNING_FACTORS: [f64; CONTEXTS] = [0.09, 0.81, 0.25, 1.0, 0.04, 0.49, 0.64, 0.16, 0.01, 0.36];
 
 impl Options {
     fn first_visit(&self) -> FirstVisit {
@@ -110,6 +117,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
         }
     };
     let episodes = options.episodes.unwrap_or(1000);
+    let learning_factors = options.overrides.learning_factors;
     Experiment {
         name: "toy".into(),
         methods: options.methods(&defaults, |method| DUcbConfig {
@@ -127,7 +135,12 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
             creps: None,
         },
         instance: Box::new(move |seed| {
-            let environment = LearningModel::new(model, seed).expect("panel noise levels are valid");
+            let mut environment = LearningModel::new(model, seed).expect("panel noise levels are valid");
+            if let Some(factors) = learning_factors {
+                environment = environment
+                    .with_learning_factors(factors)
+                    .expect("the factors were validated");
+            }
             Instance {
                 problem: LearningModel::problem(),
                 optimal_score: Some(environment.optimal_performance()),
@@ -136,7 +149,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
         }),
         selection_window: episodes as usize,
         settings: json!({
-            "model": { "sigma_r": model.sigma_r, "sigma_b": model.sigma_b, "contexts": 10 },
+            "model": { "sigma_r": model.sigma_r, "sigma_b": model.sigma_b, "contexts": CONTEXTS, "learning_factors": learning_factors.map_or("random permutation per run".to_string(), |w| format!("{w:?}")) },
             "ducb": { "gamma": 0.95, "xi": xi, "b_best_reward_diversity": 1.0, "b_progress": 0.25 },
             "first_visit": options.first_visit(),
             "sagg_riac": SaggRiacConfig::default(),
