@@ -21,9 +21,8 @@ fn summary(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
-#[test]
-fn toy_panel_writes_the_summary_contract() {
-    let dir = temp_dir("toy");
+/// `acps experiment toy --panel b` with a short fixed configuration into `dir`.
+fn short_toy_panel(dir: &Path) {
     let out = acps(&[
         "experiment",
         "toy",
@@ -40,6 +39,12 @@ fn toy_panel_writes_the_summary_contract() {
         dir.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn toy_panel_writes_the_summary_contract() {
+    let dir = temp_dir("toy");
+    short_toy_panel(&dir);
     let s = summary(&dir.join("summary.json"));
     assert_eq!(s["experiment"], "toy");
     assert_eq!(s["runs"], 3);
@@ -58,33 +63,24 @@ fn toy_panel_writes_the_summary_contract() {
         assert!(names.contains(&name), "{name} missing from {names:?}");
     }
     for (name, m) in methods {
-        let episodes = m["episodes"].as_array().unwrap();
         // Evaluations at 0, 10, ..., 120.
-        assert_eq!(episodes.len(), 13, "{name}");
+        assert_eq!(m["episodes"].as_array().unwrap().len(), 13, "{name}");
         assert_eq!(m["mean"].as_array().unwrap().len(), 13);
         assert_eq!(m["sem"].as_array().unwrap().len(), 13);
         assert_eq!(m["final_mean"], *m["mean"].as_array().unwrap().last().unwrap());
         assert!(m["final_sem"].as_f64().unwrap() >= 0.0);
         assert_eq!(m["selections_run0"].as_array().unwrap().len(), 120);
     }
+    for picture in ["curves.svg", "selections.svg"] {
+        let svg = std::fs::read_to_string(dir.join(picture)).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.contains("monotonic-progress"),
+            "{picture}"
+        );
+    }
     // Same command, same bits.
     let again = temp_dir("toy-again");
-    let out = acps(&[
-        "experiment",
-        "toy",
-        "--panel",
-        "b",
-        "--runs",
-        "3",
-        "--episodes",
-        "120",
-        "--seed",
-        "4",
-        "-q",
-        "--out",
-        again.to_str().unwrap(),
-    ]);
-    assert!(out.status.success());
+    short_toy_panel(&again);
     assert_eq!(
         std::fs::read(dir.join("summary.json")).unwrap(),
         std::fs::read(again.join("summary.json")).unwrap()
