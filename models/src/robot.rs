@@ -357,7 +357,8 @@ impl Robot {
         let height = position.z - self.ball.radius;
         let g = self.gravity;
         let discriminant = velocity.z * velocity.z + 2.0 * g * height;
-        if !(discriminant >= 0.0) || !position.iter().chain(velocity.iter()).all(|v| v.is_finite()) {
+        let finite = position.iter().chain(velocity.iter()).all(|v| v.is_finite());
+        if !finite || discriminant < 0.0 {
             return None;
         }
         let time = (velocity.z + discriminant.sqrt()) / g;
