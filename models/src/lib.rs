@@ -7,6 +7,7 @@
 pub mod contextual_function;
 pub mod learning_model;
 pub mod robot;
+pub mod trajectory;
 
 /// A model parameter outside its accepted range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
