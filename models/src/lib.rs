@@ -7,6 +7,7 @@
 pub mod contextual_function;
 pub mod learning_model;
 pub mod robot;
+pub mod targets;
 pub mod trajectory;
 
 /// A model parameter outside its accepted range.
