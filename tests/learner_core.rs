@@ -247,3 +247,24 @@ fn bad_configs_are_refused_with_the_field_name() {
         .to_string();
     assert!(error.contains("no C-REPS configuration"), "{error}");
 }
+
+#[test]
+fn evaluations_keep_every_test_outcome_in_order() {
+    let (mut learner, mut env) = function_learner(Method::Random, 2, 1, 100);
+    acps_learner::run_in_process(&mut learner, &mut env);
+    let contexts = learner.problem().test_contexts.clone();
+    for evaluation in learner.evaluations() {
+        assert_eq!(evaluation.outcomes.len(), contexts.len());
+        let scores: Vec<f64> = evaluation.outcomes.iter().map(|o| o.as_ref().unwrap().score).collect();
+        // The function's score is the cost ||A theta - s|| ||s||^2, so it is 0 only at s = 0; and
+        // the aggregate is ln(mean cost).
+        let mean = scores.iter().sum::<f64>() / scores.len() as f64;
+        assert!((evaluation.score.unwrap() - mean.ln()).abs() < 1e-12);
+    }
+    // Outcome i answers test context i: re-evaluating context 0 with the final greedy policy
+    // reproduces the final evaluation's first score.
+    let last = learner.evaluations().last().unwrap();
+    let theta = learner.policy().unwrap().greedy(&contexts[0]);
+    let (_, cost) = env.evaluate(&theta, &contexts[0]).unwrap();
+    assert_eq!(cost, last.outcomes[0].as_ref().unwrap().score);
+}

@@ -50,6 +50,8 @@ pub struct Outcome {
     /// The problem's evaluation measure for this rollout (for example a cost or a distance);
     /// the problem says how scores of a test set are aggregated.
     pub score: f64,
+    /// Problem-defined extra numbers, for example where a thrown ball landed.
+    pub diagnostics: Vec<f64>,
 }
 
 impl Outcome {
@@ -66,7 +68,14 @@ impl Outcome {
             status,
             reward,
             score,
+            diagnostics: Vec::new(),
         }
+    }
+
+    /// The same outcome with `diagnostics` attached.
+    pub fn with_diagnostics(mut self, diagnostics: Vec<f64>) -> Self {
+        self.diagnostics = diagnostics;
+        self
     }
 
     /// A failed outcome.
@@ -76,6 +85,7 @@ impl Outcome {
             status: OutcomeStatus::Failed,
             reward: f64::NAN,
             score: f64::NAN,
+            diagnostics: Vec::new(),
         }
     }
 

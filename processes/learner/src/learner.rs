@@ -96,7 +96,8 @@ pub struct Evaluation {
     pub score: Option<f64>,
     /// Failed rollouts, left out of the score.
     pub failed: usize,
-    scores: Vec<f64>,
+    /// One entry per test context, in the problem's order, once consumed.
+    pub outcomes: Vec<Option<Outcome>>,
     remaining: usize,
 }
 
@@ -126,7 +127,7 @@ pub struct LearnerStats {
 
 enum Role {
     Train { choice: Choice, bucket: usize },
-    Evaluate { evaluation: usize },
+    Evaluate { evaluation: usize, index: usize },
     Baseline { arm: usize },
 }
 
@@ -363,11 +364,11 @@ impl Learner {
             episode: self.train_consumed,
             score: None,
             failed: 0,
-            scores: Vec::new(),
+            outcomes: vec![None; contexts.len()],
             remaining: contexts.len(),
         });
-        for context in contexts {
-            self.create(TaskKind::Evaluate, context, Role::Evaluate { evaluation });
+        for (index, context) in contexts.into_iter().enumerate() {
+            self.create(TaskKind::Evaluate, context, Role::Evaluate { evaluation, index });
         }
     }
 
@@ -378,17 +379,23 @@ impl Learner {
                     self.selector.prime(arm, outcome.reward);
                 }
             }
-            Role::Evaluate { evaluation } => {
+            Role::Evaluate { evaluation, index } => {
                 let aggregate = self.problem.score;
                 let evaluation = &mut self.evaluations[evaluation];
-                if outcome.is_ok() {
-                    evaluation.scores.push(outcome.score);
-                } else {
+                if !outcome.is_ok() {
                     evaluation.failed += 1;
                 }
+                evaluation.outcomes[index] = Some(outcome);
                 evaluation.remaining -= 1;
                 if evaluation.remaining == 0 {
-                    evaluation.score = aggregate.apply(&evaluation.scores);
+                    let scores: Vec<f64> = evaluation
+                        .outcomes
+                        .iter()
+                        .flatten()
+                        .filter(|o| o.is_ok())
+                        .map(|o| o.score)
+                        .collect();
+                    evaluation.score = aggregate.apply(&scores);
                 }
             }
             Role::Train { choice, bucket } => self.consume_training(pending.task, choice, bucket, &outcome),
