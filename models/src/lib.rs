@@ -5,9 +5,11 @@
 #![warn(missing_docs)]
 
 pub mod contextual_function;
+pub mod dmp;
 pub mod learning_model;
 pub mod robot;
 pub mod targets;
+pub mod throw;
 pub mod trajectory;
 
 /// A model parameter outside its accepted range.

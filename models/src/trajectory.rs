@@ -35,6 +35,10 @@ impl JointTrajectory {
 
     /// True when every value is finite.
     pub fn is_finite(&self) -> bool {
-        self.positions.iter().chain(&self.velocities).flatten().all(|v| v.is_finite())
+        self.positions
+            .iter()
+            .chain(&self.velocities)
+            .flatten()
+            .all(|v| v.is_finite())
     }
 }

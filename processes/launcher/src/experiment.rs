@@ -25,6 +25,10 @@ pub struct Instance {
 /// Builds the problem instance of a run from the run's seed.
 pub type InstanceFactory = Box<dyn Fn(u64) -> Instance + Send + Sync>;
 
+/// Problem-specific results of one method, computed from its runs and merged into its summary
+/// (for example the dartboard's hits per ring).
+pub type MethodDetail = Box<dyn Fn(&[RunResult]) -> serde_json::Map<String, serde_json::Value> + Send + Sync>;
+
 /// A complete experiment definition.
 pub struct Experiment {
     /// Name, as on the command line.
@@ -43,6 +47,8 @@ pub struct Experiment {
     pub selection_window: usize,
     /// Settings to record in the summary, for readers and for re-running.
     pub settings: serde_json::Value,
+    /// Problem-specific results per method, if any.
+    pub detail: Option<MethodDetail>,
 }
 
 /// The result of one learner run.
@@ -57,6 +63,8 @@ pub struct RunResult {
     pub stats: LearnerStats,
     /// The instance's optimal score.
     pub optimal_score: Option<f64>,
+    /// The outcome of every test context in the last evaluation.
+    pub final_outcomes: Vec<Option<acps_shared::Outcome>>,
 }
 
 /// Per-method statistics over runs, in the summary.json contract.
@@ -83,6 +91,9 @@ pub struct MethodSummary {
     pub rejected_updates: u64,
     /// Summed failed training rollouts over runs.
     pub failed_episodes: u64,
+    /// Problem-specific results.
+    #[serde(flatten)]
+    pub detail: serde_json::Map<String, serde_json::Value>,
 }
 
 /// The summary.json of an experiment.
@@ -178,6 +189,11 @@ impl Experiment {
             episodes: learner.episodes().to_vec(),
             stats: learner.stats().clone(),
             optimal_score,
+            final_outcomes: learner
+                .evaluations()
+                .last()
+                .map(|e| e.outcomes.clone())
+                .unwrap_or_default(),
         })
     }
 
@@ -211,6 +227,7 @@ impl Experiment {
             updates: runs.iter().map(|r| r.stats.updates).sum(),
             rejected_updates: runs.iter().map(|r| r.stats.rejected_updates).sum(),
             failed_episodes: runs.iter().map(|r| r.stats.failed_episodes).sum(),
+            detail: self.detail.as_ref().map(|detail| detail(runs)).unwrap_or_default(),
         }
     }
 }

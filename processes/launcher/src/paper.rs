@@ -155,6 +155,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
             "sagg_riac": SaggRiacConfig::default(),
             "eval_every": 10,
         }),
+        detail: None,
     }
 }
 
@@ -273,5 +274,6 @@ fn function_experiment(
         }),
         selection_window: 250,
         settings,
+        detail: None,
     }
 }
