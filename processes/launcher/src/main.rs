@@ -35,6 +35,16 @@ enum ExperimentName {
     Function,
     /// Section 5.1.3: the contextual function for 1 to 4 context dimensions (Fig. 6).
     Dims,
+    /// Section 5.2.3: the PA-10 throws at a 5x5 grid of targets, tested on a 4x4 grid (Fig. 8).
+    Grid,
+    /// Section 5.2.4: the PA-10 throws at the 81 fields of a dartboard on the ground (Fig. 10).
+    Dartboard,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SimArg {
+    /// Forward kinematics at release and closed-form flight (exact for perfect tracking).
+    Analytic,
 }
 
 #[derive(clap::Args)]
@@ -89,6 +99,9 @@ struct ExperimentArgs {
     /// D-UCB padding strength xi (default: the experiment's).
     #[arg(long)]
     xi: Option<f64>,
+    /// grid and dartboard only: how throws are simulated.
+    #[arg(long, value_enum, default_value = "analytic")]
+    sim: SimArg,
     /// Output directory (default: runs/NAME).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -165,6 +178,11 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         ExperimentName::Toy => ("toy", "runs/toy"),
         ExperimentName::Function => ("function", "runs/function"),
         ExperimentName::Dims => ("dims", "runs/dims"),
+        ExperimentName::Grid => ("grid", "runs/grid"),
+        ExperimentName::Dartboard => ("dartboard", "runs/dartboard"),
+    };
+    let sim = match args.sim {
+        SimArg::Analytic => paper::Sim::Analytic,
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(default_dir));
     let jobs: Vec<(Experiment, PathBuf)> = match args.name {
@@ -201,6 +219,16 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
                     .map(|n_s| (paper::dims(n_s, &options), out.join(format!("ns-{n_s}"))))
                     .collect(),
             }
+        }
+        ExperimentName::Grid | ExperimentName::Dartboard => {
+            if args.panel.is_some() || args.n_s.is_some() {
+                bail!("--panel and --n-s do not apply to the {name} experiment");
+            }
+            let experiment = match args.name {
+                ExperimentName::Grid => paper::grid(sim, &options),
+                _ => paper::dartboard(sim, &options),
+            };
+            vec![(experiment, out.clone())]
         }
     };
     for (experiment, dir) in jobs {

@@ -1,15 +1,23 @@
 //! The paper's in-process experiments: Section 4 (`toy`, Fig. 2 and 3), Section 5.1.2
-//! (`function`, Fig. 4 and 5) and Section 5.1.3 (`dims`, Fig. 6). Every setting the paper leaves
-//! open is recorded in the summary's `settings` and explained in docs/EXPERIMENTS.md.
+//! (`function`, Fig. 4 and 5), Section 5.1.3 (`dims`, Fig. 6) and Section 5.2 (`grid`, Fig. 8;
+//! `dartboard`, Fig. 10). Every setting the paper leaves open is recorded in the summary's
+//! `settings` and explained in docs/CHOICES.md.
 
-use crate::experiment::{Experiment, Instance};
+use crate::experiment::{Experiment, Instance, RunResult, mean};
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
+use acps_models::robot::Robot;
+use acps_models::targets::{Category, Field, dartboard as dartboard_fields};
+use acps_models::throw::{
+    INITIAL_LANDING, PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment,
+    dartboard_problem, grid_problem,
+};
 use acps_shared::Problem;
 use serde_json::json;
+use std::collections::BTreeMap;
 
 /// Choices shared by every experiment command.
 #[derive(Debug, Clone)]
@@ -276,4 +284,239 @@ fn function_experiment(
         settings,
         detail: None,
     }
+}
+
+/// How throws are simulated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sim {
+    /// Forward kinematics and the Jacobian at release, closed-form flight.
+    Analytic,
+}
+
+impl Sim {
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sim::Analytic => "analytic",
+        }
+    }
+
+    fn environment(self, targets: Targets) -> ThrowingEnvironment {
+        let policy = ThrowPolicy::new(ThrowDesign::pa10(), ANALYTIC_CONTROL_DT).expect("the designed throw rolls out");
+        ThrowingEnvironment::new(Robot::pa10(), policy, Simulator::Analytic, targets, SpeedLimits::Ignore)
+    }
+}
+
+/// The analytic backend only needs the release state, which the DMPs' 1 ms Euler substeps fix
+/// whatever the control period; 10 ms keeps the trajectory short.
+const ANALYTIC_CONTROL_DT: f64 = 0.01;
+
+/// Section 5.2.2's C-REPS for K tasks: epsilon 0.5, an update every 50 trials on a memory of the
+/// best 300/K trials per task (rounded down), polar-quadratic features, W = 0 around theta_0,
+/// Sigma_0 = 0.02 I.
+fn throwing_creps(tasks: usize, options: &Options) -> CRepsConfig {
+    let per_task = (300 / tasks).max(1);
+    CRepsConfig {
+        epsilon: options.overrides.epsilon.unwrap_or(0.5),
+        eta_min: 1e-8,
+        ridge: 1e-4,
+        update_every: 50,
+        memory: if options.overrides.best_per_task == Some(false) {
+            MemoryConfig::SlidingWindow { capacity: 300 }
+        } else {
+            MemoryConfig::BestPerTask { per_task }
+        },
+        features: FeatureMap::PolarQuadratic,
+        initial_sigma: options.overrides.initial_sigma.unwrap_or(0.02),
+    }
+}
+
+fn throwing_settings(
+    sim: Sim,
+    creps: &CRepsConfig,
+    ducb: &DUcbConfig,
+    options: &Options,
+    eval_every: u64,
+) -> serde_json::Value {
+    json!({
+        "sim": sim.name(),
+        "robot": Robot::pa10().name,
+        "theta": "offset on theta_0 = (g1, g1dot, g2dot), 21 values",
+        "theta0_landing": INITIAL_LANDING,
+        "speed_limits": SpeedLimits::Ignore,
+        "creps": {
+            "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
+            "update_every": creps.update_every, "memory": creps.memory, "features": "polar-quadratic",
+            "initial_sigma": creps.initial_sigma, "initial_mean": "theta_0 (offset 0)",
+        },
+        "ducb": ducb,
+        "first_visit": options.first_visit(),
+        "eval_every": eval_every,
+    })
+}
+
+/// Section 5.2.3, the grid problem (Fig. 8): 25 training targets, 16 test targets, 10,000
+/// episodes, D-UCB gamma 0.99, B 10,000, xi 1e-9.
+pub fn grid(sim: Sim, options: &Options) -> Experiment {
+    let defaults = [
+        Method::BestReward,
+        Method::Diversity,
+        Method::OneStepProgress,
+        Method::MonotonicProgress,
+        Method::RoundRobin,
+        Method::RandomContinuous,
+    ];
+    let ducb = DUcbConfig {
+        gamma: 0.99,
+        xi: options.overrides.xi.unwrap_or(1e-9),
+        b: 10_000.0,
+    };
+    let creps = throwing_creps(25, options);
+    let eval_every = 100;
+    Experiment {
+        name: "grid".into(),
+        methods: options.methods(&defaults, |_| ducb.clone()),
+        runs: options.runs,
+        base_seed: options.seed,
+        settings: throwing_settings(sim, &creps, &ducb, options, eval_every),
+        learner: LearnerConfig {
+            seed: options.seed,
+            episodes: options.episodes.unwrap_or(10_000),
+            in_flight: options.in_flight,
+            eval_every,
+            creps: Some(creps),
+        },
+        instance: Box::new(move |_| Instance {
+            problem: grid_problem(),
+            environment: Box::new(sim.environment(Targets::Grid)),
+            optimal_score: None,
+        }),
+        selection_window: 250,
+        detail: None,
+    }
+}
+
+/// Section 5.2.4, the dartboard problem (Fig. 10): 81 fields on a 1.4 m board centred on
+/// theta_0's landing point, 50,000 episodes, monotonic progress.
+pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
+    let ducb = DUcbConfig {
+        gamma: 0.99,
+        xi: options.overrides.xi.unwrap_or(1e-9),
+        b: 10_000.0,
+    };
+    let creps = throwing_creps(81, options);
+    let eval_every = 1000;
+    let fields = board();
+    Experiment {
+        name: "dartboard".into(),
+        methods: options.methods(&[Method::MonotonicProgress], |_| ducb.clone()),
+        runs: options.runs,
+        base_seed: options.seed,
+        settings: throwing_settings(sim, &creps, &ducb, options, eval_every),
+        learner: LearnerConfig {
+            seed: options.seed,
+            episodes: options.episodes.unwrap_or(50_000),
+            in_flight: options.in_flight,
+            eval_every,
+            creps: Some(creps),
+        },
+        instance: Box::new(move |_| {
+            let fields = board();
+            Instance {
+                problem: dartboard_problem(&fields, fields[0].centre),
+                environment: Box::new(sim.environment(Targets::Dartboard(fields))),
+                optimal_score: None,
+            }
+        }),
+        selection_window: 10_000,
+        detail: Some(Box::new(move |runs| dartboard_detail(&fields, runs))),
+    }
+}
+
+/// The board, centred where theta_0 lands (analytic model).
+pub fn board() -> Vec<Field> {
+    let mut environment = Sim::Analytic.environment(Targets::Grid);
+    let bull = environment.landing(&[0.0; PARAMS]).expect("theta_0 lands");
+    dartboard_fields(bull)
+}
+
+/// Hits per ring and error statistics of the final policies (mean over runs), and the average
+/// number of selections per field of every ring over the selection window (Fig. 10 right).
+fn dartboard_detail(fields: &[Field], runs: &[RunResult]) -> serde_json::Map<String, serde_json::Value> {
+    let mut hits: BTreeMap<&str, f64> = Category::ALL.iter().map(|c| (c.name(), 0.0)).collect();
+    let (mut means, mut medians, mut maxima) = (Vec::new(), Vec::new(), Vec::new());
+    for run in runs {
+        let mut errors = Vec::new();
+        for (field, outcome) in fields.iter().zip(&run.final_outcomes) {
+            let Some(outcome) = outcome.as_ref().filter(|o| o.is_ok()) else {
+                continue;
+            };
+            let landing = [outcome.diagnostics[0], outcome.diagnostics[1]];
+            if field.hit(landing) {
+                *hits.get_mut(field.category.name()).expect("every category is counted") += 1.0 / runs.len() as f64;
+            }
+            errors.push(outcome.score);
+        }
+        if errors.is_empty() {
+            continue;
+        }
+        errors.sort_by(f64::total_cmp);
+        means.push(mean(&errors));
+        medians.push(median(&errors));
+        maxima.push(*errors.last().expect("not empty"));
+    }
+    let per_field = |category: Category| fields.iter().filter(|f| f.category == category).count() as f64;
+    let window = runs.iter().map(|r| r.episodes.len()).min().unwrap_or(0).min(10_000);
+    let selections: BTreeMap<&str, Vec<f64>> = Category::ALL
+        .iter()
+        .map(|&category| {
+            let mut cumulative = Vec::new();
+            let mut count = 0.0;
+            for t in 0..window {
+                count += runs
+                    .iter()
+                    .filter(|r| r.episodes[t].arm.is_some_and(|a| fields[a].category == category))
+                    .count() as f64;
+                if (t + 1) % 100 == 0 {
+                    cumulative.push(count / runs.len() as f64 / per_field(category));
+                }
+            }
+            (category.name(), cumulative)
+        })
+        .collect();
+    let landings_run0: Vec<Option<[f64; 2]>> = runs[0]
+        .final_outcomes
+        .iter()
+        .map(|o| {
+            o.as_ref()
+                .filter(|o| o.is_ok())
+                .map(|o| [o.diagnostics[0], o.diagnostics[1]])
+        })
+        .collect();
+    let mut detail = serde_json::Map::new();
+    detail.insert("landings_run0".into(), json!(landings_run0));
+    detail.insert("hits".into(), json!(hits));
+    detail.insert("fields_hit".into(), json!(hits.values().sum::<f64>()));
+    detail.insert(
+        "error_cm".into(),
+        json!({ "mean": mean_or_null(&means), "median": mean_or_null(&medians), "max": mean_or_null(&maxima) }),
+    );
+    detail.insert(
+        "selections_per_field".into(),
+        json!({ "every": 100, "episodes": window, "cumulative": selections }),
+    );
+    detail
+}
+
+fn median(sorted: &[f64]) -> f64 {
+    let n = sorted.len();
+    if n % 2 == 1 {
+        sorted[n / 2]
+    } else {
+        (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0
+    }
+}
+
+fn mean_or_null(values: &[f64]) -> Option<f64> {
+    (!values.is_empty()).then(|| mean(values))
 }

@@ -5,9 +5,15 @@
 //! - `selections.svg`: for 1-D contexts, the context chosen in every episode of run 0 (Fig. 3);
 //!   for 2-D contexts, the log selection ratio of every training context over the first
 //!   episodes (Fig. 5).
+//! - for the dartboard, `board.svg` (Fig. 10), and for the throwing problems `throw.svg`, a side
+//!   view of the initial throw.
 
 use crate::experiment::Summary;
+use acps_models::robot::Robot;
+use acps_models::targets::Field;
+use acps_models::trajectory::JointTrajectory;
 use plotters::prelude::*;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 type PlotResult = Result<(), Box<dyn std::error::Error>>;
@@ -27,6 +33,17 @@ const COLORS: [RGBColor; 9] = [
 /// Write every picture that fits the summary into `dir`.
 pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
     learning_curves(summary, &dir.join("curves.svg"))?;
+    if matches!(summary.experiment.as_str(), "grid" | "dartboard") {
+        let policy = acps_models::throw::ThrowPolicy::new(acps_models::throw::ThrowDesign::pa10(), 0.01)?;
+        throw_side_view(
+            &Robot::pa10(),
+            &policy.trajectory(&[0.0; acps_models::throw::PARAMS])?,
+            &dir.join("throw.svg"),
+        )?;
+    }
+    if summary.experiment == "dartboard" {
+        return dartboard(summary, &crate::paper::board(), &dir.join("board.svg"));
+    }
     match summary.training_contexts.first().map(Vec::len) {
         Some(1) => selection_traces(summary, &dir.join("selections.svg"))?,
         Some(2) => selection_maps(summary, &dir.join("selections.svg"))?,
@@ -225,4 +242,154 @@ fn half_spacing(contexts: &[Vec<f64>]) -> f64 {
         }
     }
     if smallest == f64::MAX { 0.1 } else { smallest / 2.0 }
+}
+
+/// The dartboard with every field, its target and where run 0's final policy lands (paper
+/// Fig. 10 left), next to the average number of selections per field of every ring over the
+/// first episodes (Fig. 10 right).
+pub fn dartboard(summary: &Summary, fields: &[Field], path: &Path) -> PlotResult {
+    let methods: Vec<_> = summary.methods.iter().collect();
+    let root = SVGBackend::new(path, (1200, 600 * methods.len() as u32)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let bull = fields[0].centre;
+    let reach = 0.75;
+    for ((name, m), row) in methods.iter().zip(root.split_evenly((methods.len(), 1))) {
+        let (left, right) = row.split_horizontally(600);
+        let mut board = ChartBuilder::on(&left)
+            .caption(
+                format!("{name}: targets (blue) and landings of run 0 (red)"),
+                ("sans-serif", 15),
+            )
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d(
+                (bull[0] - reach)..(bull[0] + reach),
+                (bull[1] - reach)..(bull[1] + reach),
+            )?;
+        board
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("x (m)")
+            .y_desc("y (m)")
+            .draw()?;
+        for field in fields {
+            let mut outline: Vec<(f64, f64)> = field.field.iter().map(|p| (p[0], p[1])).collect();
+            outline.push(outline[0]);
+            board.draw_series(std::iter::once(PathElement::new(outline, BLACK.mix(0.4))))?;
+        }
+        let landings: Vec<Option<[f64; 2]>> = m
+            .detail
+            .get("landings_run0")
+            .and_then(|v| serde_json::from_value(v.clone()).ok())
+            .unwrap_or_default();
+        for (field, landing) in fields.iter().zip(&landings) {
+            let centre = (field.centre[0], field.centre[1]);
+            board.draw_series(std::iter::once(Circle::new(centre, 3, COLORS[0].filled())))?;
+            if let Some(l) = landing {
+                board.draw_series(std::iter::once(PathElement::new(vec![centre, (l[0], l[1])], COLORS[3])))?;
+                board.draw_series(std::iter::once(Rectangle::new(
+                    [(l[0] - 0.006, l[1] - 0.006), (l[0] + 0.006, l[1] + 0.006)],
+                    COLORS[3].filled(),
+                )))?;
+            }
+        }
+        let curves: BTreeMap<String, Vec<f64>> = m
+            .detail
+            .get("selections_per_field")
+            .and_then(|s| serde_json::from_value(s["cumulative"].clone()).ok())
+            .unwrap_or_default();
+        let longest = curves.values().map(Vec::len).max().unwrap_or(0);
+        let top = curves.values().flatten().copied().fold(1.0, f64::max);
+        let mut chart = ChartBuilder::on(&right)
+            .caption("average selections per field of each ring", ("sans-serif", 15))
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d(0.0..(100.0 * longest.max(1) as f64), 0.0..top * 1.05)?;
+        chart
+            .configure_mesh()
+            .x_desc("episode")
+            .y_desc("selections per field")
+            .draw()?;
+        for (index, (category, values)) in curves.iter().enumerate() {
+            let color = COLORS[index % COLORS.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    values.iter().enumerate().map(|(i, &v)| (100.0 * (i + 1) as f64, v)),
+                    color.stroke_width(2),
+                ))?
+                .label(category.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// A side view of one throw: the arm every 0.1 s until the release, then the ball's flight,
+/// projected on the vertical plane through the base and the landing point.
+pub fn throw_side_view(robot: &Robot, trajectory: &JointTrajectory, path: &Path) -> PlotResult {
+    let (q, qd) = trajectory.last().ok_or("empty trajectory")?;
+    let (release, velocity) = robot.ball_state(q, qd);
+    let landing = robot.landing(&release, &velocity).ok_or("the ball does not land")?;
+    let norm = (landing[0].powi(2) + landing[1].powi(2)).sqrt().max(1e-9);
+    let along = |x: f64, y: f64| (x * landing[0] + y * landing[1]) / norm;
+    let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "throw of theta_0: arm every 0.1 s, ball after release",
+            ("sans-serif", 16),
+        )
+        .margin(12)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(-1.0..(norm + 0.3), 0.0..2.2)?;
+    chart
+        .configure_mesh()
+        .x_desc("distance towards the landing point (m)")
+        .y_desc("height (m)")
+        .draw()?;
+    let every = ((0.1 / trajectory.dt).round() as usize).max(1);
+    let samples: Vec<usize> = (0..trajectory.len())
+        .step_by(every)
+        .chain(std::iter::once(trajectory.len() - 1))
+        .collect();
+    for (k, &i) in samples.iter().enumerate() {
+        let frames = robot.frames(&trajectory.positions[i]);
+        let points: Vec<(f64, f64)> = std::iter::once((0.0, 0.0))
+            .chain(
+                frames
+                    .iter()
+                    .map(|f| (along(f.translation.x, f.translation.y), f.translation.z)),
+            )
+            .collect();
+        let shade = COLORS[0].mix(0.25 + 0.75 * k as f64 / samples.len() as f64);
+        chart.draw_series(std::iter::once(PathElement::new(points, shade.stroke_width(2))))?;
+    }
+    let flight_time = ((velocity.z
+        + (velocity.z.powi(2) + 2.0 * robot.gravity * (release.z - robot.ball.radius)).sqrt())
+        / robot.gravity)
+        .max(0.0);
+    let ball: Vec<(f64, f64)> = (0..=100)
+        .map(|i| {
+            let t = flight_time * i as f64 / 100.0;
+            let p = release + velocity * t;
+            (along(p.x, p.y), p.z - 0.5 * robot.gravity * t * t)
+        })
+        .collect();
+    chart.draw_series(LineSeries::new(ball, COLORS[3].stroke_width(2)))?;
+    chart.draw_series(std::iter::once(Circle::new(
+        (norm, robot.ball.radius),
+        5,
+        COLORS[3].filled(),
+    )))?;
+    root.present()?;
+    Ok(())
 }
