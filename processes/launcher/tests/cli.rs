@@ -164,3 +164,62 @@ fn bad_options_are_refused_naming_the_option() {
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
     }
 }
+
+#[test]
+fn throwing_experiments_write_their_results() {
+    let dir = temp_dir("throwing");
+    let grid = dir.join("grid");
+    let out = acps(&[
+        "experiment",
+        "grid",
+        "--runs",
+        "2",
+        "--episodes",
+        "300",
+        "--method",
+        "monotonic-progress",
+        "-q",
+        "--out",
+        grid.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = summary(&grid.join("summary.json"));
+    assert_eq!(s["settings"]["sim"], "analytic");
+    let m = &s["methods"]["monotonic-progress"];
+    // theta_0 lands at (-3.55, -3.55): the 16 test targets are 0.3 m to 1.8 m away at first.
+    let first = m["mean"][0].as_f64().unwrap();
+    assert!((60.0..120.0).contains(&first), "{first}");
+    assert!(
+        m["final_mean"].as_f64().unwrap() < first,
+        "learning reduces the test distance"
+    );
+    assert!(grid.join("throw.svg").is_file());
+
+    let board = dir.join("dartboard");
+    let out = acps(&[
+        "experiment",
+        "dartboard",
+        "--runs",
+        "1",
+        "--episodes",
+        "200",
+        "-q",
+        "--out",
+        board.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = summary(&board.join("summary.json"));
+    let m = &s["methods"]["monotonic-progress"];
+    let hits = m["hits"].as_object().unwrap();
+    let names: Vec<&str> = hits.keys().map(String::as_str).collect();
+    assert_eq!(names, ["bull", "double", "inner", "outer", "treble"]);
+    // A policy barely trained cannot hit every field; the total is the sum over the rings.
+    let total: f64 = hits.values().map(|h| h.as_f64().unwrap()).sum();
+    assert_eq!(m["fields_hit"].as_f64().unwrap(), total);
+    assert!(total < 81.0);
+    let error = &m["error_cm"];
+    assert!(error["median"].as_f64().unwrap() <= error["max"].as_f64().unwrap());
+    assert_eq!(m["landings_run0"].as_array().unwrap().len(), 81);
+    assert!(board.join("board.svg").is_file());
+    let _ = std::fs::remove_dir_all(dir);
+}
