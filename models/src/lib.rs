@@ -7,6 +7,7 @@
 pub mod contextual_function;
 pub mod dmp;
 pub mod learning_model;
+pub mod rapier_sim;
 pub mod robot;
 pub mod targets;
 pub mod throw;

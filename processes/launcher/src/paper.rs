@@ -308,8 +308,8 @@ impl Sim {
 }
 
 /// The analytic backend only needs the release state, which the DMPs' 1 ms Euler substeps fix
-/// whatever the control period; 10 ms keeps the trajectory short.
-const ANALYTIC_CONTROL_DT: f64 = 0.01;
+/// whatever the control period, so each DMP is sampled at its two end points only.
+const ANALYTIC_CONTROL_DT: f64 = 0.5;
 
 /// Section 5.2.2's C-REPS for K tasks: epsilon 0.5, an update every 50 trials on a memory of the
 /// best 300/K trials per task (rounded down), polar-quadratic features, W = 0 around theta_0,
