@@ -1,7 +1,8 @@
 //! Cost of one PA-10 throw, from the learner's 21 offsets to the landing point, single thread:
 //! the analytic backend (two DMP rollouts, forward kinematics and Jacobian at release,
-//! closed-form flight).
+//! closed-form flight) and the rapier3d multibody arm tracking the same trajectory.
 
+use acps_models::rapier_sim::{RapierArm, RapierConfig};
 use acps_models::robot::Robot;
 use acps_models::throw::{PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
 use acps_shared::{Environment, Task, TaskKind};
@@ -45,5 +46,26 @@ fn analytic(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, analytic);
+fn rapier(c: &mut Criterion) {
+    let tasks = tasks();
+    let robot = Robot::pa10();
+    let arm = RapierArm::new(&robot, RapierConfig::default()).unwrap();
+    let policy = ThrowPolicy::new(ThrowDesign::pa10(), 0.004).unwrap();
+    let mut env = ThrowingEnvironment::new(
+        robot,
+        policy,
+        Simulator::Rapier(Box::new(arm)),
+        Targets::Grid,
+        SpeedLimits::Ignore,
+    );
+    let mut i = 0;
+    c.bench_function("throw_rapier_default", |b| {
+        b.iter(|| {
+            i = (i + 1) % tasks.len();
+            black_box(env.rollout(&tasks[i]))
+        })
+    });
+}
+
+criterion_group!(benches, analytic, rapier);
 criterion_main!(benches);

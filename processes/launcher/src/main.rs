@@ -45,6 +45,8 @@ enum ExperimentName {
 enum SimArg {
     /// Forward kinematics at release and closed-form flight (exact for perfect tracking).
     Analytic,
+    /// The rapier3d multibody arm tracking the throw with joint motors (about 2 ms per throw).
+    Rapier,
 }
 
 #[derive(clap::Args)]
@@ -183,6 +185,7 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     };
     let sim = match args.sim {
         SimArg::Analytic => paper::Sim::Analytic,
+        SimArg::Rapier => paper::Sim::Rapier,
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(default_dir));
     let jobs: Vec<(Experiment, PathBuf)> = match args.name {

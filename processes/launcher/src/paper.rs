@@ -9,6 +9,7 @@ use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
+use acps_models::rapier_sim::{RapierArm, RapierConfig};
 use acps_models::robot::Robot;
 use acps_models::targets::{Category, Field, dartboard as dartboard_fields};
 use acps_models::throw::{
@@ -291,6 +292,8 @@ fn function_experiment(
 pub enum Sim {
     /// Forward kinematics and the Jacobian at release, closed-form flight.
     Analytic,
+    /// The rapier3d multibody arm (default `RapierConfig`), closed-form flight after release.
+    Rapier,
 }
 
 impl Sim {
@@ -298,14 +301,27 @@ impl Sim {
     pub fn name(self) -> &'static str {
         match self {
             Sim::Analytic => "analytic",
+            Sim::Rapier => "rapier",
         }
     }
 
     fn environment(self, targets: Targets) -> ThrowingEnvironment {
-        let policy = ThrowPolicy::new(ThrowDesign::pa10(), ANALYTIC_CONTROL_DT).expect("the designed throw rolls out");
-        ThrowingEnvironment::new(Robot::pa10(), policy, Simulator::Analytic, targets, SpeedLimits::Ignore)
+        let robot = Robot::pa10();
+        let (simulator, control_dt) = match self {
+            Sim::Analytic => (Simulator::Analytic, ANALYTIC_CONTROL_DT),
+            Sim::Rapier => {
+                let arm = RapierArm::new(&robot, RapierConfig::default()).expect("the shipped PA-10 builds in rapier");
+                (Simulator::Rapier(Box::new(arm)), RAPIER_CONTROL_DT)
+            }
+        };
+        let policy = ThrowPolicy::new(ThrowDesign::pa10(), control_dt).expect("the designed throw rolls out");
+        ThrowingEnvironment::new(robot, policy, simulator, targets, SpeedLimits::Ignore)
     }
 }
+
+/// The rapier arm interpolates the commanded samples between its own steps; 4 ms samples keep
+/// that interpolation far below the motors' tracking error.
+const RAPIER_CONTROL_DT: f64 = 0.004;
 
 /// The analytic backend only needs the release state, which the DMPs' 1 ms Euler substeps fix
 /// whatever the control period, so each DMP is sampled at its two end points only.
@@ -340,6 +356,7 @@ fn throwing_settings(
 ) -> serde_json::Value {
     json!({
         "sim": sim.name(),
+        "rapier": (sim == Sim::Rapier).then(RapierConfig::default),
         "robot": Robot::pa10().name,
         "theta": "offset on theta_0 = (g1, g1dot, g2dot), 21 values",
         "theta0_landing": INITIAL_LANDING,
