@@ -255,11 +255,7 @@ fn function_experiment(
     let settings = json!({
         "n_s": n_s,
         "n_theta": n_theta,
-        "creps": {
-            "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
-            "update_every": creps.update_every, "memory": creps.memory, "features": "quadratic",
-            "initial_sigma": creps.initial_sigma, "initial_mean": "0",
-        },
+        "creps": creps_settings(&creps, "quadratic", "0"),
         "ducb": ducb,
         "first_visit": options.first_visit(),
         "eval_every": setting.eval_every,
@@ -361,11 +357,7 @@ fn throwing_settings(
         "theta": "offset on theta_0 = (g1, g1dot, g2dot), 21 values",
         "theta0_landing": INITIAL_LANDING,
         "speed_limits": SpeedLimits::Ignore,
-        "creps": {
-            "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
-            "update_every": creps.update_every, "memory": creps.memory, "features": "polar-quadratic",
-            "initial_sigma": creps.initial_sigma, "initial_mean": "theta_0 (offset 0)",
-        },
+        "creps": creps_settings(creps, "polar-quadratic", "theta_0 (offset 0)"),
         "ducb": ducb,
         "first_visit": options.first_visit(),
         "eval_every": eval_every,
@@ -523,6 +515,15 @@ fn dartboard_detail(fields: &[Field], runs: &[RunResult]) -> serde_json::Map<Str
         json!({ "every": 100, "episodes": window, "cumulative": selections }),
     );
     detail
+}
+
+/// C-REPS settings for a summary (the feature map is named, as custom maps are not data).
+fn creps_settings(creps: &CRepsConfig, features: &str, initial_mean: &str) -> serde_json::Value {
+    json!({
+        "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
+        "update_every": creps.update_every, "memory": creps.memory, "features": features,
+        "initial_sigma": creps.initial_sigma, "initial_mean": initial_mean,
+    })
 }
 
 fn median(sorted: &[f64]) -> f64 {
