@@ -6,6 +6,7 @@
 
 pub mod contextual_function;
 pub mod dmp;
+pub mod environment;
 pub mod learning_model;
 pub mod rapier_sim;
 pub mod robot;

@@ -12,3 +12,5 @@ pub use context_space::{ContextSpace, ContextSpaceError, random_unit_vector};
 pub use problem::{Problem, ScoreAggregate};
 pub use seed::{Stream, derive_seed};
 pub use task::{Environment, Outcome, OutcomeStatus, Task, TaskKind};
+pub mod ipc;
+pub mod wire;

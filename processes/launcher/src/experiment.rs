@@ -20,6 +20,9 @@ pub struct Instance {
     pub environment: Box<dyn Environment>,
     /// The best achievable score, when the problem knows it (the Section 4 model's J_opt).
     pub optimal_score: Option<f64>,
+    /// How a worker builds the same environment; `None` for environments that keep state between
+    /// rollouts (the Section 4 model), which a fleet cannot serve.
+    pub spec: Option<acps_shared::wire::EnvironmentSpec>,
 }
 
 /// Builds the problem instance of a run from the run's seed.
@@ -172,6 +175,7 @@ impl Experiment {
             problem,
             mut environment,
             optimal_score,
+            ..
         } = (self.instance)(seed);
         let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
             problem: problem.name.clone(),

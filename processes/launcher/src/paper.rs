@@ -8,15 +8,14 @@ use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
+use acps_models::environment::{self, Model};
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
-use acps_models::rapier_sim::{RapierArm, RapierConfig};
+use acps_models::rapier_sim::RapierConfig;
 use acps_models::robot::Robot;
-use acps_models::targets::{Category, Field, dartboard as dartboard_fields};
-use acps_models::throw::{
-    INITIAL_LANDING, PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment,
-    dartboard_problem, grid_problem,
-};
+use acps_models::targets::{Category, Field};
+use acps_models::throw::{INITIAL_LANDING, SpeedLimits, dartboard_problem, grid_problem};
 use acps_shared::Problem;
+use acps_shared::wire::EnvironmentSpec;
 use serde_json::json;
 use std::collections::BTreeMap;
 
@@ -154,6 +153,8 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
                 problem: LearningModel::problem(),
                 optimal_score: Some(environment.optimal_performance()),
                 environment: Box::new(environment),
+                // The model keeps state between rollouts, so it cannot be served by a fleet.
+                spec: None,
             }
         }),
         selection_window: episodes as usize,
@@ -272,10 +273,11 @@ fn function_experiment(
             eval_every: setting.eval_every,
             creps: Some(creps),
         },
-        instance: Box::new(move |seed| Instance {
-            problem: problem(seed, n_theta),
-            environment: Box::new(ContextualFunction::new(n_s, n_theta, seed).expect("n_theta > n_s was checked")),
-            optimal_score: None,
+        instance: Box::new(move |seed| {
+            from_spec(
+                problem(seed, n_theta),
+                environment::contextual_function(n_s, n_theta, seed),
+            )
         }),
         selection_window: 250,
         settings,
@@ -284,44 +286,25 @@ fn function_experiment(
 }
 
 /// How throws are simulated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Sim {
-    /// Forward kinematics and the Jacobian at release, closed-form flight.
-    Analytic,
-    /// The rapier3d multibody arm (default `RapierConfig`), closed-form flight after release.
-    Rapier,
-}
+pub use acps_models::environment::Sim;
 
-impl Sim {
-    /// The command-line name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Sim::Analytic => "analytic",
-            Sim::Rapier => "rapier",
-        }
-    }
-
-    fn environment(self, targets: Targets) -> ThrowingEnvironment {
-        let robot = Robot::pa10();
-        let (simulator, control_dt) = match self {
-            Sim::Analytic => (Simulator::Analytic, ANALYTIC_CONTROL_DT),
-            Sim::Rapier => {
-                let arm = RapierArm::new(&robot, RapierConfig::default()).expect("the shipped PA-10 builds in rapier");
-                (Simulator::Rapier(Box::new(arm)), RAPIER_CONTROL_DT)
-            }
-        };
-        let policy = ThrowPolicy::new(ThrowDesign::pa10(), control_dt).expect("the designed throw rolls out");
-        ThrowingEnvironment::new(robot, policy, simulator, targets, SpeedLimits::Ignore)
+/// The command-line name of a simulator.
+pub fn sim_name(sim: Sim) -> &'static str {
+    match sim {
+        Sim::Analytic => "analytic",
+        Sim::Rapier => "rapier",
     }
 }
 
-/// The rapier arm interpolates the commanded samples between its own steps; 4 ms samples keep
-/// that interpolation far below the motors' tracking error.
-const RAPIER_CONTROL_DT: f64 = 0.004;
-
-/// The analytic backend only needs the release state, which the DMPs' 1 ms Euler substeps fix
-/// whatever the control period, so each DMP is sampled at its two end points only.
-const ANALYTIC_CONTROL_DT: f64 = 0.5;
+/// An instance whose environment is built from `spec`, as workers build theirs.
+fn from_spec(problem: Problem, spec: EnvironmentSpec) -> Instance {
+    Instance {
+        problem,
+        environment: environment::build(&spec).expect("the experiment's environment spec is valid"),
+        optimal_score: None,
+        spec: Some(spec),
+    }
+}
 
 /// Section 5.2.2's C-REPS for K tasks: epsilon 0.5, an update every 50 trials on a memory of the
 /// best 300/K trials per task (rounded down), polar-quadratic features, W = 0 around theta_0,
@@ -351,7 +334,7 @@ fn throwing_settings(
     eval_every: u64,
 ) -> serde_json::Value {
     json!({
-        "sim": sim.name(),
+        "sim": sim_name(sim),
         "rapier": (sim == Sim::Rapier).then(RapierConfig::default),
         "robot": Robot::pa10().name,
         "theta": "offset on theta_0 = (g1, g1dot, g2dot), 21 values",
@@ -395,11 +378,7 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
             eval_every,
             creps: Some(creps),
         },
-        instance: Box::new(move |_| Instance {
-            problem: grid_problem(),
-            environment: Box::new(sim.environment(Targets::Grid)),
-            optimal_score: None,
-        }),
+        instance: Box::new(move |_| from_spec(grid_problem(), environment::throwing(Model::Grid, sim))),
         selection_window: 250,
         detail: None,
     }
@@ -415,7 +394,7 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
     };
     let creps = throwing_creps(81, options);
     let eval_every = 1000;
-    let fields = board();
+    let fields = environment::dartboard_fields();
     Experiment {
         name: "dartboard".into(),
         methods: options.methods(&[Method::MonotonicProgress], |_| ducb.clone()),
@@ -430,23 +409,15 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
             creps: Some(creps),
         },
         instance: Box::new(move |_| {
-            let fields = board();
-            Instance {
-                problem: dartboard_problem(&fields, fields[0].centre),
-                environment: Box::new(sim.environment(Targets::Dartboard(fields))),
-                optimal_score: None,
-            }
+            let fields = environment::dartboard_fields();
+            from_spec(
+                dartboard_problem(&fields, fields[0].centre),
+                environment::throwing(Model::Dartboard, sim),
+            )
         }),
         selection_window: 10_000,
         detail: Some(Box::new(move |runs| dartboard_detail(&fields, runs))),
     }
-}
-
-/// The board, centred where theta_0 lands (analytic model).
-pub fn board() -> Vec<Field> {
-    let mut environment = Sim::Analytic.environment(Targets::Grid);
-    let bull = environment.landing(&[0.0; PARAMS]).expect("theta_0 lands");
-    dartboard_fields(bull)
 }
 
 /// Hits per ring and error statistics of the final policies (mean over runs), and the average

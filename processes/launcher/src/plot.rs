@@ -42,7 +42,11 @@ pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
         )?;
     }
     if summary.experiment == "dartboard" {
-        return dartboard(summary, &crate::paper::board(), &dir.join("board.svg"));
+        return dartboard(
+            summary,
+            &acps_models::environment::dartboard_fields(),
+            &dir.join("board.svg"),
+        );
     }
     match summary.training_contexts.first().map(Vec::len) {
         Some(1) => selection_traces(summary, &dir.join("selections.svg"))?,

@@ -1,0 +1,259 @@
+//! The iceoryx2 plumbing both sides of a fleet share: one prefix per run (so runs never see each
+//! other's resources), one function that opens every service with the same limits (whoever
+//! creates a service fixes its QoS), and stale-resource cleanup.
+//!
+//! Services of a run:
+//! - `tasks`: request-response; the learner is the only server, every worker a client. A request
+//!   carries the previous task's outcome, its response the next task (workers pull work).
+//! - `to-learner`: event; workers wake the learner after sending requests.
+//! - `to-workers`: event; the learner wakes workers after answering.
+
+use crate::wire::{WireTask, WorkerMessage};
+use iceoryx2::prelude::*;
+use std::time::Duration;
+
+/// Most workers one run serves.
+pub const MAX_WORKERS: usize = 128;
+/// Most requests one worker keeps in flight.
+pub const MAX_IN_FLIGHT_PER_WORKER: usize = 16;
+
+/// The task service.
+pub type TaskService =
+    iceoryx2::service::port_factory::request_response::PortFactory<ipc::Service, WorkerMessage, (), WireTask, ()>;
+/// An event service.
+pub type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+
+/// An iceoryx2 operation that failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{what}: {reason}")]
+pub struct IpcError {
+    /// What was attempted.
+    pub what: String,
+    /// iceoryx2's reason.
+    pub reason: String,
+}
+
+impl IpcError {
+    /// An error for `what` with iceoryx2's `reason`.
+    pub fn new(what: impl Into<String>, reason: impl std::fmt::Debug) -> Self {
+        Self {
+            what: what.into(),
+            reason: format!("{reason:?}"),
+        }
+    }
+}
+
+/// A run's name: it names the run's shared-memory prefix, and workers join a run by it.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct RunName(String);
+
+impl RunName {
+    /// A validated run name: 1 to 40 characters of `[A-Za-z0-9_-]`.
+    pub fn new(name: &str) -> Result<Self, IpcError> {
+        let valid = (1..=40).contains(&name.len())
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+        if valid {
+            Ok(Self(name.to_string()))
+        } else {
+            Err(IpcError::new(
+                "run name",
+                format!("'{name}' must be 1 to 40 characters of letters, digits, '-' and '_'"),
+            ))
+        }
+    }
+
+    /// The name.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// The iceoryx2 file prefix of the run's resources in /dev/shm and /tmp/iceoryx2.
+    pub fn prefix(&self) -> String {
+        format!("acps_{}_", self.0)
+    }
+
+    /// The iceoryx2 configuration of the run.
+    pub fn config(&self) -> Result<Config, IpcError> {
+        let mut config = Config::default();
+        config.global.prefix =
+            FileName::new(self.prefix().as_bytes()).map_err(|e| IpcError::new("the run's iceoryx2 prefix", e))?;
+        Ok(config)
+    }
+}
+
+impl std::fmt::Display for RunName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// The services of one run, opened with the limits every side agrees on.
+pub struct Services {
+    /// Request-response: workers request, the learner answers with tasks.
+    pub tasks: TaskService,
+    /// Workers notify the learner.
+    pub to_learner: EventService,
+    /// The learner notifies workers.
+    pub to_workers: EventService,
+}
+
+/// A node of `run` named `name`. Signal handling stays with the host program (library code must
+/// not swallow SIGINT/SIGTERM).
+pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
+    let node_name = NodeName::new(name).map_err(|e| IpcError::new(format!("node name '{name}'"), e))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(&run.config()?)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| IpcError::new(format!("creating node '{name}' of run '{run}'"), e))
+}
+
+/// Open (or create) every service of the run on `node`.
+pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
+    let nodes = MAX_WORKERS + 8;
+    let service_name =
+        |name: &str| ServiceName::new(name).map_err(|e| IpcError::new(format!("service name '{name}'"), e));
+    let tasks = node
+        .service_builder(&service_name("tasks")?)
+        .request_response::<WorkerMessage, WireTask>()
+        .max_servers(1)
+        .max_clients(MAX_WORKERS)
+        .max_nodes(nodes)
+        .max_active_requests_per_client(MAX_IN_FLIGHT_PER_WORKER)
+        .max_response_buffer_size(2)
+        .max_loaned_requests(2)
+        .open_or_create()
+        .map_err(|e| {
+            IpcError::new(
+                "opening the task service (a worker of another build has incompatible types)",
+                e,
+            )
+        })?;
+    let event = |name: &str| {
+        node.service_builder(&service_name(name)?)
+            .event()
+            .max_listeners(nodes)
+            .max_notifiers(nodes)
+            .max_nodes(nodes)
+            .open_or_create()
+            .map_err(|e| IpcError::new(format!("opening the event service '{name}'"), e))
+    };
+    Ok(Services {
+        tasks,
+        to_learner: event("to-learner")?,
+        to_workers: event("to-workers")?,
+    })
+}
+
+/// Remove what dead processes of `run` left behind (crashed learners or workers). Returns the
+/// number of dead nodes cleaned up.
+pub fn clean_stale(run: &RunName) -> Result<usize, IpcError> {
+    let config = run.config()?;
+    let mut cleaned = 0;
+    Node::<ipc::Service>::list(&config, |state| {
+        if let NodeState::Dead(view) = state
+            && view.try_remove_stale_resources().is_ok()
+        {
+            cleaned += 1;
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
+    Ok(cleaned)
+}
+
+/// Number of live nodes of `run`.
+pub fn live_nodes(run: &RunName) -> Result<usize, IpcError> {
+    let mut alive = 0;
+    Node::<ipc::Service>::list(&run.config()?, |state| {
+        if let NodeState::Alive(_) = state {
+            alive += 1;
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
+    Ok(alive)
+}
+
+/// Files of `run` in /dev/shm and /tmp/iceoryx2 (recursively).
+pub fn leftover_files(run: &RunName) -> Vec<std::path::PathBuf> {
+    let prefix = run.prefix();
+    let mut found = Vec::new();
+    let mut stack = vec![
+        std::path::PathBuf::from("/dev/shm"),
+        std::path::PathBuf::from("/tmp/iceoryx2"),
+    ];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            let name = entry.file_name();
+            if name.to_string_lossy().starts_with(&prefix) {
+                found.push(path);
+            } else if path.is_dir() {
+                stack.push(path);
+            }
+        }
+    }
+    found
+}
+
+/// After the last node of a run is gone: clean stale nodes, then remove the files iceoryx2 keeps
+/// on purpose (one 16-byte management file per prefix) and anything a crash left. Refuses while
+/// a node of the run is alive.
+pub fn remove_run_files(run: &RunName) -> Result<usize, IpcError> {
+    clean_stale(run)?;
+    let alive = live_nodes(run)?;
+    if alive > 0 {
+        return Err(IpcError::new(
+            format!("removing the files of run '{run}'"),
+            format!("{alive} node(s) still alive"),
+        ));
+    }
+    let files = leftover_files(run);
+    let count = files.len();
+    for path in files {
+        let _ = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+    }
+    Ok(count)
+}
+
+/// How long blocking waits last before a liveness check.
+pub const TICK: Duration = Duration::from_millis(50);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_names_are_validated() {
+        assert_eq!(RunName::new("grid-1").unwrap().prefix(), "acps_grid-1_");
+        for bad in ["", "a/b", "with space", &"x".repeat(41)] {
+            let error = RunName::new(bad).unwrap_err().to_string();
+            assert!(error.contains("must be 1 to 40 characters"), "{error}");
+        }
+    }
+
+    #[test]
+    fn services_open_and_leave_nothing_behind() {
+        let run = RunName::new(&format!("test-services-{}", std::process::id())).unwrap();
+        {
+            let node = node(&run, "test").unwrap();
+            let services = open_services(&node).unwrap();
+            assert_eq!(services.tasks.dynamic_config().number_of_servers(), 0);
+            let second = open_services(&node).unwrap();
+            assert_eq!(second.tasks.static_config().max_clients(), MAX_WORKERS);
+            assert_eq!(live_nodes(&run).unwrap(), 1);
+            assert!(remove_run_files(&run).is_err(), "refused while a node is alive");
+        }
+        remove_run_files(&run).unwrap();
+        assert!(leftover_files(&run).is_empty(), "{:?}", leftover_files(&run));
+    }
+}
