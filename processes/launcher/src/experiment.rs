@@ -4,13 +4,17 @@
 //! Run `r` of every method uses the seed `base_seed + r` for both the problem instance and the
 //! learner, so methods are compared on the same problem instances (paired runs).
 
+use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress};
 use acps_learner::{Episode, Learner, LearnerConfig, LearnerError, LearnerStats, SelectorConfig, run_in_process};
+use acps_shared::ipc::RunName;
+use acps_shared::wire::EnvironmentSpec;
 use acps_shared::{Environment, Problem};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
 /// One problem instance: what the learner sees, the environment, and a known optimal score.
 pub struct Instance {
@@ -128,23 +132,168 @@ pub struct Summary {
     pub methods: BTreeMap<String, MethodSummary>,
 }
 
+/// One learner of an experiment with its environment.
+pub struct Job {
+    /// The learner core.
+    pub learner: Learner,
+    /// Its environment, for in-process runs.
+    pub environment: Box<dyn Environment>,
+    /// How a worker builds the same environment, if it can.
+    pub spec: Option<EnvironmentSpec>,
+    /// The instance's optimal score, if known.
+    pub optimal_score: Option<f64>,
+}
+
+impl Job {
+    fn result(&self) -> RunResult {
+        let learner = &self.learner;
+        RunResult {
+            eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
+            scores: learner.evaluations().iter().map(|e| e.score).collect(),
+            episodes: learner.episodes().to_vec(),
+            stats: learner.stats().clone(),
+            optimal_score: self.optimal_score,
+            final_outcomes: learner
+                .evaluations()
+                .last()
+                .map(|e| e.outcomes.clone())
+                .unwrap_or_default(),
+        }
+    }
+}
+
+/// A fleet run that could not start or complete.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A learner refused its configuration.
+    #[error(transparent)]
+    Learner(#[from] LearnerError),
+    /// The fleet failed.
+    #[error(transparent)]
+    Fleet(#[from] FleetError),
+    /// The experiment cannot run on a fleet.
+    #[error(
+        "experiment '{0}' cannot run on a worker fleet: its environment keeps state between rollouts (use `acps experiment`)"
+    )]
+    Stateful(String),
+}
+
 impl Experiment {
-    /// Run every (method, run) pair in parallel and summarise.
-    pub fn run(&self, progress: &ProgressBar) -> Result<Summary, LearnerError> {
-        let jobs: Vec<(usize, usize)> = (0..self.methods.len())
+    /// Every (method, run) learner of the experiment, method-major.
+    pub fn jobs(&self) -> Result<Vec<Job>, LearnerError> {
+        (0..self.methods.len())
             .flat_map(|m| (0..self.runs).map(move |r| (m, r)))
-            .collect();
+            .map(|(method, run)| self.job(&self.methods[method], self.base_seed + run as u64))
+            .collect()
+    }
+
+    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, LearnerError> {
+        let Instance {
+            problem,
+            environment,
+            optimal_score,
+            spec,
+        } = (self.instance)(seed);
+        let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
+            problem: problem.name.clone(),
+            reason: e.to_string(),
+        })?;
+        let learner = Learner::new(
+            LearnerConfig {
+                seed,
+                ..self.learner.clone()
+            },
+            problem,
+            selector,
+        )?;
+        Ok(Job {
+            learner,
+            environment,
+            spec,
+            optimal_score,
+        })
+    }
+
+    /// Run every (method, run) pair in parallel in this process and summarise.
+    pub fn run(&self, progress: &ProgressBar) -> Result<Summary, LearnerError> {
+        let mut jobs = self.jobs()?;
         progress.set_length(jobs.len() as u64);
         progress.set_message(self.name.clone());
-        let results: Vec<RunResult> = jobs
-            .par_iter()
-            .map(|&(method, run)| {
-                let result = self.run_one(&self.methods[method], self.base_seed + run as u64);
-                progress.inc(1);
-                result
+        jobs.par_iter_mut().for_each(|job| {
+            run_in_process(&mut job.learner, job.environment.as_mut());
+            progress.inc(1);
+        });
+        Ok(self.summary(&jobs))
+    }
+
+    /// One learner run of `selector` with `seed`, in this thread.
+    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, LearnerError> {
+        let mut job = self.job(selector, seed)?;
+        run_in_process(&mut job.learner, job.environment.as_mut());
+        Ok(job.result())
+    }
+
+    /// Serve every (method, run) learner to the workers of `run` and summarise; `observe` sees
+    /// the fleet's progress every tick.
+    pub fn run_fleet(
+        &self,
+        run: &RunName,
+        stop: &AtomicBool,
+        observe: impl FnMut(&FleetProgress),
+    ) -> Result<(Summary, FleetProgress), RunError> {
+        let jobs = self.jobs()?;
+        let mut fleet_jobs = Vec::with_capacity(jobs.len());
+        let mut optimal = Vec::with_capacity(jobs.len());
+        for job in jobs {
+            let environment = job.spec.ok_or_else(|| RunError::Stateful(self.name.clone()))?;
+            optimal.push(job.optimal_score);
+            fleet_jobs.push((
+                FleetJob {
+                    learner: job.learner,
+                    environment,
+                },
+                job.environment,
+            ));
+        }
+        let (mut learners, environments): (Vec<FleetJob>, Vec<_>) = fleet_jobs.into_iter().unzip();
+        let progress = fleet::serve(&mut learners, run, self.identity(), stop, observe)?;
+        let jobs: Vec<Job> = learners
+            .into_iter()
+            .zip(environments)
+            .zip(optimal)
+            .map(|((fleet_job, environment), optimal_score)| Job {
+                learner: fleet_job.learner,
+                environment,
+                spec: Some(fleet_job.environment),
+                optimal_score,
             })
-            .collect::<Result<_, _>>()?;
-        let problem = (self.instance)(self.base_seed).problem;
+            .collect();
+        Ok((self.summary(&jobs), progress))
+    }
+
+    /// A hash of everything that determines the run's results: workers of another run are
+    /// refused instead of mixed in.
+    pub fn identity(&self) -> u64 {
+        let description = serde_json::json!({
+            "name": self.name,
+            "methods": self.methods,
+            "runs": self.runs,
+            "base_seed": self.base_seed,
+            "episodes": self.learner.episodes,
+            "in_flight": self.learner.in_flight,
+            "eval_every": self.learner.eval_every,
+            "settings": self.settings,
+        })
+        .to_string();
+        // FNV-1a: stable across builds and platforms, unlike std's hasher.
+        description.bytes().fold(0xcbf2_9ce4_8422_2325u64, |hash, byte| {
+            (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3)
+        })
+    }
+
+    fn summary(&self, jobs: &[Job]) -> Summary {
+        let results: Vec<RunResult> = jobs.iter().map(Job::result).collect();
+        let problem = jobs[0].learner.problem();
         let mut methods = BTreeMap::new();
         for (index, selector) in self.methods.iter().enumerate() {
             let runs = &results[index * self.runs..(index + 1) * self.runs];
@@ -154,7 +303,7 @@ impl Experiment {
             );
         }
         let optimal: Vec<f64> = results[..self.runs].iter().filter_map(|r| r.optimal_score).collect();
-        Ok(Summary {
+        Summary {
             experiment: self.name.clone(),
             metric: problem.metric.clone(),
             runs: self.runs,
@@ -162,43 +311,11 @@ impl Experiment {
             training_episodes: self.learner.episodes,
             in_flight: self.learner.in_flight,
             selection_window: self.selection_window,
-            training_contexts: problem.training_contexts,
+            training_contexts: problem.training_contexts.clone(),
             j_opt_mean: (!optimal.is_empty()).then(|| mean(&optimal)),
             settings: self.settings.clone(),
             methods,
-        })
-    }
-
-    /// One learner run of `selector` with `seed`.
-    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, LearnerError> {
-        let Instance {
-            problem,
-            mut environment,
-            optimal_score,
-            ..
-        } = (self.instance)(seed);
-        let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
-            problem: problem.name.clone(),
-            reason: e.to_string(),
-        })?;
-        let config = LearnerConfig {
-            seed,
-            ..self.learner.clone()
-        };
-        let mut learner = Learner::new(config, problem, selector)?;
-        run_in_process(&mut learner, environment.as_mut());
-        Ok(RunResult {
-            eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
-            scores: learner.evaluations().iter().map(|e| e.score).collect(),
-            episodes: learner.episodes().to_vec(),
-            stats: learner.stats().clone(),
-            optimal_score,
-            final_outcomes: learner
-                .evaluations()
-                .last()
-                .map(|e| e.outcomes.clone())
-                .unwrap_or_default(),
-        })
+        }
     }
 
     fn summarise(&self, runs: &[RunResult], contexts: usize) -> MethodSummary {

@@ -1,13 +1,20 @@
 //! `acps`: the command line of Active Contextual Policy Search.
 
-use acps::experiment::{Experiment, progress_bar};
+use acps::experiment::{Experiment, Summary, progress_bar};
 use acps::paper::{self, Options, Overrides};
 use acps_learner::Method;
 use acps_learner::selection::FirstVisit;
+use acps_shared::ipc::{self, RunName};
+use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::process::{Child, Command as ProcessCommand, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 #[derive(Parser)]
 #[command(
@@ -25,6 +32,47 @@ enum Command {
     /// Run one of the paper's experiments in this process, for several methods x seeds in
     /// parallel, and write DIR/summary.json.
     Experiment(ExperimentArgs),
+    /// Run an experiment through a worker fleet: this process is the learner and serves tasks
+    /// over iceoryx2 shared memory to worker processes it starts. Writes the same DIR/summary.json
+    /// as `acps experiment` with the same --in-flight and --seed.
+    Run(RunArgs),
+    /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.
+    Worker(WorkerArgs),
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    #[command(flatten)]
+    experiment: ExperimentArgs,
+    /// Worker processes to start (default: the number of cores).
+    #[arg(long)]
+    workers: Option<usize>,
+    /// Requests each started worker keeps in flight (1..=16).
+    #[arg(long, default_value_t = 4)]
+    worker_in_flight: usize,
+    /// The run's name: its shared-memory prefix, and how workers started by hand join it
+    /// (default: EXPERIMENT-PID).
+    #[arg(long)]
+    run: Option<String>,
+}
+
+#[derive(clap::Args)]
+struct WorkerArgs {
+    /// The run to join (the learner's --run).
+    #[arg(long)]
+    run: String,
+    /// Requests kept in flight (1..=16): more hides the wake-up latency between processes.
+    #[arg(long, default_value_t = 4)]
+    in_flight: usize,
+    /// The worker's name in iceoryx2's node list (default: worker-PID).
+    #[arg(long)]
+    name: Option<String>,
+    /// Seconds to wait for the run's learner to appear.
+    #[arg(long, default_value_t = 30.0)]
+    startup_timeout: f64,
+    /// Print nothing unless something goes wrong.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -138,10 +186,13 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Experiment(args) => experiment(args),
+        Command::Run(args) => fleet(args),
+        Command::Worker(args) => worker(args),
     }
 }
 
-fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
+/// The experiments `args` name, with their output directories.
+fn experiments(args: &ExperimentArgs) -> anyhow::Result<Vec<(Experiment, PathBuf)>> {
     if args.runs == 0 {
         bail!("--runs must be >= 1, got 0");
     }
@@ -234,22 +285,157 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
             vec![(experiment, out.clone())]
         }
     };
-    for (experiment, dir) in jobs {
-        run_and_write(&experiment, &dir, args.quiet)?;
+    Ok(jobs)
+}
+
+fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
+    for (experiment, dir) in experiments(&args)? {
+        let progress = progress_bar(args.quiet);
+        let summary = experiment
+            .run(&progress)
+            .with_context(|| format!("experiment {}", experiment.name))?;
+        progress.finish_and_clear();
+        write(&experiment, &summary, &dir, args.quiet)?;
     }
     Ok(())
 }
 
-fn run_and_write(experiment: &Experiment, dir: &Path, quiet: bool) -> anyhow::Result<()> {
-    let progress = progress_bar(quiet);
-    let summary = experiment
-        .run(&progress)
-        .with_context(|| format!("experiment {}", experiment.name))?;
-    progress.finish_and_clear();
+/// Run the experiments through a fleet: this process serves the learners, `--workers` worker
+/// processes simulate. Shared memory of the run is cleaned before and after, also on errors
+/// and Ctrl-C.
+fn fleet(args: RunArgs) -> anyhow::Result<()> {
+    let experiments = experiments(&args.experiment)?;
+    let run = RunName::new(
+        &args
+            .run
+            .clone()
+            .unwrap_or_else(|| format!("{}-{}", experiments[0].0.name, std::process::id())),
+    )?;
+    // A crashed earlier run of the same name may have left resources behind.
+    if ipc::live_nodes(&run)? == 0 {
+        ipc::remove_run_files(&run)?;
+    } else {
+        bail!("run '{run}' is active (live iceoryx2 nodes); choose another --run name");
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
+    let workers = args
+        .workers
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let result = (|| -> anyhow::Result<()> {
+        for (experiment, dir) in &experiments {
+            let mut children = spawn_workers(&run, workers, args.worker_in_flight)?;
+            let progress = fleet_progress(args.experiment.quiet, experiment);
+            let outcome = experiment.run_fleet(&run, &stop, |p| {
+                progress.set_position(p.jobs_done as u64);
+                progress.set_message(format!(
+                    "{} workers, {} outcomes, {} re-issued",
+                    p.workers, p.outcomes, p.reissued
+                ));
+            });
+            progress.finish_and_clear();
+            let reaped = reap(&mut children);
+            let (summary, report) =
+                outcome.with_context(|| format!("experiment {} on run '{run}'", experiment.name))?;
+            reaped?;
+            if !args.experiment.quiet {
+                println!(
+                    "{} on {workers} workers: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
+                    experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
+                );
+            }
+            write(experiment, &summary, dir, args.experiment.quiet)?;
+        }
+        Ok(())
+    })();
+    let cleaned = ipc::remove_run_files(&run);
+    result?;
+    cleaned.with_context(|| format!("removing the shared memory of run '{run}'"))?;
+    Ok(())
+}
+
+fn spawn_workers(run: &RunName, workers: usize, in_flight: usize) -> anyhow::Result<Vec<Child>> {
+    let exe = std::env::current_exe().context("locating the acps executable")?;
+    (0..workers)
+        .map(|i| {
+            ProcessCommand::new(&exe)
+                .args([
+                    "worker",
+                    "--run",
+                    run.as_str(),
+                    "--in-flight",
+                    &in_flight.to_string(),
+                    "--name",
+                    &format!("worker-{i}"),
+                    "-q",
+                ])
+                .stdin(Stdio::null())
+                .spawn()
+                .with_context(|| format!("starting worker {i}"))
+        })
+        .collect()
+}
+
+/// Wait for the workers to leave (they stop when the learner says the run is over or is gone);
+/// kill any that does not within a few seconds.
+fn reap(children: &mut [Child]) -> anyhow::Result<()> {
+    let deadline = Instant::now() + Duration::from_secs(5);
+    for child in children.iter_mut() {
+        loop {
+            if child.try_wait()?.is_some() {
+                break;
+            }
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                let _ = child.wait();
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    Ok(())
+}
+
+fn fleet_progress(quiet: bool, experiment: &Experiment) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new((experiment.methods.len() * experiment.runs) as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} learners done, {msg}, {elapsed}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_prefix(experiment.name.clone());
+    bar
+}
+
+fn worker(args: WorkerArgs) -> anyhow::Result<()> {
+    let run = RunName::new(&args.run)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
+    let options = WorkerOptions {
+        in_flight: args.in_flight,
+        name: args.name.unwrap_or_else(|| format!("worker-{}", std::process::id())),
+        startup_timeout: Duration::from_secs_f64(args.startup_timeout),
+    };
+    let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop)?;
+    if !args.quiet || report.exit == WorkerExit::LearnerGone {
+        eprintln!(
+            "worker {}: {:?} after {} rollouts",
+            options.name, report.exit, report.rollouts
+        );
+    }
+    Ok(())
+}
+
+fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) -> anyhow::Result<()> {
     summary
         .write(dir)
         .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
-    acps::plot::write_all(&summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
+    acps::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
         for (method, result) in &summary.methods {

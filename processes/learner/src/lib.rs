@@ -4,6 +4,7 @@
 #![warn(missing_docs)]
 
 pub mod creps;
+pub mod fleet;
 pub mod learner;
 pub mod method;
 pub mod selection;

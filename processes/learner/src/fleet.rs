@@ -1,0 +1,198 @@
+//! Serving learners to a fleet of worker processes over iceoryx2 shared memory.
+//!
+//! The transport boundary: everything iceoryx2-specific on the learner side lives here; the
+//! learner cores are driven through `ask`/`tell`/`reissue` only, exactly as in-process runs drive
+//! them. Many cores (one per method x run) share the fleet; tasks are handed out round robin over
+//! the cores that have one ready, so even P = 1 runs keep many workers busy, and every core's
+//! trajectory stays the one it has in-process.
+//!
+//! Faults: every tick the server asks iceoryx2 to clean up dead nodes, lists the live clients,
+//! and re-issues exactly the tasks held by clients that are gone. A late outcome of a re-issued
+//! task is recognised as a duplicate and dropped. Workers of another build or run are refused.
+
+use crate::learner::{Learner, TellError};
+use acps_shared::ipc::{self, IpcError, RunName, TICK};
+use acps_shared::wire::{CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask};
+use iceoryx2::identifiers::UniqueClientId;
+use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// One learner and the environment its tasks run in.
+pub struct FleetJob {
+    /// The learner core.
+    pub learner: Learner,
+    /// What workers build to perform its tasks.
+    pub environment: EnvironmentSpec,
+}
+
+/// Progress of a fleet run, reported every tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FleetProgress {
+    /// Jobs finished.
+    pub jobs_done: usize,
+    /// Outcomes consumed (all kinds).
+    pub outcomes: u64,
+    /// Connected workers.
+    pub workers: usize,
+    /// Tasks re-issued because their worker died.
+    pub reissued: u64,
+    /// Outcomes dropped as duplicates (a re-issued task answered twice).
+    pub duplicates: u64,
+    /// Requests refused (another build or run).
+    pub refused: u64,
+}
+
+/// A fleet run that could not complete.
+#[derive(Debug, thiserror::Error)]
+pub enum FleetError {
+    /// iceoryx2 failed.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// Another learner already serves this run.
+    #[error("another learner already serves run '{0}'; choose another --run name")]
+    RunTaken(String),
+    /// A task does not fit the wire.
+    #[error(transparent)]
+    Capacity(#[from] CapacityError),
+    /// The stop flag was set (Ctrl-C).
+    #[error("interrupted")]
+    Interrupted,
+}
+
+/// Serve `jobs` to the workers of `run` until every job is done; `identity` is the run's
+/// identity (a hash of its configuration), checked against every worker's requests.
+pub fn serve(
+    jobs: &mut [FleetJob],
+    run: &RunName,
+    identity: u64,
+    stop: &AtomicBool,
+    mut observe: impl FnMut(&FleetProgress),
+) -> Result<FleetProgress, FleetError> {
+    let node = ipc::node(run, "learner")?;
+    let services = ipc::open_services(&node)?;
+    if services.tasks.dynamic_config().number_of_servers() > 0 {
+        return Err(FleetError::RunTaken(run.to_string()));
+    }
+    let server = services
+        .tasks
+        .server_builder()
+        .create()
+        .map_err(|e| IpcError::new(format!("serving run '{run}' (is another learner serving it?)"), e))?;
+    let listener = services
+        .to_learner
+        .listener_builder()
+        .create()
+        .map_err(|e| IpcError::new("creating the learner's listener", e))?;
+    let notifier = services
+        .to_workers
+        .notifier_builder()
+        .create()
+        .map_err(|e| IpcError::new("creating the learner's notifier", e))?;
+
+    let mut progress = FleetProgress::default();
+    let mut parked = VecDeque::new();
+    let mut holders: HashMap<(u32, u64), UniqueClientId> = HashMap::new();
+    let mut next_job = 0;
+    let mut last_tick = Instant::now();
+    let mut refused_clients = HashSet::new();
+    loop {
+        let mut active_now = false;
+        while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
+            active_now = true;
+            let message = *request.payload();
+            if message.protocol != PROTOCOL_VERSION || (message.run != 0 && message.run != identity) {
+                progress.refused += 1;
+                if refused_clients.insert(request.origin()) {
+                    eprintln!(
+                        "refused a worker of run '{run}': protocol {} (ours {PROTOCOL_VERSION}), run identity {:016x} (ours {identity:016x})",
+                        message.protocol, message.run
+                    );
+                }
+                let _ = request.send_copy(WireTask::control(Response::Refused, identity));
+                continue;
+            }
+            if let Some((job, outcome)) = message.outcome() {
+                holders.remove(&(job, outcome.task_id));
+                match jobs.get_mut(job as usize).map(|j| j.learner.tell(outcome)) {
+                    Some(Ok(())) => progress.outcomes += 1,
+                    Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
+                        progress.duplicates += 1
+                    }
+                }
+            }
+            parked.push_back(request);
+        }
+        let mut answered = 0;
+        while let Some(request) = parked.pop_front() {
+            if !request.is_connected() {
+                continue;
+            }
+            let Some((job, task)) = next_task(jobs, &mut next_job) else {
+                parked.push_front(request);
+                break;
+            };
+            let wire = WireTask {
+                run: identity,
+                ..WireTask::task(job as u32, &task, jobs[job].environment)?
+            };
+            holders.insert((job as u32, task.id), request.origin());
+            request
+                .send_copy(wire)
+                .map_err(|e| IpcError::new("answering a request", e))?;
+            answered += 1;
+        }
+        progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
+        if progress.jobs_done == jobs.len() {
+            for request in parked.drain(..) {
+                let _ = request.send_copy(WireTask::control(Response::Stop, identity));
+            }
+            let _ = notifier.notify();
+            observe(&progress);
+            return Ok(progress);
+        }
+        if answered > 0 {
+            notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
+        }
+        if last_tick.elapsed() >= TICK {
+            last_tick = Instant::now();
+            services.tasks.try_cleanup_dead_nodes();
+            let mut live = HashSet::new();
+            services.tasks.dynamic_config().list_clients(|client| {
+                live.insert(client.client_id);
+                CallbackProgression::Continue
+            });
+            progress.workers = live.len();
+            holders.retain(|&(job, task_id), client| {
+                let alive = live.contains(client);
+                if !alive && jobs[job as usize].learner.reissue(task_id) {
+                    progress.reissued += 1;
+                }
+                alive
+            });
+            observe(&progress);
+        }
+        if stop.load(Ordering::Relaxed) {
+            return Err(FleetError::Interrupted);
+        }
+        if !active_now {
+            listener
+                .timed_wait(|_| {}, TICK)
+                .map_err(|e| IpcError::new("waiting for workers", e))?;
+        }
+    }
+}
+
+/// The next ready task, round robin over the jobs.
+fn next_task(jobs: &mut [FleetJob], next_job: &mut usize) -> Option<(usize, acps_shared::Task)> {
+    let n = jobs.len();
+    for offset in 0..n {
+        let job = (*next_job + offset) % n;
+        if let Some(task) = jobs[job].learner.ask() {
+            *next_job = (job + 1) % n;
+            return Some((job, task));
+        }
+    }
+    None
+}
