@@ -311,12 +311,9 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             .clone()
             .unwrap_or_else(|| format!("{}-{}", experiments[0].0.name, std::process::id())),
     )?;
-    // A crashed earlier run of the same name may have left resources behind.
-    if ipc::live_nodes(&run)? == 0 {
-        ipc::remove_run_files(&run)?;
-    } else {
-        bail!("run '{run}' is active (live iceoryx2 nodes); choose another --run name");
-    }
+    // A crashed earlier run of the same name may have left resources behind; workers started by
+    // hand may already be waiting, so only dead nodes are cleaned while anything is alive.
+    clean_up(&run)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
@@ -349,9 +346,21 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
         }
         Ok(())
     })();
-    let cleaned = ipc::remove_run_files(&run);
+    let cleaned = clean_up(&run);
     result?;
-    cleaned.with_context(|| format!("removing the shared memory of run '{run}'"))?;
+    cleaned.with_context(|| format!("removing the shared memory of run '{run}'"))
+}
+
+/// Remove the run's shared memory, or, while nodes started elsewhere (workers started by hand,
+/// embedding programs) are still alive, only what dead nodes left: the last one out leaves a
+/// management file that the next run of the same name removes.
+fn clean_up(run: &RunName) -> anyhow::Result<()> {
+    if ipc::live_nodes(run)? == 0 {
+        ipc::remove_run_files(run)?;
+    } else {
+        ipc::clean_stale(run)?;
+        eprintln!("run '{run}': nodes started elsewhere are still alive; their shared memory stays until they exit");
+    }
     Ok(())
 }
 

@@ -1,0 +1,315 @@
+//! The worker fleet end to end: real learner and worker processes over iceoryx2.
+
+use acps_shared::ipc::{self, RunName};
+use acps_shared::wire::{Response, WireTask, WorkerMessage};
+use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
+use iceoryx2::prelude::PortFactory as _;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+fn acps() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_acps"))
+}
+
+fn run_name(test: &str) -> RunName {
+    RunName::new(&format!("t{}-{test}", std::process::id())).unwrap()
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("acps-fleet-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// A short grid experiment: 2 methods x 2 runs.
+const GRID: [&str; 10] = [
+    "grid",
+    "--runs",
+    "2",
+    "--episodes",
+    "300",
+    "--method",
+    "monotonic-progress",
+    "--method",
+    "random-continuous",
+    "-q",
+];
+
+fn check(output: Output) -> String {
+    assert!(
+        output.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+fn in_process(args: &[&str], out: &Path) -> Vec<u8> {
+    check(
+        acps()
+            .arg("experiment")
+            .args(args)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap(),
+    );
+    std::fs::read(out.join("summary.json")).unwrap()
+}
+
+fn assert_clean(run: &RunName) {
+    let left = ipc::leftover_files(run);
+    assert!(left.is_empty(), "run {run} left {left:?}");
+}
+
+#[test]
+fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
+    for p in ["1", "4"] {
+        let dir = temp_dir(&format!("match-{p}"));
+        let mut args = GRID.to_vec();
+        args.extend(["--in-flight", p]);
+        let reference = in_process(&args, &dir.join("in-process"));
+        for workers in ["1", "2"] {
+            let run = run_name(&format!("match-{p}-{workers}"));
+            let out = dir.join(format!("fleet-{workers}"));
+            check(
+                acps()
+                    .arg("run")
+                    .args(&args)
+                    .args(["--workers", workers, "--run", run.as_str()])
+                    .arg("--out")
+                    .arg(&out)
+                    .output()
+                    .unwrap(),
+            );
+            assert_eq!(
+                std::fs::read(out.join("summary.json")).unwrap(),
+                reference,
+                "P = {p}, W = {workers}"
+            );
+            assert_clean(&run);
+        }
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+/// Wait for `child` to exit, at most `limit`.
+fn wait_for(child: &mut Child, limit: Duration) -> Option<Duration> {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        if child.try_wait().unwrap().is_some() {
+            return Some(start.elapsed());
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    None
+}
+
+fn kill(child: &mut Child) {
+    // SIGKILL: the process gets no chance to clean up.
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+/// The rapier backend makes the run last long enough to kill a worker in the middle.
+const SLOW: [&str; 8] = ["grid", "--sim", "rapier", "--runs", "2", "--episodes", "400", "-q"];
+
+#[test]
+fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
+    let dir = temp_dir("kill-worker");
+    let mut args = SLOW.to_vec();
+    args.extend(["--method", "monotonic-progress"]);
+    let reference = in_process(&args, &dir.join("in-process"));
+    let run = run_name("kill-worker");
+    let out = dir.join("fleet");
+    // Not quiet: the learner reports how many tasks it re-issued.
+    let loud: Vec<&str> = args.iter().copied().filter(|a| *a != "-q").collect();
+    let learner = acps()
+        .arg("run")
+        .args(&loud)
+        .args(["--workers", "1", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // A worker started by hand joins the running learner by its run name.
+    let mut victim = acps()
+        .args(["worker", "--run", run.as_str(), "--name", "victim", "-q"])
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(600));
+    assert!(victim.try_wait().unwrap().is_none(), "the victim must still be working");
+    kill(&mut victim);
+    let output = learner.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    // "grid on 1 workers: N outcomes, R re-issued, ...": the victim held tasks when it died.
+    let reissued: u64 = stdout
+        .split(" re-issued")
+        .next()
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    assert!(reissued >= 1, "{stdout}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
+    let dir = temp_dir("kill-learner");
+    let run = run_name("kill-learner");
+    let mut learner = acps()
+        .arg("run")
+        .args(SLOW)
+        .args(["--workers", "0", "--run", run.as_str()])
+        .arg("--out")
+        .arg(dir.join("a"))
+        .spawn()
+        .unwrap();
+    let mut workers: Vec<Child> = (0..2)
+        .map(|i| {
+            acps()
+                .args(["worker", "--run", run.as_str(), "--name", &format!("w{i}"), "-q"])
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(800));
+    kill(&mut learner);
+    for worker in &mut workers {
+        let waited = wait_for(worker, Duration::from_secs(10));
+        assert!(waited.is_some(), "a worker kept waiting for a dead learner");
+        eprintln!("worker left {:?} after the learner was killed", waited.unwrap());
+    }
+    // The crash left resources; a new run of the same name cleans them at start and its own at the end.
+    assert!(!ipc::leftover_files(&run).is_empty());
+    let mut args = GRID.to_vec();
+    args.extend(["--workers", "1", "--run", run.as_str()]);
+    check(
+        acps()
+            .arg("run")
+            .args(&args)
+            .arg("--out")
+            .arg(dir.join("b"))
+            .output()
+            .unwrap(),
+    );
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
+    let dir = temp_dir("refuse");
+    let run = run_name("refuse");
+    let out = dir.join("fleet");
+    let learner = acps()
+        .arg("run")
+        .args(GRID)
+        .args(["--workers", "0", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // An impostor speaks the wire directly; its node and ports go away at the end of the block.
+    {
+        let node = {
+            let start = Instant::now();
+            loop {
+                let node = ipc::node(&run, "impostor").unwrap();
+                let services = ipc::open_services(&node).unwrap();
+                if services.tasks.dynamic_config().number_of_servers() > 0 {
+                    break (node, services);
+                }
+                assert!(start.elapsed() < Duration::from_secs(20), "the learner did not start");
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        };
+        let (_node, services) = node;
+        let client = services.tasks.client_builder().create().unwrap();
+        let notifier = services.to_learner.notifier_builder().create().unwrap();
+        let ask = |message: WorkerMessage| -> WireTask {
+            let pending = client.send_copy(message).unwrap();
+            notifier.notify().unwrap();
+            let start = Instant::now();
+            loop {
+                if let Some(response) = pending.receive().unwrap() {
+                    return *response.payload();
+                }
+                assert!(start.elapsed() < Duration::from_secs(10), "no answer");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        };
+        let wrong_protocol = WorkerMessage {
+            protocol: 99,
+            ..WorkerMessage::hello(0)
+        };
+        assert_eq!(ask(wrong_protocol).response(), Some(Response::Refused));
+        let wrong_run = WorkerMessage::hello(0x1234_5678);
+        let answer = ask(wrong_run);
+        assert_eq!(answer.response(), Some(Response::Refused));
+        assert_ne!(answer.run, 0x1234_5678, "the refusal carries the learner's identity");
+    }
+
+    // An embedded worker on this thread serves the run to its end.
+    let options = WorkerOptions {
+        in_flight: 4,
+        name: "embedded".into(),
+        startup_timeout: Duration::from_secs(10),
+    };
+    let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false)).unwrap();
+    assert_eq!(report.exit, WorkerExit::Finished);
+    assert!(report.rollouts >= 2 * 2 * 300);
+    let output = learner.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("refused a worker") && stderr.contains("protocol 99"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("summary.json")).unwrap(),
+        in_process(&GRID, &dir.join("in-process"))
+    );
+    ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn an_embedded_worker_stops_cleanly_when_asked() {
+    let run = run_name("stop");
+    let stop = AtomicBool::new(true);
+    let options = WorkerOptions {
+        in_flight: 2,
+        name: "stopped".into(),
+        startup_timeout: Duration::from_secs(10),
+    };
+    let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop).unwrap();
+    assert_eq!(report.exit, WorkerExit::Stopped);
+    let error = acps_worker::serve(
+        &run,
+        &WorkerOptions {
+            in_flight: 0,
+            ..options
+        },
+        &mut ModelFactory::default(),
+        &stop,
+    )
+    .unwrap_err();
+    assert!(
+        error.to_string().contains("in_flight must be in 1..=16, got 0"),
+        "{error}"
+    );
+    ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
+}
