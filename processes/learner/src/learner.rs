@@ -16,9 +16,11 @@
 //!   consumed training episodes and after the last one.
 //!
 //! # Failed rollouts
-//! A failed training rollout (simulation failure or a non-finite return) is counted, kept out of
-//! the C-REPS memory, and the selector observes the lowest return consumed so far in the run
-//! (0 before any). A failed evaluation rollout is left out of that evaluation's aggregate and
+//! A failed outcome (simulation failure or a non-finite return) is retried once: the same task,
+//! same seed, is handed out again, so a transient failure (a crashed simulator) gets a second
+//! chance and a deterministic one fails again. A failed training rollout after its retry is
+//! counted, kept out of the C-REPS memory, and the selector observes the lowest return consumed
+//! so far in the run (0 before any). A failed evaluation rollout is left out of that evaluation's aggregate and
 //! counted in [`Evaluation::failed`].
 
 use crate::creps::{CReps, CRepsConfig, CRepsError, UpdateOutcome};
@@ -119,8 +121,10 @@ pub struct LearnerStats {
     pub updates: u64,
     /// C-REPS updates rejected (old policy kept).
     pub rejected_updates: u64,
-    /// Failed training rollouts.
+    /// Failed training rollouts (after their retry).
     pub failed_episodes: u64,
+    /// Failed outcomes whose task was handed out once more.
+    pub retries: u64,
     /// Why the latest rejected update was rejected.
     pub last_rejection: Option<String>,
 }
@@ -154,6 +158,7 @@ pub struct Learner {
     evaluations: Vec<Evaluation>,
     episodes: Vec<Episode>,
     lowest_reward: Option<f64>,
+    retried: std::collections::HashSet<u64>,
     stats: LearnerStats,
 }
 
@@ -234,6 +239,7 @@ impl Learner {
             evaluations: Vec::new(),
             episodes: Vec::new(),
             lowest_reward: None,
+            retried: std::collections::HashSet::new(),
             stats: LearnerStats::default(),
         };
         if learner.selector.wants_initial_returns() {
@@ -278,13 +284,19 @@ impl Learner {
         if self.arrived.contains_key(&task_id) {
             return Err(TellError::Duplicate { task_id });
         }
-        self.arrived.insert(task_id, outcome);
         self.outbox.retain(|id| *id != task_id);
+        if !outcome.is_ok() && self.retried.insert(task_id) {
+            self.stats.retries += 1;
+            self.outbox.push_back(task_id);
+            return Ok(());
+        }
+        self.arrived.insert(task_id, outcome);
         while let Some(outcome) = self.arrived.remove(&self.next_to_consume) {
             let pending = self
                 .pending
                 .remove(&self.next_to_consume)
                 .expect("arrived outcomes belong to pending tasks");
+            self.retried.remove(&self.next_to_consume);
             self.next_to_consume += 1;
             self.consume(pending, outcome);
         }
