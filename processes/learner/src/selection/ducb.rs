@@ -76,15 +76,50 @@ impl DUcb {
     /// upper bound (see [`upper_bounds`](Self::upper_bounds)) wins, ties going to the lowest
     /// index.
     pub fn select(&mut self) -> usize {
+        self.select_with_pending(&[])
+    }
+
+    /// The arm to pull next while the pulls `pending` (oldest first) have been selected but their
+    /// rewards not yet [`update`](Self::update)d; arms out of range are ignored.
+    ///
+    /// With several tasks in flight the statistics do not change between selections, so plain
+    /// [`select`](Self::select) would hand the same arm out again and again until its first
+    /// reward came back. Here the bounds are taken instead from the state the bandit would be in
+    /// had every pending pull been updated with a reward equal to its arm's current mean (a
+    /// "fantasy" update, as GP-BUCB hallucinates observations at the posterior mean): every
+    /// count and the total decay by gamma per pending pull and the pulled arm's count grows by
+    /// 1, while no mean moves. Only the padding of arms in flight shrinks, so a run of
+    /// selections spreads over arms whose bounds are close instead of repeating one. The real
+    /// statistics are untouched; the fantasy is rebuilt at every call, in O(K |pending|).
+    ///
+    /// With nothing pending this is exactly [`select`](Self::select), i.e. Algorithm 1.
+    pub fn select_with_pending(&mut self, pending: &[usize]) -> usize {
         let sweep = self.selections;
         self.selections = self.selections.saturating_add(1);
         if sweep < self.arms() {
             return sweep;
         }
+        if pending.is_empty() {
+            return self.best_arm(&self.counts, self.total);
+        }
+        let gamma = self.config.gamma;
+        let mut counts = self.counts.clone();
+        let mut total = self.total;
+        for &arm in pending.iter().filter(|&&arm| arm < self.arms()) {
+            counts.iter_mut().for_each(|n| *n *= gamma);
+            total = gamma * total + 1.0;
+            counts[arm] += 1.0;
+        }
+        self.best_arm(&counts, total)
+    }
+
+    /// The arm with the largest upper bound for these counts and total, ties going to the
+    /// lowest index.
+    fn best_arm(&self, counts: &[f64], total: f64) -> usize {
         let mut best = 0;
         let mut best_value = f64::NEG_INFINITY;
-        for arm in 0..self.arms() {
-            let value = self.upper_bound(arm);
+        for (arm, &count) in counts.iter().enumerate() {
+            let value = self.bound(arm, count, total);
             // Strictly greater keeps the lowest index among ties, as numpy's argmax does.
             if value > best_value {
                 best = arm;
@@ -106,11 +141,15 @@ impl DUcb {
     }
 
     fn upper_bound(&self, arm: usize) -> f64 {
-        let count = self.counts[arm];
+        self.bound(arm, self.counts[arm], self.total)
+    }
+
+    /// The upper bound of `arm` with discounted count `count` out of a total `total`.
+    fn bound(&self, arm: usize, count: f64, total: f64) -> f64 {
         if count == 0.0 {
             return f64::INFINITY;
         }
-        let log_total = self.total.max(1.0).ln();
+        let log_total = total.max(1.0).ln();
         self.means[arm] + 2.0 * self.config.b * (self.config.xi * log_total / count).sqrt()
     }
 
@@ -262,6 +301,67 @@ mod tests {
         // Equal choices alone could hide luck: the two forms differ by rounding (~1e-15
         // relative), so a near-tie closer than that could flip. Show that none came close.
         assert!(smallest_gap > 1e-12, "smallest best-vs-runner-up gap {smallest_gap:e}");
+    }
+
+    #[test]
+    fn pending_pulls_count_as_updates_with_the_arms_current_mean() {
+        let c = config(0.97, 0.5, 1.0);
+        let k = 6;
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut ducb = DUcb::new(k, c).unwrap();
+        let mut compared = 0;
+        for t in 0..2000 {
+            let arm = ducb.select();
+            ducb.update(arm, rng.random::<f64>() * (1.0 + arm as f64) / k as f64)
+                .unwrap();
+            if t < k {
+                continue;
+            }
+            // Up to 9 pending pulls (0 included), plus one arm out of range that must be ignored.
+            let pending: Vec<usize> = (0..t % 10).map(|_| rng.random_range(0..k)).collect();
+            let mut fantasy = ducb.clone();
+            for &arm in &pending {
+                let mean = fantasy.means()[arm];
+                fantasy.update(arm, mean).unwrap();
+            }
+            let expected = fantasy.select();
+            let (counts, means, total) = (ducb.counts().to_vec(), ducb.means().to_vec(), ducb.total());
+            let mut with_foreign = pending.clone();
+            with_foreign.push(k);
+            assert_eq!(
+                ducb.select_with_pending(&with_foreign),
+                expected,
+                "step {t}, pending {pending:?}"
+            );
+            assert_eq!(fantasy.means(), &means[..], "a fantasy update must not move a mean");
+            // The real statistics are untouched.
+            assert_eq!(
+                (ducb.counts(), ducb.means(), ducb.total()),
+                (&counts[..], &means[..], total)
+            );
+            compared += 1;
+        }
+        assert_eq!(compared, 2000 - k);
+    }
+
+    #[test]
+    fn pending_pulls_spread_a_window_over_tied_arms() {
+        let mut plain = DUcb::new(4, config(0.99, 1e-8, 1.0)).unwrap();
+        for arm in 0..4 {
+            assert_eq!(plain.select(), arm);
+            plain.update(arm, 0.5).unwrap();
+        }
+        let mut fantasy = plain.clone();
+        // Four selections without an update: plain D-UCB repeats the first of the tied arms ...
+        let repeated: Vec<usize> = (0..4).map(|_| plain.select()).collect();
+        assert_eq!(repeated, [0, 0, 0, 0]);
+        // ... while counting the pending pulls hands out each arm once.
+        let mut pending = Vec::new();
+        for _ in 0..4 {
+            let arm = fantasy.select_with_pending(&pending);
+            pending.push(arm);
+        }
+        assert_eq!(pending, [0, 1, 2, 3]);
     }
 
     #[test]
