@@ -15,7 +15,7 @@ use std::time::Duration;
 /// Most workers one run serves.
 pub const MAX_WORKERS: usize = 128;
 /// Most requests one worker keeps in flight.
-pub const MAX_IN_FLIGHT_PER_WORKER: usize = 16;
+pub const MAX_IN_FLIGHT_PER_WORKER: usize = 64;
 
 /// The task service.
 pub type TaskService =

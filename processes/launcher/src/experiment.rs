@@ -238,6 +238,7 @@ impl Experiment {
     pub fn run_fleet(
         &self,
         run: &RunName,
+        spin: std::time::Duration,
         stop: &AtomicBool,
         observe: impl FnMut(&FleetProgress),
     ) -> Result<(Summary, FleetProgress), RunError> {
@@ -256,7 +257,7 @@ impl Experiment {
             ));
         }
         let (mut learners, environments): (Vec<FleetJob>, Vec<_>) = fleet_jobs.into_iter().unzip();
-        let progress = fleet::serve(&mut learners, run, self.identity(), stop, observe)?;
+        let progress = fleet::serve(&mut learners, run, self.identity(), spin, stop, observe)?;
         let jobs: Vec<Job> = learners
             .into_iter()
             .zip(environments)

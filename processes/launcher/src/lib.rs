@@ -1,6 +1,8 @@
 //! The acps launcher: named experiments of the paper, run in-process over methods x seeds.
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod experiment;
 pub mod paper;
 pub mod plot;
+pub mod workers;

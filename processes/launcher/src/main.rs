@@ -11,10 +11,9 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::process::{Child, Command as ProcessCommand, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 #[derive(Parser)]
 #[command(
@@ -38,6 +37,26 @@ enum Command {
     Run(RunArgs),
     /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.
     Worker(WorkerArgs),
+    /// Measure rollouts per second in-process and through fleets of 1 ..= cores workers, for a
+    /// trivial environment (the transport's cost) and the analytic and rapier PA-10; print a
+    /// table and write DIR/bench.json.
+    Bench(BenchArgs),
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Output directory.
+    #[arg(long, default_value = "runs/bench")]
+    out: PathBuf,
+    /// Largest fleet (default: the number of cores).
+    #[arg(long)]
+    max_workers: Option<usize>,
+    /// Requests each worker keeps in flight (1..=64).
+    #[arg(long, default_value_t = 16)]
+    worker_in_flight: usize,
+    /// Multiplies the work per row (1: a few seconds per row).
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
 }
 
 #[derive(clap::Args)]
@@ -47,7 +66,7 @@ struct RunArgs {
     /// Worker processes to start (default: the number of cores).
     #[arg(long)]
     workers: Option<usize>,
-    /// Requests each started worker keeps in flight (1..=16).
+    /// Requests each started worker keeps in flight (1..=64).
     #[arg(long, default_value_t = 4)]
     worker_in_flight: usize,
     /// The run's name: its shared-memory prefix, and how workers started by hand join it
@@ -61,7 +80,7 @@ struct WorkerArgs {
     /// The run to join (the learner's --run).
     #[arg(long)]
     run: String,
-    /// Requests kept in flight (1..=16): more hides the wake-up latency between processes.
+    /// Requests kept in flight (1..=64): more hides the wake-up latency between processes.
     #[arg(long, default_value_t = 4)]
     in_flight: usize,
     /// The worker's name in iceoryx2's node list (default: worker-PID).
@@ -70,6 +89,9 @@ struct WorkerArgs {
     /// Seconds to wait for the run's learner to appear.
     #[arg(long, default_value_t = 30.0)]
     startup_timeout: f64,
+    /// Microseconds to poll for an answer before blocking (0 when processes outnumber cores).
+    #[arg(long, default_value_t = 0)]
+    spin_us: u64,
     /// Print nothing unless something goes wrong.
     #[arg(long, short)]
     quiet: bool,
@@ -188,6 +210,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Experiment(args) => experiment(args),
         Command::Run(args) => fleet(args),
         Command::Worker(args) => worker(args),
+        Command::Bench(args) => bench(args),
     }
 }
 
@@ -322,9 +345,14 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let result = (|| -> anyhow::Result<()> {
         for (experiment, dir) in &experiments {
-            let mut children = spawn_workers(&run, workers, args.worker_in_flight)?;
+            let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight)?;
             let progress = fleet_progress(args.experiment.quiet, experiment);
-            let outcome = experiment.run_fleet(&run, &stop, |p| {
+            let mut workers_lost = false;
+            let outcome = experiment.run_fleet(&run, acps::workers::spin(workers), &stop, |p| {
+                if acps::workers::all_exited(&mut children) {
+                    workers_lost = true;
+                    stop.store(true, Ordering::Relaxed);
+                }
                 progress.set_position(p.jobs_done as u64);
                 progress.set_message(format!(
                     "{} workers, {} outcomes, {} re-issued",
@@ -332,7 +360,10 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
                 ));
             });
             progress.finish_and_clear();
-            let reaped = reap(&mut children);
+            if workers_lost {
+                bail!("all {workers} workers of run '{run}' exited before the run was done (see their messages above)");
+            }
+            let reaped = acps::workers::reap(&mut children);
             let (summary, report) =
                 outcome.with_context(|| format!("experiment {} on run '{run}'", experiment.name))?;
             reaped?;
@@ -364,48 +395,6 @@ fn clean_up(run: &RunName) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn spawn_workers(run: &RunName, workers: usize, in_flight: usize) -> anyhow::Result<Vec<Child>> {
-    let exe = std::env::current_exe().context("locating the acps executable")?;
-    (0..workers)
-        .map(|i| {
-            ProcessCommand::new(&exe)
-                .args([
-                    "worker",
-                    "--run",
-                    run.as_str(),
-                    "--in-flight",
-                    &in_flight.to_string(),
-                    "--name",
-                    &format!("worker-{i}"),
-                    "-q",
-                ])
-                .stdin(Stdio::null())
-                .spawn()
-                .with_context(|| format!("starting worker {i}"))
-        })
-        .collect()
-}
-
-/// Wait for the workers to leave (they stop when the learner says the run is over or is gone);
-/// kill any that does not within a few seconds.
-fn reap(children: &mut [Child]) -> anyhow::Result<()> {
-    let deadline = Instant::now() + Duration::from_secs(5);
-    for child in children.iter_mut() {
-        loop {
-            if child.try_wait()?.is_some() {
-                break;
-            }
-            if Instant::now() > deadline {
-                let _ = child.kill();
-                let _ = child.wait();
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-    Ok(())
-}
-
 fn fleet_progress(quiet: bool, experiment: &Experiment) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();
@@ -420,6 +409,32 @@ fn fleet_progress(quiet: bool, experiment: &Experiment) -> ProgressBar {
     bar
 }
 
+fn bench(args: BenchArgs) -> anyhow::Result<()> {
+    if !(args.scale.is_finite() && args.scale > 0.0) {
+        bail!("--scale must be finite and > 0, got {}", args.scale);
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let options = acps::bench::BenchOptions {
+        max_workers: args.max_workers.unwrap_or(cores),
+        worker_in_flight: args.worker_in_flight,
+        scale: args.scale,
+    };
+    println!(
+        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>14}",
+        "env", "mode", "workers", "rollouts/s", "ratio", "learner share"
+    );
+    let rows = acps::bench::run(&options, |row| {
+        let table = acps::bench::table(std::slice::from_ref(row));
+        print!("{}", table.lines().nth(1).map(|l| format!("{l}\n")).unwrap_or_default());
+    })?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let json = serde_json::to_string_pretty(&serde_json::json!({ "rows": rows }))?;
+    let path = args.out.join("bench.json");
+    std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;
+    println!("-> {}", path.display());
+    Ok(())
+}
+
 fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     let run = RunName::new(&args.run)?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -429,6 +444,7 @@ fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         in_flight: args.in_flight,
         name: args.name.unwrap_or_else(|| format!("worker-{}", std::process::id())),
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
+        spin: Duration::from_micros(args.spin_us),
     };
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop)?;
     if !args.quiet || report.exit == WorkerExit::LearnerGone {

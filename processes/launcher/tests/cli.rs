@@ -223,3 +223,24 @@ fn throwing_experiments_write_their_results() {
     assert!(board.join("board.svg").is_file());
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn bench_writes_its_table_and_json() {
+    let dir = temp_dir("bench");
+    let out = acps(&["bench", "--scale", "0.01", "--max-workers", "1", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("rollouts/s") && stdout.contains("inprocess-rayon"), "{stdout}");
+    let bench = summary(&dir.join("bench.json"));
+    let rows = bench["rows"].as_array().unwrap();
+    // Three environments x (one thread, rayon, a fleet of one).
+    assert_eq!(rows.len(), 9);
+    for row in rows {
+        assert!(["trivial", "analytic", "rapier"].contains(&row["env"].as_str().unwrap()));
+        assert!(["inprocess-1", "inprocess-rayon", "fleet"].contains(&row["mode"].as_str().unwrap()));
+        assert!(row["rollouts_per_s"].as_f64().unwrap() > 0.0 && row["ratio"].as_f64().unwrap() > 0.0);
+    }
+    let error = acps(&["bench", "--scale", "0"]);
+    assert!(String::from_utf8_lossy(&error.stderr).contains("--scale must be finite and > 0"));
+    let _ = std::fs::remove_dir_all(dir);
+}

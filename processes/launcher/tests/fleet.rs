@@ -264,7 +264,7 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
     let options = WorkerOptions {
         in_flight: 4,
         name: "embedded".into(),
-        startup_timeout: Duration::from_secs(10),
+        ..WorkerOptions::default()
     };
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false)).unwrap();
     assert_eq!(report.exit, WorkerExit::Finished);
@@ -292,7 +292,7 @@ fn an_embedded_worker_stops_cleanly_when_asked() {
     let options = WorkerOptions {
         in_flight: 2,
         name: "stopped".into(),
-        startup_timeout: Duration::from_secs(10),
+        ..WorkerOptions::default()
     };
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop).unwrap();
     assert_eq!(report.exit, WorkerExit::Stopped);
@@ -307,7 +307,7 @@ fn an_embedded_worker_stops_cleanly_when_asked() {
     )
     .unwrap_err();
     assert!(
-        error.to_string().contains("in_flight must be in 1..=16, got 0"),
+        error.to_string().contains("in_flight must be in 1..=64, got 0"),
         "{error}"
     );
     ipc::remove_run_files(&run).unwrap();

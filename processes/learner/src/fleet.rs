@@ -28,7 +28,7 @@ pub struct FleetJob {
 }
 
 /// Progress of a fleet run, reported every tick.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct FleetProgress {
     /// Jobs finished.
     pub jobs_done: usize,
@@ -42,6 +42,8 @@ pub struct FleetProgress {
     pub duplicates: u64,
     /// Requests refused (another build or run).
     pub refused: u64,
+    /// Time spent inside the learner cores (`tell` and `ask`), in seconds.
+    pub learner_seconds: f64,
 }
 
 /// A fleet run that could not complete.
@@ -62,11 +64,14 @@ pub enum FleetError {
 }
 
 /// Serve `jobs` to the workers of `run` until every job is done; `identity` is the run's
-/// identity (a hash of its configuration), checked against every worker's requests.
+/// identity (a hash of its configuration), checked against every worker's requests. When idle,
+/// the server polls (yielding the CPU) for `spin` before it blocks: worth it only when every
+/// process has a core of its own.
 pub fn serve(
     jobs: &mut [FleetJob],
     run: &RunName,
     identity: u64,
+    spin: std::time::Duration,
     stop: &AtomicBool,
     mut observe: impl FnMut(&FleetProgress),
 ) -> Result<FleetProgress, FleetError> {
@@ -97,6 +102,7 @@ pub fn serve(
     let mut next_job = 0;
     let mut last_tick = Instant::now();
     let mut refused_clients = HashSet::new();
+    let mut idle_since: Option<Instant> = None;
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
@@ -115,7 +121,10 @@ pub fn serve(
             }
             if let Some((job, outcome)) = message.outcome() {
                 holders.remove(&(job, outcome.task_id));
-                match jobs.get_mut(job as usize).map(|j| j.learner.tell(outcome)) {
+                let started = Instant::now();
+                let told = jobs.get_mut(job as usize).map(|j| j.learner.tell(outcome));
+                progress.learner_seconds += started.elapsed().as_secs_f64();
+                match told {
                     Some(Ok(())) => progress.outcomes += 1,
                     Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
                         progress.duplicates += 1
@@ -129,7 +138,10 @@ pub fn serve(
             if !request.is_connected() {
                 continue;
             }
-            let Some((job, task)) = next_task(jobs, &mut next_job) else {
+            let started = Instant::now();
+            let next = next_task(jobs, &mut next_job);
+            progress.learner_seconds += started.elapsed().as_secs_f64();
+            let Some((job, task)) = next else {
                 parked.push_front(request);
                 break;
             };
@@ -176,7 +188,12 @@ pub fn serve(
         if stop.load(Ordering::Relaxed) {
             return Err(FleetError::Interrupted);
         }
-        if !active_now {
+        if active_now || answered > 0 {
+            idle_since = None;
+        } else if idle_since.get_or_insert_with(Instant::now).elapsed() < spin {
+            std::thread::yield_now();
+        } else {
+            idle_since = None;
             listener
                 .timed_wait(|_| {}, TICK)
                 .map_err(|e| IpcError::new("waiting for workers", e))?;

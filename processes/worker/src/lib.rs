@@ -50,12 +50,15 @@ impl<E: Environment> EnvironmentFactory for Single<E> {
 /// How a worker behaves.
 #[derive(Debug, Clone)]
 pub struct WorkerOptions {
-    /// Requests kept in flight, 1..=16: more hides the wake-up latency between processes.
+    /// Requests kept in flight, 1..=64: more hides the wake-up latency between processes.
     pub in_flight: usize,
     /// The worker's node name (shown by iceoryx2's tools).
     pub name: String,
     /// How long to wait for the run's learner to appear before giving up.
     pub startup_timeout: Duration,
+    /// How long to poll (yielding the CPU) for an answer before blocking: saves the wake-up
+    /// latency when every process has a core of its own; use zero when processes outnumber cores.
+    pub spin: Duration,
 }
 
 impl Default for WorkerOptions {
@@ -64,6 +67,7 @@ impl Default for WorkerOptions {
             in_flight: 4,
             name: format!("worker-{}", std::process::id()),
             startup_timeout: Duration::from_secs(10),
+            spin: Duration::ZERO,
         }
     }
 }
@@ -142,7 +146,7 @@ pub fn serve(
     if !(1..=MAX_IN_FLIGHT_PER_WORKER).contains(&options.in_flight) {
         return Err(WorkerError::Option {
             field: "in_flight",
-            accepted: "in 1..=16",
+            accepted: "in 1..=64",
             got: options.in_flight.to_string(),
         });
     }
@@ -187,18 +191,26 @@ pub fn serve(
     // The learner's identity, learnt from its first answer; 0 asks to join whatever runs.
     let mut identity = 0u64;
     let mut pending: Vec<_> = (0..options.in_flight)
-        .map(|_| send(WorkerMessage::hello(identity)))
+        .map(|_| send(WorkerMessage::hello(identity)).map(Some))
         .collect::<Result<_, _>>()?;
     notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
     let mut rollouts = 0;
+    let mut idle_since = None;
     loop {
         let mut progressed = false;
         for slot in pending.iter_mut() {
-            let Some(response) = slot.receive().map_err(|e| IpcError::new("receiving a response", e))? else {
+            let Some(request) = slot.as_ref() else { continue };
+            let Some(response) = request
+                .receive()
+                .map_err(|e| IpcError::new("receiving a response", e))?
+            else {
                 continue;
             };
             let wire: WireTask = *response.payload();
             drop(response);
+            // The answered request must be gone before the next one is sent: the service allows
+            // only `in_flight` active requests per client.
+            *slot = None;
             match wire.response() {
                 Some(Response::Task) => {}
                 Some(Response::Stop) => {
@@ -242,13 +254,21 @@ pub fn serve(
             let message = WorkerMessage::with_outcome(identity, wire.job, &outcome)
                 .or_else(|_| WorkerMessage::with_outcome(identity, wire.job, &Outcome::failed(task.id)))
                 .expect("a failed outcome has no diagnostics");
-            *slot = send(message)?;
+            *slot = Some(send(message)?);
+            // Wake the learner per outcome, so it can answer while this worker simulates on.
+            notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
             progressed = true;
         }
         if progressed {
-            notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
+            idle_since = None;
             continue;
         }
+        let idle = *idle_since.get_or_insert_with(Instant::now);
+        if idle.elapsed() < options.spin {
+            std::thread::yield_now();
+            continue;
+        }
+        idle_since = None;
         if stop.load(Ordering::Relaxed) {
             return Ok(WorkerReport {
                 exit: WorkerExit::Stopped,
