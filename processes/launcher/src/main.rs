@@ -198,11 +198,27 @@ enum MemoryArg {
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(error) if interrupted(&error) => {
+            eprintln!("interrupted; the run's workers were stopped and its shared memory removed");
+            ExitCode::from(130)
+        }
         Err(error) => {
             eprintln!("error: {error:#}");
             ExitCode::from(2)
         }
     }
+}
+
+/// True when `error` is a fleet stopped by Ctrl-C.
+fn interrupted(error: &anyhow::Error) -> bool {
+    use acps::experiment::RunError;
+    use acps_learner::fleet::FleetError;
+    error.chain().any(|e| {
+        matches!(
+            e.downcast_ref::<RunError>(),
+            Some(RunError::Fleet(FleetError::Interrupted))
+        ) || matches!(e.downcast_ref::<FleetError>(), Some(FleetError::Interrupted))
+    })
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {

@@ -227,10 +227,21 @@ fn throwing_experiments_write_their_results() {
 #[test]
 fn bench_writes_its_table_and_json() {
     let dir = temp_dir("bench");
-    let out = acps(&["bench", "--scale", "0.01", "--max-workers", "1", "--out", dir.to_str().unwrap()]);
+    let out = acps(&[
+        "bench",
+        "--scale",
+        "0.01",
+        "--max-workers",
+        "1",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("rollouts/s") && stdout.contains("inprocess-rayon"), "{stdout}");
+    assert!(
+        stdout.contains("rollouts/s") && stdout.contains("inprocess-rayon"),
+        "{stdout}"
+    );
     let bench = summary(&dir.join("bench.json"));
     let rows = bench["rows"].as_array().unwrap();
     // Three environments x (one thread, rayon, a fleet of one).

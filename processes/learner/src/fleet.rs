@@ -14,6 +14,7 @@ use crate::learner::{Learner, TellError};
 use acps_shared::ipc::{self, IpcError, RunName, TICK};
 use acps_shared::wire::{CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask};
 use iceoryx2::identifiers::UniqueClientId;
+use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -194,9 +195,13 @@ pub fn serve(
             std::thread::yield_now();
         } else {
             idle_since = None;
-            listener
-                .timed_wait(|_| {}, TICK)
-                .map_err(|e| IpcError::new("waiting for workers", e))?;
+            match listener.timed_wait(|_| {}, TICK) {
+                Ok(_) => {}
+                // A signal (Ctrl-C) interrupts the wait; the host's handler sets `stop` on its own
+                // thread, possibly a moment later.
+                Err(ListenerWaitError::InterruptSignal) => return Err(FleetError::Interrupted),
+                Err(error) => return Err(IpcError::new("waiting for workers", error).into()),
+            }
         }
     }
 }
