@@ -227,19 +227,28 @@ mod tests {
         }
     }
 
-    /// Run `selector` for `steps` pulls; returns (area under the noise-free performance curve,
-    /// fraction of pulls that went to the most-improving arm of that moment).
-    fn run(selector: &mut dyn ContextSelector, rates: &[f64], steps: usize, seed: u64) -> (f64, f64) {
-        let mut problem = Saturating {
+    /// A fresh problem with these rates, its noise and selector streams, and `selector` primed
+    /// with initial returns of 0.
+    fn start(selector: &mut dyn ContextSelector, rates: &[f64], seed: u64) -> (Saturating, ChaCha8Rng, ChaCha8Rng) {
+        for arm in 0..rates.len() {
+            selector.prime(arm, 0.0);
+        }
+        let problem = Saturating {
             rates: rates.to_vec(),
             pulls: vec![0; rates.len()],
             noise: 0.01,
         };
-        let mut noise_rng = ChaCha8Rng::seed_from_u64(seed);
-        let mut selector_rng = ChaCha8Rng::seed_from_u64(seed + 1000);
-        for arm in 0..rates.len() {
-            selector.prime(arm, 0.0);
-        }
+        (
+            problem,
+            ChaCha8Rng::seed_from_u64(seed),
+            ChaCha8Rng::seed_from_u64(seed + 1000),
+        )
+    }
+
+    /// Run `selector` for `steps` pulls; returns (area under the noise-free performance curve,
+    /// fraction of pulls that went to the most-improving arm of that moment).
+    fn run(selector: &mut dyn ContextSelector, rates: &[f64], steps: usize, seed: u64) -> (f64, f64) {
+        let (mut problem, mut noise_rng, mut selector_rng) = start(selector, rates, seed);
         let (mut area, mut hits) = (0.0, 0);
         for _ in 0..steps {
             let target = problem.most_improving();
@@ -273,16 +282,7 @@ mod tests {
         in_flight: usize,
         seed: u64,
     ) -> Vec<usize> {
-        let mut problem = Saturating {
-            rates: rates.to_vec(),
-            pulls: vec![0; rates.len()],
-            noise: 0.01,
-        };
-        let mut noise_rng = ChaCha8Rng::seed_from_u64(seed);
-        let mut selector_rng = ChaCha8Rng::seed_from_u64(seed + 1000);
-        for arm in 0..rates.len() {
-            selector.prime(arm, 0.0);
-        }
+        let (mut problem, mut noise_rng, mut selector_rng) = start(selector, rates, seed);
         let mut window = VecDeque::new();
         let mut arms = Vec::with_capacity(steps);
         while arms.len() < steps {
