@@ -1,0 +1,45 @@
+//! A worker told by the learner that it belongs to another run stops with a message naming both.
+
+use acps_shared::ipc::{self, RunName};
+use acps_shared::wire::{Response, WireTask};
+use acps_worker::{ModelFactory, WorkerError, WorkerOptions};
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+#[test]
+fn a_refused_worker_stops_and_says_why() {
+    let run = RunName::new(&format!("refused-{}", std::process::id())).unwrap();
+    let worker = {
+        let run = run.clone();
+        std::thread::spawn(move || {
+            let options = WorkerOptions {
+                name: "refused".into(),
+                ..WorkerOptions::default()
+            };
+            acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false))
+        })
+    };
+    {
+        // A stand-in learner that refuses every request with identity 42.
+        let node = ipc::node(&run, "fake-learner").unwrap();
+        let services = ipc::open_services(&node).unwrap();
+        let server = services.tasks.server_builder().create().unwrap();
+        let start = Instant::now();
+        while !worker.is_finished() {
+            while let Some(request) = server.receive().unwrap() {
+                request.send_copy(WireTask::control(Response::Refused, 42)).unwrap();
+            }
+            assert!(start.elapsed() < Duration::from_secs(20), "the worker never asked");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+    match worker.join().unwrap() {
+        Err(WorkerError::Refused { run: name, reason }) => {
+            assert_eq!(name, run.as_str());
+            assert!(reason.contains("000000000000002a"), "{reason}");
+        }
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+    ipc::remove_run_files(&run).unwrap();
+    assert!(ipc::leftover_files(&run).is_empty());
+}
