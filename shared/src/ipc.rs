@@ -165,6 +165,22 @@ pub fn clean_stale(run: &RunName) -> Result<usize, IpcError> {
     Ok(cleaned)
 }
 
+/// Ids of the live nodes of `run`. A port whose node is not among them belongs to a dead
+/// process, whether or not iceoryx2's cleanup of that node has succeeded (a cleanup interrupted
+/// by a concurrent one can leave a dead node's ports listed).
+pub fn alive_nodes(run: &RunName) -> Result<std::collections::HashSet<iceoryx2::identifiers::UniqueNodeId>, IpcError> {
+    use iceoryx2::node::NodeView;
+    let mut alive = std::collections::HashSet::new();
+    Node::<ipc::Service>::list(&run.config()?, |state| {
+        if let NodeState::Alive(view) = state {
+            alive.insert(*view.id());
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
+    Ok(alive)
+}
+
 /// Number of live nodes of `run`.
 pub fn live_nodes(run: &RunName) -> Result<usize, IpcError> {
     let mut alive = 0;

@@ -352,7 +352,7 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
     )?;
     // A crashed earlier run of the same name may have left resources behind; workers started by
     // hand may already be waiting, so only dead nodes are cleaned while anything is alive.
-    clean_up(&run)?;
+    clean_up(&run, false)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
@@ -393,19 +393,19 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
         }
         Ok(())
     })();
-    let cleaned = clean_up(&run);
+    let cleaned = clean_up(&run, true);
     result?;
     cleaned.with_context(|| format!("removing the shared memory of run '{run}'"))
 }
 
 /// Remove the run's shared memory, or, while nodes started elsewhere (workers started by hand,
-/// embedding programs) are still alive, only what dead nodes left: the last one out leaves a
-/// management file that the next run of the same name removes.
-fn clean_up(run: &RunName) -> anyhow::Result<()> {
-    if ipc::live_nodes(run)? == 0 {
-        ipc::remove_run_files(run)?;
-    } else {
-        ipc::clean_stale(run)?;
+/// embedding programs) are alive, only what dead nodes left: the last one out leaves a
+/// management file that the next run of the same name removes. A node may appear at any moment
+/// (a worker joining), which only means the files stay.
+fn clean_up(run: &RunName, at_end: bool) -> anyhow::Result<()> {
+    ipc::clean_stale(run)?;
+    let removed = ipc::live_nodes(run)? == 0 && ipc::remove_run_files(run).is_ok();
+    if !removed && at_end {
         eprintln!("run '{run}': nodes started elsewhere are still alive; their shared memory stays until they exit");
     }
     Ok(())

@@ -13,6 +13,13 @@ fn acps() -> Command {
     Command::new(env!("CARGO_BIN_EXE_acps"))
 }
 
+/// `acps` under a watchdog: a learner that hangs fails the test instead of blocking it.
+fn watched() -> Command {
+    let mut command = Command::new("timeout");
+    command.args(["--signal=KILL", "180", env!("CARGO_BIN_EXE_acps")]);
+    command
+}
+
 fn run_name(test: &str) -> RunName {
     RunName::new(&format!("t{}-{test}", std::process::id())).unwrap()
 }
@@ -49,7 +56,7 @@ fn check(output: Output) -> String {
 
 fn in_process(args: &[&str], out: &Path) -> Vec<u8> {
     check(
-        acps()
+        watched()
             .arg("experiment")
             .args(args)
             .arg("--out")
@@ -76,7 +83,7 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
             let run = run_name(&format!("match-{p}-{workers}"));
             let out = dir.join(format!("fleet-{workers}"));
             check(
-                acps()
+                watched()
                     .arg("run")
                     .args(&args)
                     .args(["--workers", workers, "--run", run.as_str()])
@@ -127,7 +134,7 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
     let out = dir.join("fleet");
     // Not quiet: the learner reports how many tasks it re-issued.
     let loud: Vec<&str> = args.iter().copied().filter(|a| *a != "-q").collect();
-    let learner = acps()
+    let learner = watched()
         .arg("run")
         .args(&loud)
         .args(["--workers", "1", "--run", run.as_str()])
@@ -194,7 +201,7 @@ fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
     let mut args = GRID.to_vec();
     args.extend(["--workers", "1", "--run", run.as_str()]);
     check(
-        acps()
+        watched()
             .arg("run")
             .args(&args)
             .arg("--out")
@@ -211,7 +218,7 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
     let dir = temp_dir("refuse");
     let run = run_name("refuse");
     let out = dir.join("fleet");
-    let learner = acps()
+    let learner = watched()
         .arg("run")
         .args(GRID)
         .args(["--workers", "0", "--run", run.as_str()])

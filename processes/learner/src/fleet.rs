@@ -171,9 +171,12 @@ pub fn serve(
         if last_tick.elapsed() >= TICK {
             last_tick = Instant::now();
             services.tasks.try_cleanup_dead_nodes();
+            let alive_nodes = ipc::alive_nodes(run)?;
             let mut live = HashSet::new();
             services.tasks.dynamic_config().list_clients(|client| {
-                live.insert(client.client_id);
+                if alive_nodes.contains(&client.node_id) {
+                    live.insert(client.client_id);
+                }
                 CallbackProgression::Continue
             });
             progress.workers = live.len();

@@ -11,7 +11,7 @@
 use acps_shared::ipc::{self, IpcError, MAX_IN_FLIGHT_PER_WORKER, RunName, TICK};
 use acps_shared::wire::{EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask, WorkerMessage};
 use acps_shared::{Environment, Outcome};
-use iceoryx2::prelude::PortFactory as _;
+use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -134,6 +134,18 @@ pub enum WorkerError {
         /// The factory's reason.
         reason: String,
     },
+}
+
+/// Whether the run's server (the learner) runs in a live node. Workers leave cleaning up dead
+/// nodes to the learner: concurrent cleanups of one dead node can interrupt each other.
+fn learner_alive(run: &RunName, services: &ipc::Services) -> Result<bool, IpcError> {
+    let alive = ipc::alive_nodes(run)?;
+    let mut serving = false;
+    services.tasks.dynamic_config().list_servers(|server| {
+        serving |= alive.contains(&server.node_id);
+        CallbackProgression::Continue
+    });
+    Ok(serving)
 }
 
 /// Serve the learner of `run` until it finishes, disappears or `stop` is set.
@@ -278,15 +290,11 @@ pub fn serve(
         let woken = listener
             .timed_wait(|_| {}, TICK)
             .map_err(|e| IpcError::new("waiting for the learner", e))?;
-        if woken == 0 {
-            // Quiet for a tick: is the learner still there? Cleanup removes a dead one's ports.
-            node.try_cleanup_dead_nodes();
-            if services.tasks.dynamic_config().number_of_servers() == 0 {
-                return Ok(WorkerReport {
-                    exit: WorkerExit::LearnerGone,
-                    rollouts,
-                });
-            }
+        if woken == 0 && !learner_alive(run, &services)? {
+            return Ok(WorkerReport {
+                exit: WorkerExit::LearnerGone,
+                rollouts,
+            });
         }
     }
 }
