@@ -347,6 +347,15 @@ fn throwing_settings(
     })
 }
 
+/// Section 5.2.2's D-UCB: gamma 0.99, B 10,000, xi 1e-9.
+fn throwing_ducb(options: &Options) -> DUcbConfig {
+    DUcbConfig {
+        gamma: 0.99,
+        xi: options.overrides.xi.unwrap_or(1e-9),
+        b: 10_000.0,
+    }
+}
+
 /// Section 5.2.3, the grid problem (Fig. 8): 25 training targets, 16 test targets, 10,000
 /// episodes, D-UCB gamma 0.99, B 10,000, xi 1e-9.
 pub fn grid(sim: Sim, options: &Options) -> Experiment {
@@ -358,11 +367,7 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
         Method::RoundRobin,
         Method::RandomContinuous,
     ];
-    let ducb = DUcbConfig {
-        gamma: 0.99,
-        xi: options.overrides.xi.unwrap_or(1e-9),
-        b: 10_000.0,
-    };
+    let ducb = throwing_ducb(options);
     let creps = throwing_creps(25, options);
     let eval_every = 100;
     Experiment {
@@ -387,11 +392,7 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
 /// Section 5.2.4, the dartboard problem (Fig. 10): 81 fields on a 1.4 m board centred on
 /// theta_0's landing point, 50,000 episodes, monotonic progress.
 pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
-    let ducb = DUcbConfig {
-        gamma: 0.99,
-        xi: options.overrides.xi.unwrap_or(1e-9),
-        b: 10_000.0,
-    };
+    let ducb = throwing_ducb(options);
     let creps = throwing_creps(81, options);
     let eval_every = 1000;
     let fields = environment::dartboard_fields();
