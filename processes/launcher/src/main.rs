@@ -370,8 +370,9 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
                     stop.store(true, Ordering::Relaxed);
                 }
                 progress.set_position(p.jobs_done as u64);
+                let rate = p.outcomes as f64 / progress.elapsed().as_secs_f64().max(1e-3);
                 progress.set_message(format!(
-                    "{} workers, {} outcomes, {} re-issued",
+                    "{} workers, {} rollouts ({rate:.0}/s), {} re-issued",
                     p.workers, p.outcomes, p.reissued
                 ));
             });
