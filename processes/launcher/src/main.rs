@@ -352,7 +352,7 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
     )?;
     // A crashed earlier run of the same name may have left resources behind; workers started by
     // hand may already be waiting, so only dead nodes are cleaned while anything is alive.
-    clean_up(&run, false)?;
+    clean_up(&run, false);
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
@@ -394,22 +394,22 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
         }
         Ok(())
     })();
-    let cleaned = clean_up(&run, true);
-    result?;
-    cleaned.with_context(|| format!("removing the shared memory of run '{run}'"))
+    clean_up(&run, true);
+    result
 }
 
 /// Remove the run's shared memory, or, while nodes started elsewhere (workers started by hand,
 /// embedding programs) are alive, only what dead nodes left: the last one out leaves a
 /// management file that the next run of the same name removes. A node may appear at any moment
 /// (a worker joining), which only means the files stay.
-fn clean_up(run: &RunName, at_end: bool) -> anyhow::Result<()> {
-    ipc::clean_stale(run)?;
-    let removed = ipc::live_nodes(run)? == 0 && ipc::remove_run_files(run).is_ok();
+fn clean_up(run: &RunName, at_end: bool) {
+    // Listing nodes can fail while one is being created or removed; then there is nothing
+    // certain to remove, and the next start of the run looks again.
+    let _ = ipc::clean_stale(run);
+    let removed = ipc::live_nodes(run).is_ok_and(|alive| alive == 0) && ipc::remove_run_files(run).is_ok();
     if !removed && at_end {
         eprintln!("run '{run}': nodes started elsewhere are still alive; their shared memory stays until they exit");
     }
-    Ok(())
 }
 
 fn fleet_progress(quiet: bool, experiment: &Experiment) -> ProgressBar {

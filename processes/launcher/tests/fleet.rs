@@ -218,7 +218,7 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
     let dir = temp_dir("refuse");
     let run = run_name("refuse");
     let out = dir.join("fleet");
-    let learner = watched()
+    let mut learner = watched()
         .arg("run")
         .args(GRID)
         .args(["--workers", "0", "--run", run.as_str()])
@@ -229,19 +229,21 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         .unwrap();
     // An impostor speaks the wire directly; its node and ports go away at the end of the block.
     {
-        let node = {
-            let start = Instant::now();
-            loop {
-                let node = ipc::node(&run, "impostor").unwrap();
-                let services = ipc::open_services(&node).unwrap();
-                if services.tasks.dynamic_config().number_of_servers() > 0 {
-                    break (node, services);
-                }
-                assert!(start.elapsed() < Duration::from_secs(20), "the learner did not start");
-                std::thread::sleep(Duration::from_millis(20));
+        // One node for the whole wait: creating and dropping nodes while the learner starts
+        // is churn no real worker causes.
+        let node = ipc::node(&run, "impostor").unwrap();
+        let services = ipc::open_services(&node).unwrap();
+        let start = Instant::now();
+        while services.tasks.dynamic_config().number_of_servers() == 0 {
+            if let Some(status) = learner.try_wait().unwrap() {
+                let mut stderr = String::new();
+                std::io::Read::read_to_string(learner.stderr.as_mut().unwrap(), &mut stderr).unwrap();
+                panic!("the learner exited ({status}) before serving: {stderr}");
             }
-        };
-        let (_node, services) = node;
+            assert!(start.elapsed() < Duration::from_secs(60), "the learner did not start");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _node = node;
         let client = services.tasks.client_builder().create().unwrap();
         let notifier = services.to_learner.notifier_builder().create().unwrap();
         let ask = |message: WorkerMessage| -> WireTask {

@@ -171,7 +171,12 @@ pub fn serve(
         if last_tick.elapsed() >= TICK {
             last_tick = Instant::now();
             services.tasks.try_cleanup_dead_nodes();
-            let alive_nodes = ipc::alive_nodes(run)?;
+            // A node being created or removed at this moment can make the listing fail; the
+            // next tick looks again.
+            let Ok(alive_nodes) = ipc::alive_nodes(run) else {
+                observe(&progress);
+                continue;
+            };
             let mut live = HashSet::new();
             services.tasks.dynamic_config().list_clients(|client| {
                 if alive_nodes.contains(&client.node_id) {
