@@ -2,7 +2,7 @@
 //! the analytic backend (two DMP rollouts, forward kinematics and Jacobian at release,
 //! closed-form flight) and the rapier3d multibody arm tracking the same trajectory.
 
-use acps_models::rapier_sim::{RapierArm, RapierConfig};
+use acps_models::environment::{self, Model, Sim};
 use acps_models::robot::Robot;
 use acps_models::throw::{PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
 use acps_shared::{Environment, Task, TaskKind};
@@ -48,16 +48,8 @@ fn analytic(c: &mut Criterion) {
 
 fn rapier(c: &mut Criterion) {
     let tasks = tasks();
-    let robot = Robot::pa10();
-    let arm = RapierArm::new(&robot, RapierConfig::default()).unwrap();
-    let policy = ThrowPolicy::new(ThrowDesign::pa10(), 0.004).unwrap();
-    let mut env = ThrowingEnvironment::new(
-        robot,
-        policy,
-        Simulator::Rapier(Box::new(arm)),
-        Targets::Grid,
-        SpeedLimits::Ignore,
-    );
+    // The rapier environment exactly as the experiments and the workers build it.
+    let mut env = environment::build(&environment::throwing(Model::Grid, Sim::Rapier)).unwrap();
     let mut i = 0;
     c.bench_function("throw_rapier_default", |b| {
         b.iter(|| {
