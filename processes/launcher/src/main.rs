@@ -342,7 +342,16 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
 /// Run the experiments through a fleet: this process serves the learners, `--workers` worker
 /// processes simulate. Shared memory of the run is cleaned before and after, also on errors
 /// and Ctrl-C.
+/// Refuse a per-worker window the task service cannot hold.
+fn check_worker_in_flight(option: &str, value: usize) -> anyhow::Result<()> {
+    if !(1..=ipc::MAX_IN_FLIGHT_PER_WORKER).contains(&value) {
+        bail!("{option} must be in 1..={}, got {value}", ipc::MAX_IN_FLIGHT_PER_WORKER);
+    }
+    Ok(())
+}
+
 fn fleet(args: RunArgs) -> anyhow::Result<()> {
+    check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
     let experiments = experiments(&args.experiment)?;
     let run = RunName::new(
         &args
@@ -430,6 +439,7 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
     if !(args.scale.is_finite() && args.scale > 0.0) {
         bail!("--scale must be finite and > 0, got {}", args.scale);
     }
+    check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let options = acps::bench::BenchOptions {
         max_workers: args.max_workers.unwrap_or(cores),
@@ -454,6 +464,13 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
 
 fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     let run = RunName::new(&args.run)?;
+    check_worker_in_flight("--in-flight", args.in_flight)?;
+    if !(args.startup_timeout.is_finite() && args.startup_timeout >= 0.0) {
+        bail!(
+            "--startup-timeout must be finite and >= 0 seconds, got {}",
+            args.startup_timeout
+        );
+    }
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;

@@ -255,3 +255,31 @@ fn bench_writes_its_table_and_json() {
     assert!(String::from_utf8_lossy(&error.stderr).contains("--scale must be finite and > 0"));
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn fleet_options_are_checked_before_anything_starts() {
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["run", "grid", "--worker-in-flight", "0"],
+            "--worker-in-flight must be in 1..=64, got 0",
+        ),
+        (
+            &["worker", "--run", "x", "--in-flight", "65"],
+            "--in-flight must be in 1..=64, got 65",
+        ),
+        (
+            &["worker", "--run", "x", "--startup-timeout=-1"],
+            "--startup-timeout must be finite and >= 0",
+        ),
+        (&["worker", "--run", "bad/name"], "must be 1 to 40 characters"),
+    ];
+    for (args, expected) in cases {
+        let out = acps(args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains(expected) && !stderr.contains("panicked"),
+            "{args:?}: {stderr}"
+        );
+    }
+}
