@@ -12,7 +12,7 @@
 
 use crate::learner::{Learner, TellError};
 use acps_shared::ipc::{self, IpcError, RunName, TICK};
-use acps_shared::wire::{CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask};
+use acps_shared::wire::{CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask, WorkerMessage};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -104,6 +104,7 @@ pub fn serve(
     let mut last_tick = Instant::now();
     let mut refused_clients = HashSet::new();
     let mut idle_since: Option<Instant> = None;
+    let mut outcomes = VecDeque::new();
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
@@ -122,40 +123,31 @@ pub fn serve(
             }
             if let Some((job, outcome)) = message.outcome() {
                 holders.remove(&(job, outcome.task_id));
-                let started = Instant::now();
-                let told = jobs.get_mut(job as usize).map(|j| j.learner.tell(outcome));
-                progress.learner_seconds += started.elapsed().as_secs_f64();
-                match told {
-                    Some(Ok(())) => progress.outcomes += 1,
-                    Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
-                        progress.duplicates += 1
-                    }
-                }
+                outcomes.push_back((job, outcome));
             }
             parked.push_back(request);
         }
-        let mut answered = 0;
-        while let Some(request) = parked.pop_front() {
-            if !request.is_connected() {
-                continue;
-            }
-            let started = Instant::now();
-            let next = next_task(jobs, &mut next_job);
-            progress.learner_seconds += started.elapsed().as_secs_f64();
-            let Some((job, task)) = next else {
-                parked.push_front(request);
-                break;
-            };
-            let wire = WireTask {
-                run: identity,
-                ..WireTask::task(job as u32, &task, jobs[job].environment)?
-            };
-            holders.insert((job as u32, task.id), request.origin());
-            request
-                .send_copy(wire)
-                .map_err(|e| IpcError::new("answering a request", e))?;
-            answered += 1;
+        // Answer before telling, and tell one outcome per pass: tasks are created eagerly, so
+        // ready ones wait in the cores, and workers get them without waiting for C-REPS updates
+        // (a millisecond each) of the outcomes queued before theirs.
+        let answered = answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?;
+        if answered > 0 {
+            notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
         }
+        let told_one = if let Some((job, outcome)) = outcomes.pop_front() {
+            let started = Instant::now();
+            let told = jobs.get_mut(job as usize).map(|j| j.learner.tell(outcome));
+            progress.learner_seconds += started.elapsed().as_secs_f64();
+            match told {
+                Some(Ok(())) => progress.outcomes += 1,
+                Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
+                    progress.duplicates += 1
+                }
+            }
+            true
+        } else {
+            false
+        };
         progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
         if progress.jobs_done == jobs.len() {
             for request in parked.drain(..) {
@@ -164,9 +156,6 @@ pub fn serve(
             let _ = notifier.notify();
             observe(&progress);
             return Ok(progress);
-        }
-        if answered > 0 {
-            notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
         }
         if last_tick.elapsed() >= TICK {
             last_tick = Instant::now();
@@ -197,7 +186,7 @@ pub fn serve(
         if stop.load(Ordering::Relaxed) {
             return Err(FleetError::Interrupted);
         }
-        if active_now || answered > 0 {
+        if active_now || answered > 0 || told_one {
             idle_since = None;
         } else if idle_since.get_or_insert_with(Instant::now).elapsed() < spin {
             std::thread::yield_now();
@@ -212,6 +201,45 @@ pub fn serve(
             }
         }
     }
+}
+
+/// A worker's request: it carries the outcome of its previous task, and is answered with the
+/// next.
+type TaskRequest =
+    iceoryx2::active_request::ActiveRequest<iceoryx2::prelude::ipc::Service, WorkerMessage, (), WireTask, ()>;
+
+/// Answer parked requests with ready tasks, round robin over the jobs; returns how many.
+fn answer(
+    jobs: &mut [FleetJob],
+    parked: &mut VecDeque<TaskRequest>,
+    holders: &mut HashMap<(u32, u64), UniqueClientId>,
+    next_job: &mut usize,
+    identity: u64,
+    progress: &mut FleetProgress,
+) -> Result<usize, FleetError> {
+    let mut answered = 0;
+    while let Some(request) = parked.pop_front() {
+        if !request.is_connected() {
+            continue;
+        }
+        let started = Instant::now();
+        let next = next_task(jobs, next_job);
+        progress.learner_seconds += started.elapsed().as_secs_f64();
+        let Some((job, task)) = next else {
+            parked.push_front(request);
+            break;
+        };
+        let wire = WireTask {
+            run: identity,
+            ..WireTask::task(job as u32, &task, jobs[job].environment)?
+        };
+        holders.insert((job as u32, task.id), request.origin());
+        request
+            .send_copy(wire)
+            .map_err(|e| IpcError::new("answering a request", e))?;
+        answered += 1;
+    }
+    Ok(answered)
 }
 
 /// The next ready task, round robin over the jobs.

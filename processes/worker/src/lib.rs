@@ -12,7 +12,7 @@ use acps_shared::ipc::{self, IpcError, MAX_IN_FLIGHT_PER_WORKER, RunName, TICK};
 use acps_shared::wire::{EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask, WorkerMessage};
 use acps_shared::{Environment, Outcome};
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -208,9 +208,24 @@ pub fn serve(
     notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
     let mut rollouts = 0;
     let mut idle_since = None;
+    // Tasks answered by the learner and not yet simulated, with the slot each frees.
+    let mut queue = VecDeque::new();
+    // Outcomes sent since the learner was last woken: waking it once per half window (rather
+    // than per outcome) keeps it from preempting a worker thousands of times a second when
+    // processes share cores, while the other half window keeps this worker busy meanwhile.
+    let mut unannounced = 0;
+    let wake_every = options.in_flight.div_ceil(2);
     loop {
-        let mut progressed = false;
-        for slot in pending.iter_mut() {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(WorkerReport {
+                exit: WorkerExit::Stopped,
+                rollouts,
+            });
+        }
+        // Polling every slot costs about as much as a trivial rollout, so it waits until the
+        // queue runs dry: answers that arrive meanwhile wait in their slots.
+        let slots = if queue.is_empty() { pending.len() } else { 0 };
+        for (index, slot) in pending.iter_mut().enumerate().take(slots) {
             let Some(request) = slot.as_ref() else { continue };
             let Some(response) = request
                 .receive()
@@ -224,7 +239,7 @@ pub fn serve(
             // only `in_flight` active requests per client.
             *slot = None;
             match wire.response() {
-                Some(Response::Task) => {}
+                Some(Response::Task) => queue.push_back((index, wire)),
                 Some(Response::Stop) => {
                     return Ok(WorkerReport {
                         exit: WorkerExit::Finished,
@@ -249,6 +264,8 @@ pub fn serve(
                     });
                 }
             }
+        }
+        if let Some((index, wire)) = queue.pop_front() {
             if identity == 0 {
                 identity = wire.run;
             }
@@ -266,12 +283,12 @@ pub fn serve(
             let message = WorkerMessage::with_outcome(identity, wire.job, &outcome)
                 .or_else(|_| WorkerMessage::with_outcome(identity, wire.job, &Outcome::failed(task.id)))
                 .expect("a failed outcome has no diagnostics");
-            *slot = Some(send(message)?);
-            // Wake the learner per outcome, so it can answer while this worker simulates on.
-            notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
-            progressed = true;
-        }
-        if progressed {
+            pending[index] = Some(send(message)?);
+            unannounced += 1;
+            if unannounced >= wake_every || queue.is_empty() {
+                notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
+                unannounced = 0;
+            }
             idle_since = None;
             continue;
         }
@@ -281,12 +298,6 @@ pub fn serve(
             continue;
         }
         idle_since = None;
-        if stop.load(Ordering::Relaxed) {
-            return Ok(WorkerReport {
-                exit: WorkerExit::Stopped,
-                rollouts,
-            });
-        }
         let woken = listener
             .timed_wait(|_| {}, TICK)
             .map_err(|e| IpcError::new("waiting for the learner", e))?;
