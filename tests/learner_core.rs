@@ -306,3 +306,50 @@ fn a_failed_outcome_is_retried_once_then_consumed_as_failed() {
     assert_eq!(permanent.stats().retries, permanent.stats().failed_episodes);
     assert!(permanent.stats().failed_episodes > 20);
 }
+
+#[test]
+fn progress_reports_episodes_and_the_latest_complete_evaluation() {
+    for seed in [1, 2, 3] {
+        let (mut learner, mut environment) = function_learner(Method::MonotonicProgress, seed, 4, 200);
+        let mut observed = Vec::new();
+        acps_learner::run_in_process_observed(&mut learner, &mut environment, 37, |learner, rollouts| {
+            observed.push((learner.progress(), rollouts));
+        });
+        // Every rollout is reported once: training, evaluations and first-visit baselines.
+        let evaluation_rollouts: usize = learner.evaluations().iter().map(|e| e.outcomes.len()).sum();
+        let rollouts: u64 = observed.iter().map(|(_, r)| r).sum();
+        let baselines = learner.problem().training_contexts.len() as u64;
+        assert_eq!(rollouts, 200 + evaluation_rollouts as u64 + baselines);
+        let (last, _) = observed.last().unwrap();
+        assert_eq!((last.episodes, last.total_episodes), (200, 200));
+        assert_eq!(last.score, learner.evaluations().last().unwrap().score);
+        assert!(observed.windows(2).all(|w| w[0].0.episodes <= w[1].0.episodes));
+        // Mid-run, the score is that of an evaluation already scheduled at that point.
+        let (middle, _) = observed[observed.len() / 2];
+        let score = middle.score.expect("the first evaluation is done early");
+        assert!(
+            learner
+                .evaluations()
+                .iter()
+                .any(|e| e.episode <= middle.episodes && e.score == Some(score))
+        );
+    }
+}
+
+#[test]
+fn progress_of_several_learners_adds_episodes_and_averages_scores() {
+    use acps_learner::LearningProgress;
+    let part = |episodes, score: Option<f64>| LearningProgress {
+        episodes,
+        total_episodes: 100,
+        score,
+        scored: usize::from(score.is_some()),
+    };
+    let total = LearningProgress::combine([part(10, Some(1.0)), part(20, None), part(30, Some(4.0))]);
+    assert_eq!((total.episodes, total.total_episodes, total.scored), (60, 300, 2));
+    assert_eq!(total.score, Some(2.5));
+    // Combining combined parts weighs them by the learners they average.
+    let nested = LearningProgress::combine([total, part(0, Some(7.0))]);
+    assert_eq!(nested.score, Some(4.0));
+    assert_eq!(LearningProgress::combine([part(5, None)]).score, None);
+}

@@ -99,6 +99,13 @@ pub struct Services {
     pub to_workers: EventService,
 }
 
+/// Quiet iceoryx2's own log down to errors unless `IOX2_LOG_LEVEL` asks for more: its
+/// warnings (such as "no config file was loaded") say nothing an acps user can act on. For
+/// programs (the `acps` binary), not libraries: the level is process-wide.
+pub fn quiet_iceoryx2_log() {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+}
+
 /// A node of `run` named `name`. Signal handling stays with the host program (library code must
 /// not swallow SIGINT/SIGTERM).
 pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {

@@ -4,17 +4,21 @@
 //! Run `r` of every method uses the seed `base_seed + r` for both the problem instance and the
 //! learner, so methods are compared on the same problem instances (paired runs).
 
+use crate::progress::Progress;
 use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress};
-use acps_learner::{Episode, Learner, LearnerConfig, LearnerError, LearnerStats, SelectorConfig, run_in_process};
+use acps_learner::{
+    Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, run_in_process,
+    run_in_process_observed,
+};
 use acps_shared::ipc::RunName;
 use acps_shared::wire::EnvironmentSpec;
 use acps_shared::{Environment, Problem};
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Mutex, PoisonError};
 
 /// One problem instance: what the learner sees, the environment, and a known optimal score.
 pub struct Instance {
@@ -132,6 +136,13 @@ pub struct Summary {
     pub methods: BTreeMap<String, MethodSummary>,
 }
 
+/// What the progress line of an in-process run last showed: each job's progress and the
+/// rollouts of all.
+struct Shown {
+    jobs: Vec<LearningProgress>,
+    rollouts: u64,
+}
+
 /// One learner of an experiment with its environment.
 pub struct Job {
     /// The learner core.
@@ -215,13 +226,23 @@ impl Experiment {
     }
 
     /// Run every (method, run) pair in parallel in this process and summarise.
-    pub fn run(&self, progress: &ProgressBar) -> Result<Summary, LearnerError> {
+    pub fn run(&self, progress: &Progress) -> Result<Summary, LearnerError> {
         let mut jobs = self.jobs()?;
-        progress.set_length(jobs.len() as u64);
-        progress.set_message(self.name.clone());
-        jobs.par_iter_mut().for_each(|job| {
-            run_in_process(&mut job.learner, job.environment.as_mut());
-            progress.inc(1);
+        let shown = Mutex::new(Shown {
+            jobs: jobs.iter().map(|job| job.learner.progress()).collect(),
+            rollouts: 0,
+        });
+        jobs.par_iter_mut().enumerate().for_each(|(index, job)| {
+            run_in_process_observed(&mut job.learner, job.environment.as_mut(), 256, |learner, rollouts| {
+                let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
+                shown.jobs[index] = learner.progress();
+                shown.rollouts += rollouts;
+                progress.show(
+                    &LearningProgress::combine(shown.jobs.iter().copied()),
+                    shown.rollouts,
+                    None,
+                );
+            });
         });
         Ok(self.summary(&jobs))
     }
@@ -376,20 +397,6 @@ pub fn standard_error(values: &[f64]) -> f64 {
     }
     let m = mean(values);
     (values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
-}
-
-/// A progress bar for `jobs` learner runs, hidden when `quiet`.
-pub fn progress_bar(quiet: bool) -> ProgressBar {
-    if quiet {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new(0);
-    bar.set_style(
-        ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} runs, {elapsed} elapsed, eta {eta}")
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
-    bar
 }
 
 #[cfg(test)]

@@ -5,4 +5,5 @@ pub mod bench;
 pub mod experiment;
 pub mod paper;
 pub mod plot;
+pub mod progress;
 pub mod workers;

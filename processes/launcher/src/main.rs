@@ -1,14 +1,14 @@
 //! `acps`: the command line of Active Contextual Policy Search.
 
-use acps::experiment::{Experiment, Summary, progress_bar};
+use acps::experiment::{Experiment, Summary};
 use acps::paper::{self, Options, Overrides};
+use acps::progress::Progress;
 use acps_learner::Method;
 use acps_learner::selection::FirstVisit;
 use acps_shared::ipc::{self, RunName};
 use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -24,10 +24,39 @@ use std::time::Duration;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// More log lines on stderr: -v info, -vv debug (e.g. rejected C-REPS updates), -vvv
+    /// trace. The ACPS_LOG variable takes tracing filter directives instead (e.g.
+    /// ACPS_LOG=acps_learner=debug); IOX2_LOG_LEVEL sets iceoryx2's own log (default error).
+    #[arg(long, short, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+}
+
+/// Log to stderr at the level -v asks for, or as ACPS_LOG says; warnings by default.
+fn init_logging(verbose: u8) {
+    let level = match verbose {
+        0 => "warn",
+        1 => "info",
+        2 => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_env("ACPS_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    ipc::quiet_iceoryx2_log();
 }
 
 #[derive(Subcommand)]
 enum Command {
+    /// The main job with its defaults: the PA-10 learns to throw at the grid problem's 25
+    /// targets (paper Section 5.2.3) through a fleet of simulator workers (rapier3d physics),
+    /// choosing targets with D-UCB and monotonic progress. Shows the test error falling and
+    /// writes DIR (default runs/learn). The same as `acps run grid --sim rapier --method
+    /// monotonic-progress --runs 4 --episodes 10000 --in-flight 8 --out runs/learn`.
+    Learn(LearnArgs),
     /// Run one of the paper's experiments in this process, for several methods x seeds in
     /// parallel, and write DIR/summary.json.
     Experiment(ExperimentArgs),
@@ -41,6 +70,73 @@ enum Command {
     /// trivial environment (the transport's cost) and the analytic and rapier PA-10; print a
     /// table and write DIR/bench.json.
     Bench(BenchArgs),
+}
+
+/// `acps run`'s arguments on their own, to parse the command `acps learn` stands for.
+#[derive(Parser)]
+struct RunCommand {
+    #[command(flatten)]
+    args: RunArgs,
+}
+
+#[derive(clap::Args)]
+struct LearnArgs {
+    /// Worker processes (default: the number of cores).
+    #[arg(long)]
+    workers: Option<usize>,
+    /// Independent learning runs (seeds 0 .. runs - 1), for the SEM band of the curve.
+    #[arg(long, default_value_t = 4)]
+    runs: usize,
+    /// Training episodes (throws) per run.
+    #[arg(long, default_value_t = 10_000)]
+    episodes: u64,
+    /// How throws are simulated.
+    #[arg(long, value_enum, default_value = "rapier")]
+    sim: SimArg,
+    /// Output directory.
+    #[arg(long, default_value = "runs/learn")]
+    out: PathBuf,
+    /// The run's name, for workers started by hand to join (default: grid-PID).
+    #[arg(long)]
+    run: Option<String>,
+    /// No progress line.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+impl LearnArgs {
+    /// The arguments of the `acps run` command this stands for.
+    fn run_command(&self) -> Vec<String> {
+        let sim = match self.sim {
+            SimArg::Analytic => "analytic",
+            SimArg::Rapier => "rapier",
+        };
+        let mut args: Vec<String> = [
+            "acps run",
+            "grid",
+            "--sim",
+            sim,
+            "--method",
+            "monotonic-progress",
+            "--in-flight",
+            "8",
+        ]
+        .map(String::from)
+        .into();
+        args.extend(["--runs".into(), self.runs.to_string()]);
+        args.extend(["--episodes".into(), self.episodes.to_string()]);
+        args.extend(["--out".into(), self.out.display().to_string()]);
+        if let Some(workers) = self.workers {
+            args.extend(["--workers".into(), workers.to_string()]);
+        }
+        if let Some(run) = &self.run {
+            args.extend(["--run".into(), run.clone()]);
+        }
+        if self.quiet {
+            args.push("--quiet".into());
+        }
+        args
+    }
 }
 
 #[derive(clap::Args)]
@@ -196,7 +292,9 @@ enum MemoryArg {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    init_logging(cli.verbose);
+    match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) if interrupted(&error) => {
             eprintln!("interrupted; the run's workers were stopped and its shared memory removed");
@@ -224,6 +322,7 @@ fn interrupted(error: &anyhow::Error) -> bool {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Experiment(args) => experiment(args),
+        Command::Learn(args) => fleet(RunCommand::try_parse_from(args.run_command())?.args),
         Command::Run(args) => fleet(args),
         Command::Worker(args) => worker(args),
         Command::Bench(args) => bench(args),
@@ -329,11 +428,11 @@ fn experiments(args: &ExperimentArgs) -> anyhow::Result<Vec<(Experiment, PathBuf
 
 fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     for (experiment, dir) in experiments(&args)? {
-        let progress = progress_bar(args.quiet);
+        let progress = Progress::new(&experiment.name, args.quiet);
         let summary = experiment
             .run(&progress)
             .with_context(|| format!("experiment {}", experiment.name))?;
-        progress.finish_and_clear();
+        progress.finish();
         write(&experiment, &summary, &dir, args.quiet)?;
     }
     Ok(())
@@ -371,21 +470,16 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
     let result = (|| -> anyhow::Result<()> {
         for (experiment, dir) in &experiments {
             let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight)?;
-            let progress = fleet_progress(args.experiment.quiet, experiment);
+            let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
             let outcome = experiment.run_fleet(&run, acps::workers::spin(workers), &stop, |p| {
                 if acps::workers::all_exited(&mut children) {
                     workers_lost = true;
                     stop.store(true, Ordering::Relaxed);
                 }
-                progress.set_position(p.jobs_done as u64);
-                let rate = p.outcomes as f64 / progress.elapsed().as_secs_f64().max(1e-3);
-                progress.set_message(format!(
-                    "{} workers, {} rollouts ({rate:.0}/s), {} re-issued",
-                    p.workers, p.outcomes, p.reissued
-                ));
+                progress.show(&p.learning, p.outcomes, Some(p.workers));
             });
-            progress.finish_and_clear();
+            progress.finish();
             if workers_lost {
                 bail!("all {workers} workers of run '{run}' exited before the run was done (see their messages above)");
             }
@@ -419,20 +513,6 @@ fn clean_up(run: &RunName, at_end: bool) {
     if !removed && at_end {
         eprintln!("run '{run}': nodes started elsewhere are still alive; their shared memory stays until they exit");
     }
-}
-
-fn fleet_progress(quiet: bool, experiment: &Experiment) -> ProgressBar {
-    if quiet {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new((experiment.methods.len() * experiment.runs) as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} learners done, {msg}, {elapsed}")
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
-    bar.set_prefix(experiment.name.clone());
-    bar
 }
 
 fn bench(args: BenchArgs) -> anyhow::Result<()> {

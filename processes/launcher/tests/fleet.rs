@@ -103,6 +103,29 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
     }
 }
 
+#[test]
+fn learn_is_the_fleet_run_of_monotonic_progress_it_documents() {
+    let dir = temp_dir("learn");
+    let shape = ["--runs", "2", "--episodes", "300", "-q"];
+    let mut args = vec!["grid", "--method", "monotonic-progress", "--in-flight", "8"];
+    args.extend(shape);
+    let reference = in_process(&args, &dir.join("in-process"));
+    let run = run_name("learn");
+    let out = dir.join("learn");
+    check(
+        watched()
+            .args(["learn", "--sim", "analytic", "--workers", "2", "--run", run.as_str()])
+            .args(shape)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// Wait for `child` to exit, at most `limit`.
 fn wait_for(child: &mut Child, limit: Duration) -> Option<Duration> {
     let start = Instant::now();

@@ -10,7 +10,7 @@
 //! and re-issues exactly the tasks held by clients that are gone. A late outcome of a re-issued
 //! task is recognised as a duplicate and dropped. Workers of another build or run are refused.
 
-use crate::learner::{Learner, TellError};
+use crate::learner::{Learner, LearningProgress, TellError};
 use acps_shared::ipc::{self, IpcError, RunName, TICK};
 use acps_shared::wire::{CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask, WorkerMessage};
 use iceoryx2::identifiers::UniqueClientId;
@@ -45,6 +45,8 @@ pub struct FleetProgress {
     pub refused: u64,
     /// Time spent inside the learner cores (`tell` and `ask`), in seconds.
     pub learner_seconds: f64,
+    /// Training episodes and latest test scores of all jobs together.
+    pub learning: LearningProgress,
 }
 
 /// A fleet run that could not complete.
@@ -113,9 +115,10 @@ pub fn serve(
             if message.protocol != PROTOCOL_VERSION || (message.run != 0 && message.run != identity) {
                 progress.refused += 1;
                 if refused_clients.insert(request.origin()) {
-                    eprintln!(
+                    tracing::warn!(
                         "refused a worker of run '{run}': protocol {} (ours {PROTOCOL_VERSION}), run identity {:016x} (ours {identity:016x})",
-                        message.protocol, message.run
+                        message.protocol,
+                        message.run
                     );
                 }
                 let _ = request.send_copy(WireTask::control(Response::Refused, identity));
@@ -154,11 +157,13 @@ pub fn serve(
                 let _ = request.send_copy(WireTask::control(Response::Stop, identity));
             }
             let _ = notifier.notify();
+            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
             observe(&progress);
             return Ok(progress);
         }
         if last_tick.elapsed() >= TICK {
             last_tick = Instant::now();
+            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
             services.tasks.try_cleanup_dead_nodes();
             // A node being created or removed at this moment can make the listing fail; the
             // next tick looks again.
@@ -174,6 +179,7 @@ pub fn serve(
                 CallbackProgression::Continue
             });
             progress.workers = live.len();
+            let reissued_before = progress.reissued;
             holders.retain(|&(job, task_id), client| {
                 let alive = live.contains(client);
                 if !alive && jobs[job as usize].learner.reissue(task_id) {
@@ -181,6 +187,12 @@ pub fn serve(
                 }
                 alive
             });
+            if progress.reissued > reissued_before {
+                tracing::info!(
+                    "run '{run}': a worker is gone; re-issued its {} tasks",
+                    progress.reissued - reissued_before
+                );
+            }
             observe(&progress);
         }
         if stop.load(Ordering::Relaxed) {

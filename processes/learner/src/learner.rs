@@ -103,6 +103,37 @@ pub struct Evaluation {
     remaining: usize,
 }
 
+/// How far one learner, or several together, are: what a progress display shows.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LearningProgress {
+    /// Training episodes consumed.
+    pub episodes: u64,
+    /// Training episodes to run.
+    pub total_episodes: u64,
+    /// Mean over the learners that have one of their latest evaluation score.
+    pub score: Option<f64>,
+    /// How many learners the score averages.
+    pub scored: usize,
+}
+
+impl LearningProgress {
+    /// The progress of several learners together.
+    pub fn combine(parts: impl IntoIterator<Item = LearningProgress>) -> Self {
+        let mut total = Self::default();
+        let mut score_sum = 0.0;
+        for part in parts {
+            total.episodes += part.episodes;
+            total.total_episodes += part.total_episodes;
+            if let Some(score) = part.score {
+                score_sum += score * part.scored as f64;
+                total.scored += part.scored;
+            }
+        }
+        total.score = (total.scored > 0).then(|| score_sum / total.scored as f64);
+        total
+    }
+}
+
 /// A consumed training episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Episode {
@@ -313,6 +344,25 @@ impl Learner {
         &self.evaluations
     }
 
+    /// The score of the most recent complete evaluation that has one.
+    pub fn latest_score(&self) -> Option<f64> {
+        self.evaluations
+            .iter()
+            .rev()
+            .filter(|e| e.remaining == 0)
+            .find_map(|e| e.score)
+    }
+
+    /// How far this learner is, for progress displays.
+    pub fn progress(&self) -> LearningProgress {
+        LearningProgress {
+            episodes: self.train_consumed,
+            total_episodes: self.config.episodes,
+            score: self.latest_score(),
+            scored: usize::from(self.latest_score().is_some()),
+        }
+    }
+
     /// The consumed training episodes in order.
     pub fn episodes(&self) -> &[Episode] {
         &self.episodes
@@ -425,6 +475,7 @@ impl Learner {
             match report.map(|r| r.outcome) {
                 Some(UpdateOutcome::Updated { .. }) => self.stats.updates += 1,
                 Some(UpdateOutcome::Rejected { reason }) => {
+                    tracing::debug!(seed = self.config.seed, episode = self.train_consumed, %reason, "C-REPS update rejected; the old policy stays");
                     self.stats.rejected_updates += 1;
                     self.stats.last_rejection = Some(reason);
                 }
@@ -460,11 +511,29 @@ fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
 
 /// Drive `learner` to the end with `environment` in this thread.
 pub fn run_in_process(learner: &mut Learner, environment: &mut dyn acps_shared::Environment) {
+    run_in_process_observed(learner, environment, u64::MAX, |_, _| {});
+}
+
+/// [`run_in_process`], calling `observe(learner, rollouts since the last call)` after every
+/// `every` rollouts and once at the end, for progress displays.
+pub fn run_in_process_observed(
+    learner: &mut Learner,
+    environment: &mut dyn acps_shared::Environment,
+    every: u64,
+    mut observe: impl FnMut(&Learner, u64),
+) {
+    let mut unreported = 0;
     while let Some(task) = learner.ask() {
         let outcome = environment.rollout(&task);
         learner
             .tell(outcome)
             .expect("the outcome answers a task just handed out");
+        unreported += 1;
+        if unreported >= every {
+            observe(learner, unreported);
+            unreported = 0;
+        }
     }
+    observe(learner, unreported);
     debug_assert!(learner.is_done());
 }

@@ -9,5 +9,8 @@ pub mod learner;
 pub mod method;
 pub mod selection;
 
-pub use learner::{Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerStats, TellError, run_in_process};
+pub use learner::{
+    Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, TellError,
+    run_in_process, run_in_process_observed,
+};
 pub use method::{Method, SelectorConfig, UnknownMethod};

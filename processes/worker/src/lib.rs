@@ -180,6 +180,7 @@ pub fn serve(
         }
         std::thread::sleep(TICK);
     }
+    tracing::info!("worker {} joins run '{run}'", options.name);
     let client = services
         .tasks
         .client_builder()
