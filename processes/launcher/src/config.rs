@@ -370,11 +370,6 @@ impl LoadedFile {
             values,
         })
     }
-
-    /// The file's path.
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
 }
 
 fn line_of(text: &str, offset: usize) -> usize {
@@ -641,7 +636,10 @@ impl ExperimentFile {
         std::fs::create_dir_all(dir)?;
         std::fs::write(
             dir.join("config.toml"),
-            self.to_toml(&header("the run in this directory")),
+            self.to_toml(&header(
+                "the run in this directory",
+                "acps experiment --config config.toml --out NEW_DIR",
+            )),
         )
     }
 
@@ -658,15 +656,20 @@ impl ExperimentFile {
                 }
                 _ => cannot(e),
             })?;
-        std::io::Write::write_all(&mut file, self.to_toml(&header("an experiment")).as_bytes()).map_err(cannot)
+        std::io::Write::write_all(
+            &mut file,
+            self.to_toml(&header("an experiment", "acps experiment --config FILE"))
+                .as_bytes(),
+        )
+        .map_err(cannot)
     }
 }
 
-/// The comment lines that open a written file.
-fn header(what: &str) -> String {
+/// The comment lines that open a written file: what it describes and how to run it.
+fn header(what: &str, command: &str) -> String {
     format!(
         "# Every setting of {what}, written by acps {}.\n\
-         # Run it with `acps experiment --config FILE` (docs/EXPERIMENTS.md, \"Experiment files\").\n\n",
+         # Run it with `{command}` (docs/EXPERIMENTS.md, \"Experiment files\").\n\n",
         env!("CARGO_PKG_VERSION")
     )
 }
