@@ -126,7 +126,9 @@ pub struct ExperimentFile {
     #[arg(long)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub in_flight: Option<usize>,
-    /// Run only this method (repeatable) [default: the methods of the paper's figure].
+    /// Run only this method (repeatable): round-robin, random, random-continuous, corners,
+    /// best-reward, diversity, one-step-progress, monotonic-progress or sagg-riac [default: the
+    /// methods of the paper's figure].
     #[arg(long = "method", value_name = "METHOD")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub methods: Option<Vec<Method>>,
@@ -158,7 +160,7 @@ pub struct ExperimentFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub xi: Option<f64>,
     /// toy only: use the learning factors of the paper's Fig. 3 in every run instead of a random
-    /// permutation per run.
+    /// permutation per run [default: false].
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fig3_learning_factors: Option<bool>,

@@ -241,3 +241,16 @@ fn a_saved_or_written_config_reruns_bit_for_bit() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("exists; remove it or choose another name"));
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn an_experiment_is_named_or_read_from_a_file_not_both() {
+    let neither = acps(&["experiment", "-q"]);
+    assert!(String::from_utf8_lossy(&neither.stderr).contains("<NAME>"));
+    let both = acps(&["experiment", "toy", "--config", "experiments/toy-fig2a.toml"]);
+    assert!(String::from_utf8_lossy(&both.stderr).contains("cannot be used with '--config <FILE>'"));
+    let missing = acps(&["experiment", "--config", "no/such/file.toml"]);
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("no/such/file.toml: cannot read"));
+    for out in [neither, both, missing] {
+        assert!(!out.status.success());
+    }
+}
