@@ -627,27 +627,28 @@ impl ExperimentFile {
         Ok(())
     }
 
-    /// The file's text: `header` (comment lines) and every set key.
-    pub fn to_toml(&self, header: &str) -> String {
-        let body = toml::to_string(self).expect("checked values fit TOML");
-        format!("{header}{body}")
+    /// The file's text: `header` (comment lines) and every set key. Fails on integers TOML cannot
+    /// hold, which [`Plan::new`] refuses.
+    fn to_toml(&self, header: &str) -> Result<String, ConfigError> {
+        let body = toml::to_string(self).map_err(|e| ConfigError(format!("not representable in TOML: {e}")))?;
+        Ok(format!("{header}{body}"))
     }
 
     /// Write the resolved file of a run into its directory (`config.toml`).
-    pub fn write_resolved(&self, dir: &Path) -> std::io::Result<()> {
-        std::fs::create_dir_all(dir)?;
-        std::fs::write(
-            dir.join("config.toml"),
-            self.to_toml(&header(
-                "the run in this directory",
-                "acps experiment --config config.toml --out NEW_DIR",
-            )),
-        )
+    pub fn write_resolved(&self, dir: &Path) -> Result<(), ConfigError> {
+        let path = dir.join("config.toml");
+        let text = self.to_toml(&header(
+            "the run in this directory",
+            "acps experiment --config config.toml --out NEW_DIR",
+        ))?;
+        std::fs::create_dir_all(dir)
+            .and_then(|()| std::fs::write(&path, text))
+            .map_err(|e| cannot_write(&path, e))
     }
 
     /// Write the file to `path`, which must not exist yet: a hand-edited file is never replaced.
     pub fn save_new(&self, path: &Path) -> Result<(), ConfigError> {
-        let cannot = |e: std::io::Error| ConfigError(format!("{}: cannot write: {e}", path.display()));
+        let text = self.to_toml(&header("an experiment", "acps experiment --config FILE"))?;
         let mut file = std::fs::OpenOptions::new()
             .write(true)
             .create_new(true)
@@ -656,15 +657,14 @@ impl ExperimentFile {
                 std::io::ErrorKind::AlreadyExists => {
                     ConfigError(format!("{} exists; remove it or choose another name", path.display()))
                 }
-                _ => cannot(e),
+                _ => cannot_write(path, e),
             })?;
-        std::io::Write::write_all(
-            &mut file,
-            self.to_toml(&header("an experiment", "acps experiment --config FILE"))
-                .as_bytes(),
-        )
-        .map_err(cannot)
+        std::io::Write::write_all(&mut file, text.as_bytes()).map_err(|e| cannot_write(path, e))
     }
+}
+
+fn cannot_write(path: &Path, error: std::io::Error) -> ConfigError {
+    ConfigError(format!("{}: cannot write: {error}", path.display()))
 }
 
 /// The comment lines that open a written file: what it describes and how to run it.
@@ -755,7 +755,7 @@ mod tests {
         };
         let names: Vec<&str> = KEYS.iter().map(|k| k.name).collect();
         assert_eq!(every.set_keys().len(), names.len());
-        let text = every.to_toml("");
+        let text = every.to_toml("").unwrap();
         let order: Vec<&str> = text.lines().map(|l| l.split(" = ").next().unwrap()).collect();
         assert_eq!(order, names);
     }
@@ -883,7 +883,7 @@ mod tests {
                     ..job.config.clone()
                 };
                 assert_eq!(same, resolved, "{name:?}");
-                let text = job.config.to_toml("# header\n");
+                let text = job.config.to_toml("# header\n").unwrap();
                 let again = LoadedFile::parse(Path::new("r.toml"), text).unwrap();
                 assert_eq!(again.values, job.config);
                 let replan = Plan::new(Some(&again), &ExperimentFile::default()).unwrap();

@@ -357,9 +357,7 @@ fn write(
     summary
         .write(dir)
         .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
-    config
-        .write_resolved(dir)
-        .with_context(|| format!("writing {}", dir.join("config.toml").display()))?;
+    config.write_resolved(dir)?;
     acps::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
