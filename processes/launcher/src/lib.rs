@@ -2,6 +2,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod config;
 pub mod experiment;
 pub mod paper;
 pub mod plot;

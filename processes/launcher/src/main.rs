@@ -1,14 +1,12 @@
 //! `acps`: the command line of Active Contextual Policy Search.
 
+use acps::config::{self, ExperimentFile, Job, LoadedFile, Plan};
 use acps::experiment::{Experiment, Summary};
-use acps::paper::{self, Options, Overrides};
 use acps::progress::Progress;
-use acps_learner::Method;
-use acps_learner::selection::FirstVisit;
 use acps_shared::ipc::{self, RunName};
 use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -58,7 +56,9 @@ enum Command {
     /// monotonic-progress --runs 4 --episodes 10000 --in-flight 8 --out runs/learn`.
     Learn(LearnArgs),
     /// Run one of the paper's experiments in this process, for several methods x seeds in
-    /// parallel, and write DIR/summary.json.
+    /// parallel, and write DIR/summary.json, the plots and DIR/config.toml. Name the experiment
+    /// (`acps experiment grid --runs 5`) or give an experiment file (`acps experiment --config
+    /// experiments/grid-fig8.toml`).
     Experiment(ExperimentArgs),
     /// Run an experiment through a worker fleet: this process is the learner and serves tasks
     /// over iceoryx2 shared memory to worker processes it starts. Writes the same DIR/summary.json
@@ -92,7 +92,7 @@ struct LearnArgs {
     episodes: u64,
     /// How throws are simulated.
     #[arg(long, value_enum, default_value = "rapier")]
-    sim: SimArg,
+    sim: config::SimName,
     /// Output directory.
     #[arg(long, default_value = "runs/learn")]
     out: PathBuf,
@@ -108,8 +108,8 @@ impl LearnArgs {
     /// The arguments of the `acps run` command this stands for.
     fn run_command(&self) -> Vec<String> {
         let sim = match self.sim {
-            SimArg::Analytic => "analytic",
-            SimArg::Rapier => "rapier",
+            config::SimName::Analytic => "analytic",
+            config::SimName::Rapier => "rapier",
         };
         let mut args: Vec<String> = [
             "acps run",
@@ -193,102 +193,24 @@ struct WorkerArgs {
     quiet: bool,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum ExperimentName {
-    /// Section 4's model of the learning process (Fig. 2 and 3).
-    Toy,
-    /// Section 5.1.2's contextual function on a 5x5 grid of contexts (Fig. 4 and 5).
-    Function,
-    /// Section 5.1.3: the contextual function for 1 to 4 context dimensions (Fig. 6).
-    Dims,
-    /// Section 5.2.3: the PA-10 throws at a 5x5 grid of targets, tested on a 4x4 grid (Fig. 8).
-    Grid,
-    /// Section 5.2.4: the PA-10 throws at the 81 fields of a dartboard on the ground (Fig. 10).
-    Dartboard,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum SimArg {
-    /// Forward kinematics at release and closed-form flight (exact for perfect tracking).
-    Analytic,
-    /// The rapier3d multibody arm tracking the throw with joint motors (about 2 ms per throw).
-    Rapier,
-}
-
 #[derive(clap::Args)]
 struct ExperimentArgs {
-    /// Which experiment.
-    name: ExperimentName,
-    /// Runs per method.
-    #[arg(long, default_value_t = 20)]
-    runs: usize,
-    /// Training episodes per run (default: the paper's length: toy 1000, function 2500, dims 5000).
-    #[arg(long)]
-    episodes: Option<u64>,
-    /// Seed of run 0; run r uses seed + r for the problem instance and the learner.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Training tasks in flight (P): task t is created after outcome t - P is consumed. 1 is the
-    /// paper's sequential algorithm.
-    #[arg(long, default_value_t = 1)]
-    in_flight: usize,
-    /// Run only this method (repeatable). Default: the methods of the paper's figure.
-    #[arg(long = "method", value_name = "METHOD")]
-    methods: Vec<String>,
-    /// toy only: one panel of Fig. 2 (a: sigma_r 0, sigma_b 0; b: 0.01, 0; c: 0, 0.2; d: 0.01, 0.2)
-    /// into DIR; without it all four go to DIR/a .. DIR/d.
-    #[arg(long)]
-    panel: Option<char>,
-    /// dims only: one context dimension (1..=4) into DIR; without it all four go to DIR/ns-1 .. DIR/ns-4.
-    #[arg(long)]
-    n_s: Option<usize>,
-    /// Number of low-level parameters n_theta of the contextual function (the paper does not say;
-    /// default 20). Must exceed the context dimension.
-    #[arg(long)]
-    n_theta: Option<usize>,
-    /// Baseline of a context's first visit for the progress heuristics: the initial greedy
-    /// policy's return there (default), or none (the first visit scores 0).
-    #[arg(long, value_enum)]
-    first_visit: Option<FirstVisitArg>,
-    /// C-REPS sample memory: the last N rollouts (default, as BOLeRo) or the paper's Section 5.2
-    /// per-task memory of the best N/K rollouts.
-    #[arg(long, value_enum)]
-    memory: Option<MemoryArg>,
-    /// Initial exploration covariance Sigma_0 = X I (default 1).
-    #[arg(long, value_name = "X")]
-    initial_sigma: Option<f64>,
-    /// C-REPS KL bound epsilon (default: the experiment's).
-    #[arg(long)]
-    epsilon: Option<f64>,
-    /// toy only: use the learning factors of the paper's Fig. 3 in every run instead of a random
-    /// permutation per run.
-    #[arg(long)]
-    fig3_learning_factors: bool,
-    /// D-UCB padding strength xi (default: the experiment's).
-    #[arg(long)]
-    xi: Option<f64>,
-    /// grid and dartboard only: how throws are simulated.
-    #[arg(long, value_enum, default_value = "analytic")]
-    sim: SimArg,
-    /// Output directory (default: runs/NAME).
+    /// Read the experiment from an experiment file (one per paper figure in experiments/); options
+    /// given as well override the file's values.
+    #[arg(long, short, value_name = "FILE")]
+    config: Option<PathBuf>,
+    #[command(flatten)]
+    settings: ExperimentFile,
+    /// Write the resolved experiment file (every setting, defaults filled in) to FILE and exit
+    /// without running; `--config FILE` runs it. Every run also writes DIR/config.toml.
+    #[arg(long, value_name = "FILE")]
+    save_config: Option<PathBuf>,
+    /// Output directory [default: runs/NAME, or runs/STEM for --config STEM.toml].
     #[arg(long)]
     out: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum FirstVisitArg {
-    InitialReturn,
-    Zero,
-    Optimistic,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum MemoryArg {
-    Window,
-    BestPerTask,
 }
 
 fn main() -> ExitCode {
@@ -329,111 +251,39 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
-/// The experiments `args` name, with their output directories.
-fn experiments(args: &ExperimentArgs) -> anyhow::Result<Vec<(Experiment, PathBuf)>> {
-    if args.runs == 0 {
-        bail!("--runs must be >= 1, got 0");
+/// The experiments `args` ask for, checked, with their output directories and resolved files;
+/// `None` when `--save-config` wrote the resolved file instead.
+fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
+    let file = args.config.as_deref().map(LoadedFile::read).transpose()?;
+    let plan = Plan::new(file.as_ref(), &args.settings)?;
+    if let Some(path) = &args.save_config {
+        plan.resolved().save_new(path)?;
+        println!("{} -> {}", plan.name().name(), path.display());
+        return Ok(None);
     }
-    let methods = args
-        .methods
-        .iter()
-        .map(|name| name.parse::<Method>())
-        .collect::<Result<Vec<_>, _>>()
-        .context("--method")?;
-    if let Some(n_theta) = args.n_theta
-        && n_theta <= 4
-    {
-        bail!("--n-theta must be > the context dimension (up to 4), got {n_theta}");
-    }
-    let options = Options {
-        runs: args.runs,
-        episodes: args.episodes,
-        seed: args.seed,
-        in_flight: args.in_flight,
-        methods: (!methods.is_empty()).then_some(methods),
-        overrides: Overrides {
-            n_theta: args.n_theta,
-            first_visit: args.first_visit.map(|f| match f {
-                FirstVisitArg::InitialReturn => FirstVisit::InitialReturn,
-                FirstVisitArg::Zero => FirstVisit::Zero,
-                FirstVisitArg::Optimistic => FirstVisit::Optimistic,
-            }),
-            best_per_task: args.memory.map(|m| matches!(m, MemoryArg::BestPerTask)),
-            initial_sigma: args.initial_sigma,
-            xi: args.xi,
-            epsilon: args.epsilon,
-            learning_factors: args.fig3_learning_factors.then_some(paper::FIG3_LEARNING_FACTORS),
-        },
-    };
-    let (name, default_dir) = match args.name {
-        ExperimentName::Toy => ("toy", "runs/toy"),
-        ExperimentName::Function => ("function", "runs/function"),
-        ExperimentName::Dims => ("dims", "runs/dims"),
-        ExperimentName::Grid => ("grid", "runs/grid"),
-        ExperimentName::Dartboard => ("dartboard", "runs/dartboard"),
-    };
-    let sim = match args.sim {
-        SimArg::Analytic => paper::Sim::Analytic,
-        SimArg::Rapier => paper::Sim::Rapier,
-    };
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(default_dir));
-    let jobs: Vec<(Experiment, PathBuf)> = match args.name {
-        ExperimentName::Toy => {
-            if args.n_s.is_some() {
-                bail!("--n-s belongs to the dims experiment, not {name}");
-            }
-            let panels = match args.panel {
-                Some(panel) => vec![(panel, out.clone())],
-                None => "abcd".chars().map(|p| (p, out.join(p.to_string()))).collect(),
-            };
-            panels
-                .into_iter()
-                .map(|(panel, dir)| match paper::toy_panel(panel) {
-                    Some(model) => Ok((paper::toy(model, &options), dir)),
-                    None => bail!("--panel must be one of a, b, c, d; got '{panel}'"),
-                })
-                .collect::<anyhow::Result<_>>()?
-        }
-        ExperimentName::Function => {
-            if args.panel.is_some() || args.n_s.is_some() {
-                bail!("--panel and --n-s do not apply to the function experiment");
-            }
-            vec![(paper::function(&options), out.clone())]
-        }
-        ExperimentName::Dims => {
-            if args.panel.is_some() {
-                bail!("--panel belongs to the toy experiment, not {name}");
-            }
-            match args.n_s {
-                Some(n_s @ 1..=4) => vec![(paper::dims(n_s, &options), out.clone())],
-                Some(n_s) => bail!("--n-s must be in 1..=4, got {n_s}"),
-                None => (1..=4)
-                    .map(|n_s| (paper::dims(n_s, &options), out.join(format!("ns-{n_s}"))))
-                    .collect(),
-            }
-        }
-        ExperimentName::Grid | ExperimentName::Dartboard => {
-            if args.panel.is_some() || args.n_s.is_some() {
-                bail!("--panel and --n-s do not apply to the {name} experiment");
-            }
-            let experiment = match args.name {
-                ExperimentName::Grid => paper::grid(sim, &options),
-                _ => paper::dartboard(sim, &options),
-            };
-            vec![(experiment, out.clone())]
-        }
-    };
-    Ok(jobs)
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| config::default_out(args.config.as_deref(), plan.name()));
+    Ok(Some(plan.jobs(&out)))
 }
 
 fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
-    for (experiment, dir) in experiments(&args)? {
+    let Some(jobs) = jobs(&args)? else {
+        return Ok(());
+    };
+    for Job {
+        experiment,
+        dir,
+        config,
+    } in jobs
+    {
         let progress = Progress::new(&experiment.name, args.quiet);
         let summary = experiment
             .run(&progress)
             .with_context(|| format!("experiment {}", experiment.name))?;
         progress.finish();
-        write(&experiment, &summary, &dir, args.quiet)?;
+        write(&experiment, &summary, &dir, &config, args.quiet)?;
     }
     Ok(())
 }
@@ -451,12 +301,14 @@ fn check_worker_in_flight(option: &str, value: usize) -> anyhow::Result<()> {
 
 fn fleet(args: RunArgs) -> anyhow::Result<()> {
     check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
-    let experiments = experiments(&args.experiment)?;
+    let Some(jobs) = jobs(&args.experiment)? else {
+        return Ok(());
+    };
     let run = RunName::new(
         &args
             .run
             .clone()
-            .unwrap_or_else(|| format!("{}-{}", experiments[0].0.name, std::process::id())),
+            .unwrap_or_else(|| format!("{}-{}", jobs[0].experiment.name, std::process::id())),
     )?;
     // A crashed earlier run of the same name may have left resources behind; workers started by
     // hand may already be waiting, so only dead nodes are cleaned while anything is alive.
@@ -468,7 +320,12 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let result = (|| -> anyhow::Result<()> {
-        for (experiment, dir) in &experiments {
+        for Job {
+            experiment,
+            dir,
+            config,
+        } in &jobs
+        {
             let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight)?;
             let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
@@ -493,7 +350,7 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
                     experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
                 );
             }
-            write(experiment, &summary, dir, args.experiment.quiet)?;
+            write(experiment, &summary, dir, config, args.experiment.quiet)?;
         }
         Ok(())
     })();
@@ -570,10 +427,17 @@ fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) -> anyhow::Result<()> {
+fn write(
+    experiment: &Experiment,
+    summary: &Summary,
+    dir: &Path,
+    config: &ExperimentFile,
+    quiet: bool,
+) -> anyhow::Result<()> {
     summary
         .write(dir)
         .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
+    config.write_resolved(dir)?;
     acps::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());

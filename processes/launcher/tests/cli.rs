@@ -132,7 +132,7 @@ fn toy_without_panel_writes_all_four_and_function_runs_one_method() {
 
 #[test]
 fn bad_options_are_refused_naming_the_option() {
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 7] = [
         (
             &["experiment", "toy", "--panel", "e"],
             "--panel must be one of a, b, c, d",
@@ -141,8 +141,14 @@ fn bad_options_are_refused_naming_the_option() {
             &["experiment", "function", "--method", "monotonic"],
             "unknown method 'monotonic'",
         ),
-        (&["experiment", "dims", "--n-s", "5"], "--n-s must be in 1..=4"),
-        (&["experiment", "function", "--runs", "0"], "--runs must be >= 1"),
+        (
+            &["experiment", "dims", "--n-s", "5"],
+            "--n-s must be an integer in 1..=4, got 5",
+        ),
+        (
+            &["experiment", "function", "--runs", "0"],
+            "--runs must be an integer in 1..=2^63-1, got 0",
+        ),
         (
             &[
                 "experiment",
@@ -154,7 +160,15 @@ fn bad_options_are_refused_naming_the_option() {
                 "--episodes",
                 "10",
             ],
-            "in_flight must be >= 1",
+            "--in-flight must be an integer in 1..=8192 (what a full fleet holds), got 0",
+        ),
+        (
+            &["experiment", "toy", "--epsilon", "1"],
+            "--epsilon applies to function, dims, grid, dartboard only, not to the toy experiment",
+        ),
+        (
+            &["experiment", "grid", "--method", "random", "--method", "random"],
+            "--method must be a non-empty list of distinct methods",
         ),
     ];
     for (args, expected) in cases {

@@ -79,13 +79,16 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
         let mut args = GRID.to_vec();
         args.extend(["--in-flight", p]);
         let reference = in_process(&args, &dir.join("in-process"));
-        for workers in ["1", "2"] {
+        let written = dir.join("in-process").join("config.toml");
+        let from_file = ["--config", written.to_str().unwrap(), "-q"];
+        // One worker runs the options, two run the in-process run's experiment file.
+        for (workers, args) in [("1", &args[..]), ("2", &from_file[..])] {
             let run = run_name(&format!("match-{p}-{workers}"));
             let out = dir.join(format!("fleet-{workers}"));
             check(
                 watched()
                     .arg("run")
-                    .args(&args)
+                    .args(args)
                     .args(["--workers", workers, "--run", run.as_str()])
                     .arg("--out")
                     .arg(&out)
@@ -96,6 +99,11 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
                 std::fs::read(out.join("summary.json")).unwrap(),
                 reference,
                 "P = {p}, W = {workers}"
+            );
+            // The fleet records the same experiment file: how a run is executed is not part of it.
+            assert_eq!(
+                std::fs::read(out.join("config.toml")).unwrap(),
+                std::fs::read(&written).unwrap()
             );
             assert_clean(&run);
         }

@@ -1,0 +1,894 @@
+//! Experiment files: a TOML file defines what a run computes (the experiment, its methods,
+//! runs, seeds and every setting the paper leaves open). Command-line options and files resolve to
+//! the same [`ExperimentFile`] and are checked here, in one place; every run writes its resolved
+//! file to `DIR/config.toml`, which re-runs it bit for bit.
+//!
+//! How a run is executed (output directory, progress, the fleet's workers) stays on the command
+//! line: it does not change the results.
+
+use crate::experiment::Experiment;
+use crate::paper::{self, Options, Overrides};
+use acps_learner::Method;
+use acps_learner::creps::MemoryConfig;
+use acps_learner::selection::FirstVisit;
+use acps_shared::ipc;
+use acps_shared::wire::MAX_THETA;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// Training tasks in flight at most: what a full fleet holds (every worker's every request).
+pub const MAX_IN_FLIGHT: usize = ipc::MAX_WORKERS * ipc::MAX_IN_FLIGHT_PER_WORKER;
+
+/// The largest integer TOML holds (a signed 64-bit integer).
+const TOML_MAX: u64 = i64::MAX as u64;
+
+/// The paper's experiments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExperimentName {
+    /// Section 4's model of the learning process (Fig. 2 and 3).
+    Toy,
+    /// Section 5.1.2's contextual function on a 5x5 grid of contexts (Fig. 4 and 5).
+    Function,
+    /// Section 5.1.3: the contextual function for 1 to 4 context dimensions (Fig. 6).
+    Dims,
+    /// Section 5.2.3: the PA-10 throws at a 5x5 grid of targets, tested on a 4x4 grid (Fig. 8).
+    Grid,
+    /// Section 5.2.4: the PA-10 throws at the 81 fields of a dartboard on the ground (Fig. 10).
+    Dartboard,
+}
+
+impl ExperimentName {
+    /// The name on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Toy => "toy",
+            Self::Function => "function",
+            Self::Dims => "dims",
+            Self::Grid => "grid",
+            Self::Dartboard => "dartboard",
+        }
+    }
+}
+
+/// How throws are simulated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum SimName {
+    /// Forward kinematics at release and closed-form flight (exact for perfect tracking).
+    Analytic,
+    /// The rapier3d multibody arm tracking the throw with joint motors (about 2 ms per throw).
+    Rapier,
+}
+
+/// Baseline of a context's first visit for the progress heuristics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum FirstVisitName {
+    /// The initial greedy policy's return in that context.
+    InitialReturn,
+    /// None: the first visit scores 0.
+    Zero,
+    /// The first visit scores D-UCB's reward bound B.
+    Optimistic,
+}
+
+/// C-REPS sample memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Memory {
+    /// The last N rollouts (BOLeRo).
+    Window,
+    /// The paper's Section 5.2 memory of the best N/K rollouts per task.
+    BestPerTask,
+}
+
+/// Everything that defines a run, as an experiment file or as command-line options. Every key is
+/// optional except `experiment`; an unset key takes the experiment's default, and a resolved file
+/// (`DIR/config.toml`) sets every key that applies to its experiment.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentFile {
+    /// Which experiment (or give an experiment file with --config).
+    #[arg(value_name = "NAME", required_unless_present = "config", conflicts_with = "config")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub experiment: Option<ExperimentName>,
+    /// toy only: one panel of Fig. 2 (a: sigma_r 0, sigma_b 0; b: 0.01, 0; c: 0, 0.2; d: 0.01, 0.2)
+    /// into DIR; without it all four go to DIR/a .. DIR/d.
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub panel: Option<char>,
+    /// dims only: one context dimension (1..=4) into DIR; without it all four go to DIR/ns-1 .. DIR/ns-4.
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub n_s: Option<usize>,
+    /// grid and dartboard only: how throws are simulated [default: analytic].
+    #[arg(long, value_enum)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sim: Option<SimName>,
+    /// Runs per method [default: 20].
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub runs: Option<usize>,
+    /// Training episodes per run [default: the paper's: toy 1000, function 2500, dims 5000, grid
+    /// 10000, dartboard 50000].
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub episodes: Option<u64>,
+    /// Seed of run 0; run r uses seed + r for the problem instance and the learner [default: 0].
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Training tasks in flight (P): task t is created after outcome t - P is consumed; 1 is the
+    /// paper's sequential algorithm [default: 1].
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub in_flight: Option<usize>,
+    /// Run only this method (repeatable): round-robin, random, random-continuous, corners,
+    /// best-reward, diversity, one-step-progress, monotonic-progress or sagg-riac [default: the
+    /// methods of the paper's figure].
+    #[arg(long = "method", value_name = "METHOD")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub methods: Option<Vec<Method>>,
+    /// function and dims only: number of low-level parameters n_theta of the contextual function
+    /// (the paper does not say) [default: 20].
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub n_theta: Option<usize>,
+    /// Baseline of a context's first visit for the progress heuristics [default: initial-return].
+    #[arg(long, value_enum)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_visit: Option<FirstVisitName>,
+    /// Not toy: C-REPS sample memory [default: window for function and dims, best-per-task for
+    /// grid and dartboard, as in the paper].
+    #[arg(long, value_enum)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub memory: Option<Memory>,
+    /// Not toy: initial exploration covariance Sigma_0 = X I [default: 1 for function and dims,
+    /// 0.02 for grid and dartboard].
+    #[arg(long, value_name = "X")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub initial_sigma: Option<f64>,
+    /// Not toy: C-REPS KL bound epsilon [default: function 2, dims 1, grid and dartboard 0.5].
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epsilon: Option<f64>,
+    /// D-UCB padding strength xi [default: 1e-8, grid and dartboard 1e-9].
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub xi: Option<f64>,
+    /// toy only: use the learning factors of the paper's Fig. 3 in every run instead of a random
+    /// permutation per run [default: false].
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fig3_learning_factors: Option<bool>,
+}
+
+use ExperimentName::{Dartboard, Dims, Function, Grid, Toy};
+
+/// A key of [`ExperimentFile`]: what it accepts and which experiments it applies to.
+struct Key {
+    name: &'static str,
+    accepted: &'static str,
+    applies: &'static [ExperimentName],
+}
+
+const ALL: &[ExperimentName] = &[Toy, Function, Dims, Grid, Dartboard];
+const WITH_CREPS: &[ExperimentName] = &[Function, Dims, Grid, Dartboard];
+
+/// Every key, in file order.
+const KEYS: &[Key] = &[
+    Key {
+        name: "experiment",
+        accepted: "one of toy, function, dims, grid, dartboard",
+        applies: ALL,
+    },
+    Key {
+        name: "panel",
+        accepted: "one of a, b, c, d",
+        applies: &[Toy],
+    },
+    Key {
+        name: "n_s",
+        accepted: "an integer in 1..=4",
+        applies: &[Dims],
+    },
+    Key {
+        name: "sim",
+        accepted: "analytic or rapier",
+        applies: &[Grid, Dartboard],
+    },
+    Key {
+        name: "runs",
+        accepted: "an integer in 1..=2^63-1",
+        applies: ALL,
+    },
+    Key {
+        name: "episodes",
+        accepted: "an integer in 1..=2^63-1",
+        applies: ALL,
+    },
+    Key {
+        name: "seed",
+        accepted: "an integer in 0..=2^63-1 - (runs - 1) (run r uses seed + r)",
+        applies: ALL,
+    },
+    Key {
+        name: "in_flight",
+        accepted: "an integer in 1..=8192 (what a full fleet holds)",
+        applies: ALL,
+    },
+    Key {
+        name: "methods",
+        accepted: "a non-empty list of distinct methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac",
+        applies: ALL,
+    },
+    Key {
+        name: "n_theta",
+        accepted: "an integer in 5..=64 (more than the largest context dimension, at most what a task carries)",
+        applies: &[Function, Dims],
+    },
+    Key {
+        name: "first_visit",
+        accepted: "one of initial-return, zero, optimistic",
+        applies: ALL,
+    },
+    Key {
+        name: "memory",
+        accepted: "window or best-per-task",
+        applies: WITH_CREPS,
+    },
+    Key {
+        name: "initial_sigma",
+        accepted: "a finite number > 0",
+        applies: WITH_CREPS,
+    },
+    Key {
+        name: "epsilon",
+        accepted: "a finite number > 0",
+        applies: WITH_CREPS,
+    },
+    Key {
+        name: "xi",
+        accepted: "a finite number >= 0",
+        applies: ALL,
+    },
+    Key {
+        name: "fig3_learning_factors",
+        accepted: "true or false",
+        applies: &[Toy],
+    },
+];
+
+fn key(name: &str) -> &'static Key {
+    KEYS.iter()
+        .find(|k| k.name == name)
+        .expect("every field of ExperimentFile is in KEYS (tested)")
+}
+
+/// A refused experiment file or option; the message names the file and line or the option, and
+/// the accepted range.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct ConfigError(String);
+
+/// What is wrong with a key's value, before it is known where the value came from.
+struct Invalid {
+    key: &'static str,
+    problem: Problem,
+}
+
+enum Problem {
+    /// Outside the key's accepted range.
+    Range { got: String },
+    /// The key does not apply to this experiment.
+    NotApplicable(ExperimentName),
+    /// A required key is not set.
+    Missing,
+}
+
+fn out_of_range(key: &'static str, got: impl std::fmt::Display) -> Invalid {
+    Invalid {
+        key,
+        problem: Problem::Range { got: got.to_string() },
+    }
+}
+
+/// An experiment file as read: its values and where each top-level key stands.
+pub struct LoadedFile {
+    path: PathBuf,
+    text: String,
+    positions: BTreeMap<String, Position>,
+    /// The file's values.
+    pub values: ExperimentFile,
+}
+
+/// Where a top-level key and its value stand in a file.
+struct Position {
+    line: usize,
+    value: Range<usize>,
+}
+
+impl LoadedFile {
+    /// Read and parse an experiment file. Unknown keys, wrong types and malformed TOML are refused
+    /// with the file and line; ranges are checked by [`Plan::new`].
+    pub fn read(path: &Path) -> Result<Self, ConfigError> {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| ConfigError(format!("{}: cannot read: {e}", path.display())))?;
+        Self::parse(path, text)
+    }
+
+    /// Parse `text`; `path` names it in errors.
+    pub fn parse(path: &Path, text: String) -> Result<Self, ConfigError> {
+        let at = |span: Option<Range<usize>>, message: &str| {
+            let line = span.map_or(String::new(), |s| format!("{}:", line_of(&text, s.start)));
+            ConfigError(format!("{}:{line} {message}", path.display()))
+        };
+        let document = toml::de::DeTable::parse(&text).map_err(|e| at(e.span(), e.message()))?;
+        let positions: BTreeMap<String, Position> = document
+            .get_ref()
+            .iter()
+            .map(|(key, value)| {
+                let position = Position {
+                    line: line_of(&text, key.span().start),
+                    value: value.span(),
+                };
+                (key.get_ref().to_string(), position)
+            })
+            .collect();
+        let values = match toml::from_str::<ExperimentFile>(&text) {
+            Ok(values) => values,
+            Err(error) => {
+                // A wrong type or an unknown name inside a known key's value: say what the key
+                // accepts. Unknown keys keep toml's message, which lists the known ones.
+                let span = error.span();
+                let owner = span.as_ref().and_then(|span| {
+                    positions
+                        .iter()
+                        .find(|(_, p)| p.value.start <= span.start && span.end <= p.value.end)
+                });
+                return Err(match (owner, span) {
+                    (Some((name, _)), Some(span)) if KEYS.iter().any(|k| k.name == name) => {
+                        let key = key(name);
+                        ConfigError(format!(
+                            "{}:{}: {} must be {}, got {}",
+                            path.display(),
+                            line_of(&text, span.start),
+                            key.name,
+                            key.accepted,
+                            &text[span]
+                        ))
+                    }
+                    (_, span) => at(span, error.message()),
+                });
+            }
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            text,
+            positions,
+            values,
+        })
+    }
+}
+
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+/// A checked request: the experiment file's values overridden by command-line options.
+pub struct Plan {
+    settings: ExperimentFile,
+    name: ExperimentName,
+    options: Options,
+}
+
+/// One experiment to run, where its results go, and its resolved experiment file.
+pub struct Job {
+    /// The experiment.
+    pub experiment: Experiment,
+    /// Its output directory.
+    pub dir: PathBuf,
+    /// Every setting of the job, the experiment's defaults filled in: re-runs it bit for bit.
+    pub config: ExperimentFile,
+}
+
+impl Plan {
+    /// Check `file`'s values overridden by the options set in `cli`. Errors name the option for
+    /// values given on the command line and the file and line for values from the file.
+    pub fn new(file: Option<&LoadedFile>, cli: &ExperimentFile) -> Result<Self, ConfigError> {
+        let base = file.map(|f| f.values.clone()).unwrap_or_default();
+        let settings = cli.over(base);
+        settings.check().map_err(|invalid| describe(invalid, file, cli))?;
+        let name = settings.experiment.expect("checked");
+        let overrides = Overrides {
+            n_theta: settings.n_theta,
+            first_visit: settings.first_visit.map(|f| match f {
+                FirstVisitName::InitialReturn => FirstVisit::InitialReturn,
+                FirstVisitName::Zero => FirstVisit::Zero,
+                FirstVisitName::Optimistic => FirstVisit::Optimistic,
+            }),
+            best_per_task: settings.memory.map(|m| m == Memory::BestPerTask),
+            initial_sigma: settings.initial_sigma,
+            xi: settings.xi,
+            epsilon: settings.epsilon,
+            learning_factors: (settings.fig3_learning_factors == Some(true)).then_some(paper::FIG3_LEARNING_FACTORS),
+        };
+        let defaults = Options::default();
+        let options = Options {
+            runs: settings.runs.unwrap_or(defaults.runs),
+            episodes: settings.episodes,
+            seed: settings.seed.unwrap_or(defaults.seed),
+            in_flight: settings.in_flight.unwrap_or(defaults.in_flight),
+            methods: settings.methods.clone(),
+            overrides,
+        };
+        Ok(Self {
+            settings,
+            name,
+            options,
+        })
+    }
+
+    /// The experiment.
+    pub fn name(&self) -> ExperimentName {
+        self.name
+    }
+
+    /// The experiments to run into `out`: toy without a panel and dims without n_s expand to
+    /// their four panels or dimensions in subdirectories.
+    pub fn jobs(&self, out: &Path) -> Vec<Job> {
+        let options = &self.options;
+        let sim = match self.settings.sim.unwrap_or(SimName::Analytic) {
+            SimName::Analytic => paper::Sim::Analytic,
+            SimName::Rapier => paper::Sim::Rapier,
+        };
+        let job = |experiment: Experiment, dir: PathBuf, panel, n_s| {
+            let config = self.resolved_for(&experiment, panel, n_s);
+            Job {
+                experiment,
+                dir,
+                config,
+            }
+        };
+        match self.name {
+            Toy => {
+                let panels: Vec<(char, PathBuf)> = match self.settings.panel {
+                    Some(panel) => vec![(panel, out.to_path_buf())],
+                    None => "abcd".chars().map(|p| (p, out.join(p.to_string()))).collect(),
+                };
+                panels
+                    .into_iter()
+                    .map(|(panel, dir)| {
+                        let model = paper::toy_panel(panel).expect("the panel was checked");
+                        job(paper::toy(model, options), dir, Some(panel), None)
+                    })
+                    .collect()
+            }
+            Function => vec![job(paper::function(options), out.to_path_buf(), None, None)],
+            Dims => {
+                let dims: Vec<(usize, PathBuf)> = match self.settings.n_s {
+                    Some(n_s) => vec![(n_s, out.to_path_buf())],
+                    None => (1..=4).map(|n| (n, out.join(format!("ns-{n}")))).collect(),
+                };
+                dims.into_iter()
+                    .map(|(n_s, dir)| job(paper::dims(n_s, options), dir, None, Some(n_s)))
+                    .collect()
+            }
+            Grid => vec![job(paper::grid(sim, options), out.to_path_buf(), None, None)],
+            Dartboard => vec![job(paper::dartboard(sim, options), out.to_path_buf(), None, None)],
+        }
+    }
+
+    /// The request with the experiment's defaults filled in; the panel or n_s stays unset when it
+    /// was, meaning all four. (Every panel and dimension shares the other defaults; tested.)
+    pub fn resolved(&self) -> ExperimentFile {
+        let first = self.jobs(Path::new("")).swap_remove(0);
+        ExperimentFile {
+            panel: self.settings.panel,
+            n_s: self.settings.n_s,
+            ..first.config
+        }
+    }
+
+    /// Every setting of `experiment`, read back from what it runs, so the file cannot drift from
+    /// the experiment's defaults.
+    fn resolved_for(&self, experiment: &Experiment, panel: Option<char>, n_s: Option<usize>) -> ExperimentFile {
+        let creps = experiment.learner.creps.as_ref();
+        let selector = &experiment.methods[0];
+        let throws = matches!(self.name, Grid | Dartboard);
+        ExperimentFile {
+            experiment: Some(self.name),
+            panel,
+            n_s,
+            sim: throws.then(|| self.settings.sim.unwrap_or(SimName::Analytic)),
+            runs: Some(experiment.runs),
+            episodes: Some(experiment.learner.episodes),
+            seed: Some(experiment.base_seed),
+            in_flight: Some(experiment.learner.in_flight),
+            methods: Some(experiment.methods.iter().map(|s| s.method).collect()),
+            n_theta: experiment.settings["n_theta"].as_u64().map(|n| n as usize),
+            first_visit: Some(match selector.first_visit {
+                FirstVisit::InitialReturn => FirstVisitName::InitialReturn,
+                FirstVisit::Zero => FirstVisitName::Zero,
+                FirstVisit::Optimistic => FirstVisitName::Optimistic,
+            }),
+            memory: creps.map(|c| match c.memory {
+                MemoryConfig::SlidingWindow { .. } => Memory::Window,
+                MemoryConfig::BestPerTask { .. } => Memory::BestPerTask,
+            }),
+            initial_sigma: creps.map(|c| c.initial_sigma),
+            epsilon: creps.map(|c| c.epsilon),
+            xi: Some(selector.ducb.xi),
+            fig3_learning_factors: (self.name == Toy).then(|| self.settings.fig3_learning_factors == Some(true)),
+        }
+    }
+}
+
+/// The default output directory: runs/STEM for an experiment file STEM.toml, else runs/NAME.
+pub fn default_out(file: Option<&Path>, name: ExperimentName) -> PathBuf {
+    let stem = file.and_then(|f| f.file_stem()).and_then(|s| s.to_str());
+    Path::new("runs").join(stem.unwrap_or(name.name()))
+}
+
+impl ExperimentFile {
+    /// `self`'s set values over `base`'s.
+    fn over(&self, base: ExperimentFile) -> ExperimentFile {
+        let s = self.clone();
+        ExperimentFile {
+            experiment: s.experiment.or(base.experiment),
+            panel: s.panel.or(base.panel),
+            n_s: s.n_s.or(base.n_s),
+            sim: s.sim.or(base.sim),
+            runs: s.runs.or(base.runs),
+            episodes: s.episodes.or(base.episodes),
+            seed: s.seed.or(base.seed),
+            in_flight: s.in_flight.or(base.in_flight),
+            methods: s.methods.or(base.methods),
+            n_theta: s.n_theta.or(base.n_theta),
+            first_visit: s.first_visit.or(base.first_visit),
+            memory: s.memory.or(base.memory),
+            initial_sigma: s.initial_sigma.or(base.initial_sigma),
+            epsilon: s.epsilon.or(base.epsilon),
+            xi: s.xi.or(base.xi),
+            fig3_learning_factors: s.fig3_learning_factors.or(base.fig3_learning_factors),
+        }
+    }
+
+    /// The keys that are set.
+    fn set_keys(&self) -> Vec<String> {
+        // Unset keys are skipped when serialising; JSON, unlike TOML, holds every u64 and f64.
+        match serde_json::to_value(self) {
+            Ok(serde_json::Value::Object(map)) => map.keys().cloned().collect(),
+            _ => unreachable!("a struct of plain values serialises to an object"),
+        }
+    }
+
+    /// Every value in its accepted range, and only keys that apply to the experiment.
+    fn check(&self) -> Result<(), Invalid> {
+        let Some(name) = self.experiment else {
+            return Err(Invalid {
+                key: "experiment",
+                problem: Problem::Missing,
+            });
+        };
+        for set in self.set_keys() {
+            let key = key(&set);
+            if !key.applies.contains(&name) {
+                return Err(Invalid {
+                    key: key.name,
+                    problem: Problem::NotApplicable(name),
+                });
+            }
+        }
+        let in_range = |key, ok: bool, got: String| if ok { Ok(()) } else { Err(out_of_range(key, got)) };
+        if let Some(panel) = self.panel {
+            in_range("panel", paper::toy_panel(panel).is_some(), format!("'{panel}'"))?;
+        }
+        if let Some(n_s) = self.n_s {
+            in_range("n_s", (1..=4).contains(&n_s), n_s.to_string())?;
+        }
+        let runs = self.runs.unwrap_or(Options::default().runs);
+        in_range("runs", (1..=TOML_MAX).contains(&(runs as u64)), runs.to_string())?;
+        if let Some(episodes) = self.episodes {
+            in_range("episodes", (1..=TOML_MAX).contains(&episodes), episodes.to_string())?;
+        }
+        if let Some(seed) = self.seed {
+            let last = seed.checked_add(runs as u64 - 1);
+            in_range("seed", last.is_some_and(|l| l <= TOML_MAX), seed.to_string())?;
+        }
+        if let Some(in_flight) = self.in_flight {
+            in_range(
+                "in_flight",
+                (1..=MAX_IN_FLIGHT).contains(&in_flight),
+                in_flight.to_string(),
+            )?;
+        }
+        if let Some(methods) = &self.methods {
+            let distinct = methods.iter().enumerate().all(|(i, m)| !methods[..i].contains(m));
+            let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
+            in_range("methods", !methods.is_empty() && distinct, format!("{names:?}"))?;
+        }
+        if let Some(n_theta) = self.n_theta {
+            in_range("n_theta", (5..=MAX_THETA).contains(&n_theta), n_theta.to_string())?;
+        }
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        for (key, value, ok) in [
+            ("initial_sigma", self.initial_sigma, positive as fn(f64) -> bool),
+            ("epsilon", self.epsilon, positive),
+            ("xi", self.xi, |x: f64| x.is_finite() && x >= 0.0),
+        ] {
+            if let Some(value) = value {
+                in_range(key, ok(value), value.to_string())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The file's text: `header` (comment lines) and every set key. Fails on integers TOML cannot
+    /// hold, which [`Plan::new`] refuses.
+    fn to_toml(&self, header: &str) -> Result<String, ConfigError> {
+        let body = toml::to_string(self).map_err(|e| ConfigError(format!("not representable in TOML: {e}")))?;
+        Ok(format!("{header}{body}"))
+    }
+
+    /// Write the resolved file of a run into its directory (`config.toml`).
+    pub fn write_resolved(&self, dir: &Path) -> Result<(), ConfigError> {
+        let path = dir.join("config.toml");
+        let text = self.to_toml(&header(
+            "the run in this directory",
+            "acps experiment --config config.toml --out NEW_DIR",
+        ))?;
+        std::fs::create_dir_all(dir)
+            .and_then(|()| std::fs::write(&path, text))
+            .map_err(|e| cannot_write(&path, e))
+    }
+
+    /// Write the file to `path`, which must not exist yet: a hand-edited file is never replaced.
+    pub fn save_new(&self, path: &Path) -> Result<(), ConfigError> {
+        let text = self.to_toml(&header("an experiment", "acps experiment --config FILE"))?;
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .map_err(|e| match e.kind() {
+                std::io::ErrorKind::AlreadyExists => {
+                    ConfigError(format!("{} exists; remove it or choose another name", path.display()))
+                }
+                _ => cannot_write(path, e),
+            })?;
+        std::io::Write::write_all(&mut file, text.as_bytes()).map_err(|e| cannot_write(path, e))
+    }
+}
+
+fn cannot_write(path: &Path, error: std::io::Error) -> ConfigError {
+    ConfigError(format!("{}: cannot write: {error}", path.display()))
+}
+
+/// The comment lines that open a written file: what it describes and how to run it.
+fn header(what: &str, command: &str) -> String {
+    format!(
+        "# Every setting of {what}, written by acps {}.\n\
+         # Run it with `{command}` (docs/EXPERIMENTS.md, \"Experiment files\").\n\n",
+        env!("CARGO_PKG_VERSION")
+    )
+}
+
+/// The message for `invalid`: the option when the value came from the command line, else the
+/// file and line.
+fn describe(invalid: Invalid, file: Option<&LoadedFile>, cli: &ExperimentFile) -> ConfigError {
+    let key = key(invalid.key);
+    let from_cli = cli.set_keys().iter().any(|k| k == key.name);
+    let position = file
+        .filter(|_| !from_cli)
+        .and_then(|f| f.positions.get(key.name).map(|p| (f, p)));
+    let (subject, got) = match (from_cli, position, file) {
+        (true, ..) => (flag(key.name), None),
+        (false, Some((f, p)), _) => (
+            format!("{}:{}: {}", f.path.display(), p.line, key.name),
+            Some(f.text[p.value.clone()].to_string()),
+        ),
+        (false, None, Some(f)) => (format!("{}: {}", f.path.display(), key.name), None),
+        (false, None, None) => (key.name.to_string(), None),
+    };
+    ConfigError(match invalid.problem {
+        Problem::Range { got: value } => {
+            format!("{subject} must be {}, got {}", key.accepted, got.unwrap_or(value))
+        }
+        Problem::NotApplicable(name) => {
+            let applies: Vec<&str> = key.applies.iter().map(|e| e.name()).collect();
+            format!(
+                "{subject} applies to {} only, not to the {} experiment",
+                applies.join(", "),
+                name.name()
+            )
+        }
+        Problem::Missing => format!("{subject} must be set: {}", key.accepted),
+    })
+}
+
+/// The command-line option of a key.
+fn flag(key: &str) -> String {
+    match key {
+        "experiment" => "NAME".into(),
+        "methods" => "--method".into(),
+        _ => format!("--{}", key.replace('_', "-")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn error(text: &str) -> String {
+        let file = LoadedFile::parse(Path::new("e.toml"), text.to_string());
+        match file {
+            Err(e) => e.to_string(),
+            Ok(file) => match Plan::new(Some(&file), &ExperimentFile::default()) {
+                Err(e) => e.to_string(),
+                Ok(_) => panic!("{text} was accepted"),
+            },
+        }
+    }
+
+    #[test]
+    fn every_field_has_a_key_in_file_order() {
+        let every = ExperimentFile {
+            experiment: Some(Toy),
+            panel: Some('a'),
+            n_s: Some(1),
+            sim: Some(SimName::Analytic),
+            runs: Some(1),
+            episodes: Some(1),
+            seed: Some(0),
+            in_flight: Some(1),
+            methods: Some(vec![Method::Random]),
+            n_theta: Some(5),
+            first_visit: Some(FirstVisitName::Zero),
+            memory: Some(Memory::Window),
+            initial_sigma: Some(1.0),
+            epsilon: Some(1.0),
+            xi: Some(0.0),
+            fig3_learning_factors: Some(true),
+        };
+        let names: Vec<&str> = KEYS.iter().map(|k| k.name).collect();
+        assert_eq!(every.set_keys().len(), names.len());
+        let text = every.to_toml("").unwrap();
+        let order: Vec<&str> = text.lines().map(|l| l.split(" = ").next().unwrap()).collect();
+        assert_eq!(order, names);
+    }
+
+    #[test]
+    fn file_errors_name_line_key_and_range() {
+        let cases = [
+            ("experiment = \"toy\"\nrunz = 3\n", "e.toml:2: unknown field `runz`"),
+            (
+                "experiment = \"toy\"\n\nruns = \"3\"\n",
+                "e.toml:3: runs must be an integer in 1..=2^63-1, got \"3\"",
+            ),
+            (
+                "experiment = \"toy\"\nruns = 0\n",
+                "e.toml:2: runs must be an integer in 1..=2^63-1, got 0",
+            ),
+            (
+                "experiment = \"toy\"\nxi = nan\n",
+                "e.toml:2: xi must be a finite number >= 0, got nan",
+            ),
+            (
+                "experiment = \"grid\"\nepsilon = -inf\n",
+                "e.toml:2: epsilon must be a finite number > 0, got -inf",
+            ),
+            (
+                "experiment = \"toy\"\nepsilon = 1.0\n",
+                "e.toml:2: epsilon applies to function, dims, grid, dartboard only, not to the toy experiment",
+            ),
+            (
+                "experiment = \"dims\"\nn_s = 5\n",
+                "e.toml:2: n_s must be an integer in 1..=4, got 5",
+            ),
+            (
+                "experiment = \"toy\"\npanel = \"e\"\n",
+                "e.toml:2: panel must be one of a, b, c, d, got \"e\"",
+            ),
+            (
+                "experiment = \"function\"\nmethods = [\n  \"random\",\n  \"monotonic\",\n]\n",
+                "e.toml:4: methods must be a non-empty list of distinct methods",
+            ),
+            (
+                "experiment = \"function\"\nmethods = [\"random\", \"random\"]\n",
+                "got [\"random\", \"random\"]",
+            ),
+            (
+                "experiment = \"function\"\nmethods = []\n",
+                "e.toml:2: methods must be a non-empty",
+            ),
+            (
+                "experiment = \"function\"\nn_theta = 65\n",
+                "e.toml:2: n_theta must be an integer in 5..=64",
+            ),
+            (
+                "experiment = \"function\"\nin_flight = 8193\n",
+                "e.toml:2: in_flight must be an integer in 1..=8192",
+            ),
+            (
+                "experiment = \"function\"\nruns = 2\nseed = 9223372036854775807\n",
+                "e.toml:3: seed must be an integer in 0..=2^63-1 - (runs - 1)",
+            ),
+            (
+                "experiment = \"throw\"\n",
+                "e.toml:1: experiment must be one of toy, function",
+            ),
+            ("runs = 2\n", "e.toml: experiment must be set"),
+            ("experiment = \"toy\"\nruns = \n", "e.toml:2:"),
+            (
+                "experiment = \"toy\"\n[fleet]\nworkers = 2\n",
+                "e.toml:2: unknown field `fleet`",
+            ),
+        ];
+        for (text, expected) in cases {
+            let message = error(text);
+            assert!(
+                message.starts_with(expected) || message.contains(expected),
+                "{text:?}: {message}"
+            );
+        }
+    }
+
+    #[test]
+    fn options_name_the_flag_and_override_the_file() {
+        let file = LoadedFile::parse(Path::new("e.toml"), "experiment = \"toy\"\nruns = 0\n".into()).unwrap();
+        let cli = ExperimentFile {
+            runs: Some(3),
+            ..Default::default()
+        };
+        let plan = Plan::new(Some(&file), &cli).unwrap();
+        assert_eq!(plan.resolved().runs, Some(3));
+        let cli = ExperimentFile {
+            epsilon: Some(f64::NAN),
+            ..Default::default()
+        };
+        let message = Plan::new(Some(&file), &cli).err().unwrap().to_string();
+        assert_eq!(
+            message,
+            "--epsilon applies to function, dims, grid, dartboard only, not to the toy experiment"
+        );
+        let cli = ExperimentFile {
+            experiment: Some(Grid),
+            xi: Some(f64::INFINITY),
+            ..Default::default()
+        };
+        let message = Plan::new(None, &cli).err().unwrap().to_string();
+        assert_eq!(message, "--xi must be a finite number >= 0, got inf");
+    }
+
+    #[test]
+    fn resolved_files_validate_and_panels_share_their_defaults() {
+        for name in ALL {
+            let plan = Plan::new(
+                None,
+                &ExperimentFile {
+                    experiment: Some(*name),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let resolved = plan.resolved();
+            let jobs = plan.jobs(Path::new("out"));
+            for job in &jobs {
+                let same = ExperimentFile {
+                    panel: resolved.panel,
+                    n_s: resolved.n_s,
+                    ..job.config.clone()
+                };
+                assert_eq!(same, resolved, "{name:?}");
+                let text = job.config.to_toml("# header\n").unwrap();
+                let again = LoadedFile::parse(Path::new("r.toml"), text).unwrap();
+                assert_eq!(again.values, job.config);
+                let replan = Plan::new(Some(&again), &ExperimentFile::default()).unwrap();
+                assert_eq!(replan.resolved(), job.config, "{name:?}");
+            }
+        }
+    }
+}
