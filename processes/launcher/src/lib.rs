@@ -2,7 +2,9 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod evaluate;
 pub mod experiment;
 pub mod paper;
 pub mod plot;
+pub mod records;
 pub mod workers;
