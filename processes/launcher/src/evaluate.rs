@@ -219,14 +219,24 @@ pub fn report(saved: &SavedPolicy, replay: &Replay, test_set: bool) -> String {
     lines.join("\n") + "\n"
 }
 
-/// Draw the side view of the throw at `throw`'s target into `path` (.svg or .png).
-pub fn render(saved: &SavedPolicy, throw: &Throw, path: &Path) -> anyhow::Result<()> {
+/// Refuse a `--render` file before anything is thrown: the problem must have throws and the
+/// file must be .svg or .png.
+pub fn check_render(saved: &SavedPolicy, path: &Path) -> anyhow::Result<()> {
     if !is_throwing(saved) {
         bail!(
             "--render draws a throw; the {} experiment has no throws",
             saved.experiment
         );
     }
+    if !matches!(path.extension().and_then(|e| e.to_str()), Some("svg" | "png")) {
+        bail!("--render {}: the file name must end in .svg or .png", path.display());
+    }
+    Ok(())
+}
+
+/// Draw the side view of the throw at `throw`'s target into `path` (.svg or .png).
+pub fn render(saved: &SavedPolicy, throw: &Throw, path: &Path) -> anyhow::Result<()> {
+    check_render(saved, path)?;
     let trajectory = ThrowPolicy::new(ThrowDesign::pa10(), 0.01)
         .and_then(|policy| policy.trajectory(&throw.theta))
         .map_err(|e| anyhow::anyhow!("rolling out the throw: {e}"))?;

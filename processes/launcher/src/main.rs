@@ -520,6 +520,9 @@ fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     let path = policy_file(&args.dir, args.method.as_deref(), args.run)?;
     let (saved, policy) = SavedPolicy::load(&path)?;
     evaluate::check_targets(&saved, &args.target)?;
+    if let Some(file) = &args.render {
+        evaluate::check_render(&saved, file)?;
+    }
     let test_set = args.target.is_empty();
     let contexts = if test_set {
         saved.problem.test_contexts.clone()

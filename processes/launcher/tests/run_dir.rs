@@ -256,6 +256,11 @@ fn evaluate_refuses_bad_targets_with_the_accepted_range() {
     );
     let error = refusal(&["evaluate", dir, "--target", "-4;-4"]);
     assert!(error.contains("is not a number; write the target as X,Y"), "{error}");
+    let error = refusal(&["evaluate", dir, "--render", "throw.jpg"]);
+    assert!(
+        error.contains("--render throw.jpg: the file name must end in .svg or .png"),
+        "{error}"
+    );
 }
 
 #[test]
