@@ -73,6 +73,16 @@ pub fn throwing(model: Model, sim: Sim) -> EnvironmentSpec {
     }
 }
 
+/// For a dartboard spec, the same throws scored against any target as on the grid (reward
+/// -||s - b||^2): the dartboard's reward is defined at field centres only. `None` for other
+/// specs.
+pub fn free_targets(spec: &EnvironmentSpec) -> Option<EnvironmentSpec> {
+    (Model::from_code(spec.model) == Some(Model::Dartboard)).then_some(EnvironmentSpec {
+        model: Model::Grid.code(),
+        ..*spec
+    })
+}
+
 /// The spec of the trivial environment.
 pub fn trivial() -> EnvironmentSpec {
     EnvironmentSpec {
@@ -196,6 +206,9 @@ mod tests {
         let mut grid = build(&throwing(Model::Grid, Sim::Analytic)).unwrap();
         assert!(grid.rollout(&task(vec![0.0; PARAMS], vec![-3.5, -3.5])).is_ok());
         let mut board = build(&throwing(Model::Dartboard, Sim::Analytic)).unwrap();
+        let free = free_targets(&throwing(Model::Dartboard, Sim::Rapier)).unwrap();
+        assert_eq!(free, throwing(Model::Grid, Sim::Rapier));
+        assert_eq!(free_targets(&throwing(Model::Grid, Sim::Analytic)), None);
         let bull = dartboard_fields()[0].centre;
         assert_eq!(board.rollout(&task(vec![0.0; PARAMS], bull.to_vec())).reward, 0.0);
         assert_eq!(

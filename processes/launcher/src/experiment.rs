@@ -5,6 +5,7 @@
 //! learner, so methods are compared on the same problem instances (paired runs).
 
 use crate::progress::Progress;
+use acps_learner::creps::PolicySnapshot;
 use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress};
 use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, run_in_process,
@@ -63,7 +64,16 @@ pub struct Experiment {
 }
 
 /// The result of one learner run.
+#[derive(Debug)]
 pub struct RunResult {
+    /// The run's seed (problem instance and learner).
+    pub seed: u64,
+    /// The problem the run learned.
+    pub problem: Problem,
+    /// How to build its environment again, if it can be built from a spec.
+    pub spec: Option<EnvironmentSpec>,
+    /// The final upper-level policy, if the problem has policy parameters.
+    pub policy: Option<PolicySnapshot>,
     /// Episodes at which the policy was evaluated.
     pub eval_episodes: Vec<u64>,
     /// The evaluation scores (`None` if every rollout of an evaluation failed).
@@ -134,6 +144,10 @@ pub struct Summary {
     pub settings: serde_json::Value,
     /// Results per method.
     pub methods: BTreeMap<String, MethodSummary>,
+    /// Every run of every method (keyed like `methods`), for the run directory's tables and
+    /// policies; not part of summary.json.
+    #[serde(skip)]
+    pub run_results: BTreeMap<String, Vec<RunResult>>,
 }
 
 /// What the progress line of an in-process run last showed: each job's progress and the
@@ -159,6 +173,10 @@ impl Job {
     fn result(&self) -> RunResult {
         let learner = &self.learner;
         RunResult {
+            seed: learner.seed(),
+            problem: learner.problem().clone(),
+            spec: self.spec,
+            policy: learner.policy().and_then(|p| p.snapshot()),
             eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
             scores: learner.evaluations().iter().map(|e| e.score).collect(),
             episodes: learner.episodes().to_vec(),
@@ -314,17 +332,17 @@ impl Experiment {
     }
 
     fn summary(&self, jobs: &[Job]) -> Summary {
-        let results: Vec<RunResult> = jobs.iter().map(Job::result).collect();
+        let mut results: Vec<RunResult> = jobs.iter().map(Job::result).collect();
         let problem = jobs[0].learner.problem();
-        let mut methods = BTreeMap::new();
-        for (index, selector) in self.methods.iter().enumerate() {
-            let runs = &results[index * self.runs..(index + 1) * self.runs];
-            methods.insert(
-                selector.method.name().to_string(),
-                self.summarise(runs, problem.training_contexts.len()),
-            );
-        }
         let optimal: Vec<f64> = results[..self.runs].iter().filter_map(|r| r.optimal_score).collect();
+        let mut methods = BTreeMap::new();
+        let mut run_results = BTreeMap::new();
+        for selector in &self.methods {
+            let runs: Vec<RunResult> = results.drain(..self.runs).collect();
+            let name = selector.method.name().to_string();
+            methods.insert(name.clone(), self.summarise(&runs, problem.training_contexts.len()));
+            run_results.insert(name, runs);
+        }
         Summary {
             experiment: self.name.clone(),
             metric: problem.metric.clone(),
@@ -337,6 +355,7 @@ impl Experiment {
             j_opt_mean: (!optimal.is_empty()).then(|| mean(&optimal)),
             settings: self.settings.clone(),
             methods,
+            run_results,
         }
     }
 

@@ -3,8 +3,10 @@
 
 pub mod bench;
 pub mod config;
+pub mod evaluate;
 pub mod experiment;
 pub mod paper;
 pub mod plot;
 pub mod progress;
+pub mod records;
 pub mod workers;

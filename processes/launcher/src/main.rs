@@ -70,6 +70,29 @@ enum Command {
     /// trivial environment (the transport's cost) and the analytic and rapier PA-10; print a
     /// table and write DIR/bench.json.
     Bench(BenchArgs),
+    /// Replay a learned policy from a run directory greedily (its mean, exploration off) at
+    /// --target points or at the problem's test contexts, printing the landing point, error and
+    /// reward of every throw (the return of every context for the contextual function).
+    Evaluate(EvaluateArgs),
+}
+
+#[derive(clap::Args)]
+struct EvaluateArgs {
+    /// A run directory written by `acps experiment` or `acps run` (or one of its
+    /// policies/METHOD-runR.json files).
+    dir: PathBuf,
+    /// The method whose policy to replay (default: the first by name).
+    #[arg(long)]
+    method: Option<String>,
+    /// The run whose policy to replay (default 0).
+    #[arg(long)]
+    run: Option<usize>,
+    /// A target X,Y to throw at (repeatable; default: the problem's test contexts).
+    #[arg(long, value_name = "X,Y", allow_hyphen_values = true, value_parser = acps::evaluate::parse_target)]
+    target: Vec<Vec<f64>>,
+    /// Draw the side view of the first throw into FILE (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    render: Option<PathBuf>,
 }
 
 /// `acps run`'s arguments on their own, to parse the command `acps learn` stands for.
@@ -248,6 +271,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Run(args) => fleet(args),
         Command::Worker(args) => worker(args),
         Command::Bench(args) => bench(args),
+        Command::Evaluate(args) => evaluate(args),
     }
 }
 
@@ -427,6 +451,31 @@ fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
+    use acps::evaluate;
+    use acps::records::{SavedPolicy, policy_file};
+    let path = policy_file(&args.dir, args.method.as_deref(), args.run)?;
+    let (saved, policy) = SavedPolicy::load(&path)?;
+    evaluate::check_targets(&saved, &args.target)?;
+    if let Some(file) = &args.render {
+        evaluate::check_render(&saved, file)?;
+    }
+    let test_set = args.target.is_empty();
+    let contexts = if test_set {
+        saved.problem.test_contexts.clone()
+    } else {
+        args.target
+    };
+    let replay = evaluate::replay(&saved, &policy, &contexts)?;
+    print!("{}", evaluate::report(&saved, &replay, test_set));
+    if let Some(file) = args.render {
+        let first = replay.throws.first().context("--render: there is no throw to draw")?;
+        evaluate::render(&saved, first, &file)?;
+        println!("-> {}", file.display());
+    }
+    Ok(())
+}
+
 fn write(
     experiment: &Experiment,
     summary: &Summary,
@@ -438,6 +487,7 @@ fn write(
         .write(dir)
         .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
     config.write_resolved(dir)?;
+    acps::records::write(summary, dir)?;
     acps::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());

@@ -1,17 +1,22 @@
-//! Pictures of a summary, written next to summary.json as SVG:
-//! - `curves.svg`: mean learning curve of every method with a +-1 SEM band (paper Fig. 4, 6);
+//! Pictures of a summary, written next to summary.json, each as SVG and PNG (the same drawing
+//! code on both plotters backends; PNG text uses the embedded DejaVu Sans, so no system fonts
+//! are needed):
+//! - `curves`: mean learning curve of every method with a +-1 SEM band (paper Fig. 4, 6, 8);
 //!   when the problem knows its optimum and round robin ran, curves are drawn relative to round
 //!   robin with the optimum as a dashed line (Fig. 2).
-//! - `selections.svg`: for 1-D contexts, the context chosen in every episode of run 0 (Fig. 3);
+//! - `selections`: for 1-D contexts, the context chosen in every episode of run 0 (Fig. 3);
 //!   for 2-D contexts, the log selection ratio of every training context over the first
 //!   episodes (Fig. 5).
-//! - for the dartboard, `board.svg` (Fig. 10), and for the throwing problems `throw.svg`, a side
-//!   view of the initial throw.
+//! - `selections-time`: per method, the share of selections of every training context in bins
+//!   of episodes, averaged over runs (Fig. 3 and 5 over the whole run).
+//! - for the dartboard, `board` (Fig. 10), and for the throwing problems `throw`, a side view of
+//!   the initial throw.
 
 use crate::experiment::Summary;
 use acps_models::robot::Robot;
 use acps_models::targets::Field;
 use acps_models::trajectory::JointTrajectory;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -30,30 +35,91 @@ const COLORS: [RGBColor; 9] = [
     RGBColor(23, 190, 207),
 ];
 
+/// A picture drawn once, on any plotters backend.
+trait Picture {
+    /// Width and height in pixels.
+    fn size(&self) -> (u32, u32);
+    /// Draw on `root`, which is already white.
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static;
+}
+
+/// Write `picture` to `path`, as SVG or PNG by the file's extension.
+fn save_as(picture: &impl Picture, path: &Path) -> PlotResult {
+    fn draw_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, picture: &impl Picture) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        picture.draw(&root)?;
+        root.present()?;
+        Ok(())
+    }
+    static FONT: std::sync::Once = std::sync::Once::new();
+    FONT.call_once(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+            .unwrap_or_else(|_| unreachable!("the embedded DejaVu Sans parses"));
+    });
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("svg") => draw_on(SVGBackend::new(path, picture.size()).into_drawing_area(), picture),
+        Some("png") => draw_on(BitMapBackend::new(path, picture.size()).into_drawing_area(), picture),
+        _ => Err(format!("{}: a picture's file name must end in .svg or .png", path.display()).into()),
+    }
+}
+
+/// Write `picture` to `dir/stem.svg` and `dir/stem.png`.
+fn save(picture: &impl Picture, dir: &Path, stem: &str) -> PlotResult {
+    for extension in ["svg", "png"] {
+        save_as(picture, &dir.join(format!("{stem}.{extension}")))?;
+    }
+    Ok(())
+}
+
 /// Write every picture that fits the summary into `dir`.
 pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
-    learning_curves(summary, &dir.join("curves.svg"))?;
+    save(&LearningCurves(summary), dir, "curves")?;
+    if let Some(picture) = SelectionsOverTime::new(summary) {
+        save(&picture, dir, "selections-time")?;
+    }
     if matches!(summary.experiment.as_str(), "grid" | "dartboard") {
         let policy = acps_models::throw::ThrowPolicy::new(acps_models::throw::ThrowDesign::pa10(), 0.01)?;
-        throw_side_view(
-            &Robot::pa10(),
-            &policy.trajectory(&[0.0; acps_models::throw::PARAMS])?,
-            &dir.join("throw.svg"),
-        )?;
+        let view = ThrowSideView {
+            robot: &Robot::pa10(),
+            trajectory: &policy.trajectory(&[0.0; acps_models::throw::PARAMS])?,
+            title: "throw of theta_0: arm every 0.1 s, ball after release",
+        };
+        save(&view, dir, "throw")?;
     }
     if summary.experiment == "dartboard" {
-        return dartboard(
-            summary,
-            &acps_models::environment::dartboard_fields(),
-            &dir.join("board.svg"),
+        let fields = acps_models::environment::dartboard_fields();
+        return save(
+            &Dartboard {
+                summary,
+                fields: &fields,
+            },
+            dir,
+            "board",
         );
     }
     match summary.training_contexts.first().map(Vec::len) {
-        Some(1) => selection_traces(summary, &dir.join("selections.svg"))?,
-        Some(2) => selection_maps(summary, &dir.join("selections.svg"))?,
+        Some(1) => save(&SelectionTraces(summary), dir, "selections")?,
+        Some(2) => save(&SelectionMaps(summary), dir, "selections")?,
         _ => {}
     }
     Ok(())
+}
+
+/// Write the side view of one throw to `path` (.svg or .png), titled `title`.
+pub fn save_throw(robot: &Robot, trajectory: &JointTrajectory, title: &str, path: &Path) -> PlotResult {
+    save_as(
+        &ThrowSideView {
+            robot,
+            trajectory,
+            title,
+        },
+        path,
+    )
 }
 
 /// One curve: episodes, mean, SEM.
@@ -84,7 +150,26 @@ fn curves(summary: &Summary) -> (Vec<Curve>, Option<f64>, String) {
     (curves, optimum, label)
 }
 
-fn learning_curves(summary: &Summary, path: &Path) -> PlotResult {
+/// Mean learning curves with SEM bands.
+struct LearningCurves<'a>(&'a Summary);
+
+impl Picture for LearningCurves<'_> {
+    fn size(&self) -> (u32, u32) {
+        (900, 560)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        learning_curves(self.0, root)
+    }
+}
+
+fn learning_curves<DB: DrawingBackend>(summary: &Summary, root: &DrawingArea<DB, Shift>) -> PlotResult
+where
+    DB::ErrorType: 'static,
+{
     let (curves, optimum, y_label) = curves(summary);
     let all = curves.iter().flat_map(|c| c.points.iter());
     // The range fits the curves; the optimum line may leave it early on, as in the paper's Fig. 2.
@@ -96,10 +181,8 @@ fn learning_curves(summary: &Summary, path: &Path) -> PlotResult {
         (y_min, y_max) = (y_min - 1.0, y_max + 1.0);
     }
     let pad = 0.05 * (y_max - y_min);
-    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
     let caption = format!("{}: {} runs per method", summary.experiment, summary.runs);
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(caption, ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(40)
@@ -108,6 +191,7 @@ fn learning_curves(summary: &Summary, path: &Path) -> PlotResult {
     chart
         .configure_mesh()
         .x_desc("training episodes")
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .y_desc(short(&y_label))
         .draw()?;
     for (index, curve) in curves.iter().enumerate() {
@@ -144,7 +228,6 @@ fn learning_curves(summary: &Summary, path: &Path) -> PlotResult {
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .draw()?;
-    root.present()?;
     Ok(())
 }
 
@@ -159,74 +242,230 @@ fn short(metric: &str) -> String {
         .collect()
 }
 
-fn selection_traces(summary: &Summary, path: &Path) -> PlotResult {
-    let methods: Vec<_> = summary.methods.iter().collect();
-    let contexts = summary.training_contexts.len();
-    let root = SVGBackend::new(path, (900, 220 * methods.len() as u32)).into_drawing_area();
-    root.fill(&WHITE)?;
-    for ((name, m), area) in methods.iter().zip(root.split_evenly((methods.len(), 1))) {
-        let episodes = m.selections_run0.len().max(1) as f64;
-        let mut chart = ChartBuilder::on(&area)
-            .caption(format!("{name}: selected context, run 0"), ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(40)
-            .build_cartesian_2d(0.0..episodes, -0.5..(contexts as f64 - 0.5))?;
-        chart.configure_mesh().x_desc("episode").y_desc("context").draw()?;
-        let points = m
-            .selections_run0
-            .iter()
-            .enumerate()
-            .filter_map(|(t, arm)| Some((t as f64, (*arm)? as f64)));
-        chart.draw_series(points.map(|p| Circle::new(p, 1, COLORS[0].filled())))?;
-    }
-    root.present()?;
-    Ok(())
+/// Per method, the share of selections of every training context in bins of episodes,
+/// averaged over runs. A context drawn from the continuous space counts for the nearest
+/// training context, as the learner files it.
+struct SelectionsOverTime {
+    /// Per method: its name and `shares[context][bin]`.
+    methods: Vec<(String, Vec<Vec<f64>>)>,
+    /// Episodes per run.
+    episodes: usize,
+    runs: usize,
 }
 
-fn selection_maps(summary: &Summary, path: &Path) -> PlotResult {
-    let methods: Vec<_> = summary.methods.iter().collect();
-    let columns = methods.len().min(3);
-    let rows = methods.len().div_ceil(columns);
-    let root = SVGBackend::new(path, (320 * columns as u32, 320 * rows as u32)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (lo, hi) = bounds(&summary.training_contexts);
-    // Half the smallest spacing between contexts: each context is drawn as a square of that size.
-    let half = half_spacing(&summary.training_contexts);
-    for ((name, m), area) in methods.iter().zip(root.split_evenly((rows, columns))) {
-        let title = format!(
-            "{name}: ln(selections / most selected), first {}",
-            summary.selection_window
-        );
-        let mut chart = ChartBuilder::on(&area)
-            .caption(title, ("sans-serif", 12))
-            .margin(8)
-            .x_label_area_size(25)
-            .y_label_area_size(35)
-            .build_cartesian_2d((lo[0] - half)..(hi[0] + half), (lo[1] - half)..(hi[1] + half))?;
-        chart.configure_mesh().disable_mesh().draw()?;
-        let most = m.selection_ratio.iter().copied().fold(0.0, f64::max);
-        let squares = summary
-            .training_contexts
+impl SelectionsOverTime {
+    const BINS: usize = 50;
+
+    fn new(summary: &Summary) -> Option<Self> {
+        let contexts = &summary.training_contexts;
+        let episodes = summary
+            .run_results
+            .values()
+            .flatten()
+            .map(|run| run.episodes.len())
+            .min()?;
+        if episodes == 0 || contexts.is_empty() {
+            return None;
+        }
+        let bins = Self::BINS.min(episodes);
+        let methods = summary
+            .run_results
             .iter()
-            .zip(&m.selection_ratio)
-            .map(|(c, &ratio)| {
-                // The paper's Fig. 5 colour scale: -3 (white) to 0 (dark).
-                let shade = if most > 0.0 {
-                    ((ratio / most).max(1e-12).ln() + 3.0) / 3.0
-                } else {
-                    0.0
-                };
-                let level = (255.0 * (1.0 - shade.clamp(0.0, 1.0))) as u8;
-                Rectangle::new(
-                    [(c[0] - half, c[1] - half), (c[0] + half, c[1] + half)],
-                    RGBColor(level, level, 255).filled(),
-                )
-            });
-        chart.draw_series(squares)?;
+            .map(|(name, runs)| {
+                let mut shares = vec![vec![0.0; bins]; contexts.len()];
+                for run in runs {
+                    for (t, episode) in run.episodes[..episodes].iter().enumerate() {
+                        let arm = episode.arm.unwrap_or_else(|| nearest(contexts, &episode.context));
+                        shares[arm][t * bins / episodes] += 1.0;
+                    }
+                }
+                for (bin, width) in (0..bins).map(|b| (b, bin_width(b, bins, episodes))) {
+                    for row in &mut shares {
+                        row[bin] /= (width * runs.len()) as f64;
+                    }
+                }
+                (name.clone(), shares)
+            })
+            .collect();
+        Some(Self {
+            methods,
+            episodes,
+            runs: summary.runs,
+        })
     }
-    root.present()?;
-    Ok(())
+
+    fn panel_height(&self) -> u32 {
+        let contexts = self.methods.first().map_or(0, |(_, shares)| shares.len());
+        (70 + 6 * contexts as u32).max(200)
+    }
+}
+
+/// The number of episodes t in 0..episodes with t * bins / episodes == bin.
+fn bin_width(bin: usize, bins: usize, episodes: usize) -> usize {
+    let first = |b: usize| (b * episodes).div_ceil(bins);
+    first(bin + 1) - first(bin)
+}
+
+/// The index of the context nearest to `s`.
+fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
+    let distance = |c: &Vec<f64>| c.iter().zip(s).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+    (0..contexts.len())
+        .min_by(|&a, &b| distance(&contexts[a]).total_cmp(&distance(&contexts[b])))
+        .unwrap_or(0)
+}
+
+impl Picture for SelectionsOverTime {
+    fn size(&self) -> (u32, u32) {
+        (900, self.panel_height() * self.methods.len() as u32)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let episodes = self.episodes as f64;
+        for ((name, shares), area) in self.methods.iter().zip(root.split_evenly((self.methods.len(), 1))) {
+            let bins = shares[0].len();
+            let most = shares.iter().flatten().copied().fold(0.0, f64::max);
+            let caption = format!(
+                "{name}: share of selections per context, bins of {:.0} episodes, {} runs (darkest {most:.2})",
+                episodes / bins as f64,
+                self.runs
+            );
+            let mut chart = ChartBuilder::on(&area)
+                .caption(caption, ("sans-serif", 15))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(40)
+                .build_cartesian_2d(0.0..episodes, -0.5..(shares.len() as f64 - 0.5))?;
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc("episode")
+                .y_desc("context")
+                .x_label_formatter(&|x| format!("{x:.0}"))
+                .y_label_formatter(&|y| format!("{y:.0}"))
+                .draw()?;
+            let cells = shares.iter().enumerate().flat_map(|(context, row)| {
+                row.iter().enumerate().map(move |(bin, &share)| {
+                    let level = if most > 0.0 { share / most } else { 0.0 };
+                    let fade = |full: u8| (255.0 - level * (255.0 - f64::from(full))) as u8;
+                    let x = |b: usize| (b * self.episodes).div_ceil(bins) as f64;
+                    Rectangle::new(
+                        [(x(bin), context as f64 - 0.5), (x(bin + 1), context as f64 + 0.5)],
+                        RGBColor(fade(8), fade(48), fade(107)).filled(),
+                    )
+                })
+            });
+            chart.draw_series(cells)?;
+        }
+        Ok(())
+    }
+}
+
+/// The context chosen in every episode of run 0, per method (1-D contexts).
+struct SelectionTraces<'a>(&'a Summary);
+
+impl Picture for SelectionTraces<'_> {
+    fn size(&self) -> (u32, u32) {
+        (900, 220 * self.0.methods.len() as u32)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let summary = self.0;
+        let methods: Vec<_> = summary.methods.iter().collect();
+        let contexts = summary.training_contexts.len();
+        for ((name, m), area) in methods.iter().zip(root.split_evenly((methods.len(), 1))) {
+            let episodes = m.selections_run0.len().max(1) as f64;
+            let mut chart = ChartBuilder::on(&area)
+                .caption(format!("{name}: selected context, run 0"), ("sans-serif", 16))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(40)
+                .build_cartesian_2d(0.0..episodes, -0.5..(contexts as f64 - 0.5))?;
+            chart
+                .configure_mesh()
+                .x_desc("episode")
+                .y_desc("context")
+                .x_label_formatter(&|x| format!("{x:.0}"))
+                .y_label_formatter(&|y| format!("{y:.0}"))
+                .draw()?;
+            let points = m
+                .selections_run0
+                .iter()
+                .enumerate()
+                .filter_map(|(t, arm)| Some((t as f64, (*arm)? as f64)));
+            chart.draw_series(points.map(|p| Circle::new(p, 1, COLORS[0].filled())))?;
+        }
+        Ok(())
+    }
+}
+
+/// The log selection ratio of every training context over the first episodes, per method
+/// (2-D contexts).
+struct SelectionMaps<'a>(&'a Summary);
+
+impl SelectionMaps<'_> {
+    /// Panels per row and rows.
+    fn grid(&self) -> (usize, usize) {
+        let columns = self.0.methods.len().clamp(1, 3);
+        (columns, self.0.methods.len().div_ceil(columns))
+    }
+}
+
+impl Picture for SelectionMaps<'_> {
+    fn size(&self) -> (u32, u32) {
+        let (columns, rows) = self.grid();
+        (320 * columns as u32, 320 * rows as u32)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let summary = self.0;
+        let methods: Vec<_> = summary.methods.iter().collect();
+        let (columns, rows) = self.grid();
+        let (lo, hi) = bounds(&summary.training_contexts);
+        // Half the smallest spacing between contexts: each context is drawn as a square of that size.
+        let half = half_spacing(&summary.training_contexts);
+        for ((name, m), area) in methods.iter().zip(root.split_evenly((rows, columns))) {
+            let title = format!(
+                "{name}: ln(selections / most selected), first {}",
+                summary.selection_window
+            );
+            let mut chart = ChartBuilder::on(&area)
+                .caption(title, ("sans-serif", 12))
+                .margin(8)
+                .x_label_area_size(25)
+                .y_label_area_size(35)
+                .build_cartesian_2d((lo[0] - half)..(hi[0] + half), (lo[1] - half)..(hi[1] + half))?;
+            chart.configure_mesh().disable_mesh().draw()?;
+            let most = m.selection_ratio.iter().copied().fold(0.0, f64::max);
+            let squares = summary
+                .training_contexts
+                .iter()
+                .zip(&m.selection_ratio)
+                .map(|(c, &ratio)| {
+                    // The paper's Fig. 5 colour scale: -3 (white) to 0 (dark).
+                    let shade = if most > 0.0 {
+                        ((ratio / most).max(1e-12).ln() + 3.0) / 3.0
+                    } else {
+                        0.0
+                    };
+                    let level = (255.0 * (1.0 - shade.clamp(0.0, 1.0))) as u8;
+                    Rectangle::new(
+                        [(c[0] - half, c[1] - half), (c[0] + half, c[1] + half)],
+                        RGBColor(level, level, 255).filled(),
+                    )
+                });
+            chart.draw_series(squares)?;
+        }
+        Ok(())
+    }
 }
 
 fn bounds(contexts: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
@@ -251,149 +490,190 @@ fn half_spacing(contexts: &[Vec<f64>]) -> f64 {
 /// The dartboard with every field, its target and where run 0's final policy lands (paper
 /// Fig. 10 left), next to the average number of selections per field of every ring over the
 /// first episodes (Fig. 10 right).
-pub fn dartboard(summary: &Summary, fields: &[Field], path: &Path) -> PlotResult {
-    let methods: Vec<_> = summary.methods.iter().collect();
-    let root = SVGBackend::new(path, (1200, 600 * methods.len() as u32)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let bull = fields[0].centre;
-    let reach = 0.75;
-    for ((name, m), row) in methods.iter().zip(root.split_evenly((methods.len(), 1))) {
-        let (left, right) = row.split_horizontally(600);
-        let mut board = ChartBuilder::on(&left)
-            .caption(
-                format!("{name}: targets (blue) and landings of run 0 (red)"),
-                ("sans-serif", 15),
-            )
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(45)
-            .build_cartesian_2d(
-                (bull[0] - reach)..(bull[0] + reach),
-                (bull[1] - reach)..(bull[1] + reach),
-            )?;
-        board
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("x (m)")
-            .y_desc("y (m)")
-            .draw()?;
-        for field in fields {
-            let mut outline: Vec<(f64, f64)> = field.field.iter().map(|p| (p[0], p[1])).collect();
-            outline.push(outline[0]);
-            board.draw_series(std::iter::once(PathElement::new(outline, BLACK.mix(0.4))))?;
-        }
-        let landings: Vec<Option<[f64; 2]>> = m
-            .detail
-            .get("landings_run0")
-            .and_then(|v| serde_json::from_value(v.clone()).ok())
-            .unwrap_or_default();
-        for (field, landing) in fields.iter().zip(&landings) {
-            let centre = (field.centre[0], field.centre[1]);
-            board.draw_series(std::iter::once(Circle::new(centre, 3, COLORS[0].filled())))?;
-            if let Some(l) = landing {
-                board.draw_series(std::iter::once(PathElement::new(vec![centre, (l[0], l[1])], COLORS[3])))?;
-                board.draw_series(std::iter::once(Rectangle::new(
-                    [(l[0] - 0.006, l[1] - 0.006), (l[0] + 0.006, l[1] + 0.006)],
-                    COLORS[3].filled(),
-                )))?;
-            }
-        }
-        let curves: BTreeMap<String, Vec<f64>> = m
-            .detail
-            .get("selections_per_field")
-            .and_then(|s| serde_json::from_value(s["cumulative"].clone()).ok())
-            .unwrap_or_default();
-        let longest = curves.values().map(Vec::len).max().unwrap_or(0);
-        let top = curves.values().flatten().copied().fold(1.0, f64::max);
-        let mut chart = ChartBuilder::on(&right)
-            .caption("average selections per field of each ring", ("sans-serif", 15))
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(45)
-            .build_cartesian_2d(0.0..(100.0 * longest.max(1) as f64), 0.0..top * 1.05)?;
-        chart
-            .configure_mesh()
-            .x_desc("episode")
-            .y_desc("selections per field")
-            .draw()?;
-        for (index, (category, values)) in curves.iter().enumerate() {
-            let color = COLORS[index % COLORS.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    values.iter().enumerate().map(|(i, &v)| (100.0 * (i + 1) as f64, v)),
-                    color.stroke_width(2),
-                ))?
-                .label(category.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
+struct Dartboard<'a> {
+    summary: &'a Summary,
+    fields: &'a [Field],
+}
+
+impl Picture for Dartboard<'_> {
+    fn size(&self) -> (u32, u32) {
+        (1200, 600 * self.summary.methods.len() as u32)
     }
-    root.present()?;
-    Ok(())
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let (summary, fields) = (self.summary, self.fields);
+        let methods: Vec<_> = summary.methods.iter().collect();
+        let bull = fields[0].centre;
+        let reach = 0.75;
+        for ((name, m), row) in methods.iter().zip(root.split_evenly((methods.len(), 1))) {
+            let (left, right) = row.split_horizontally(600);
+            let mut board = ChartBuilder::on(&left)
+                .caption(
+                    format!("{name}: targets (blue) and landings of run 0 (red)"),
+                    ("sans-serif", 15),
+                )
+                .margin(10)
+                .x_label_area_size(30)
+                .y_label_area_size(45)
+                .build_cartesian_2d(
+                    (bull[0] - reach)..(bull[0] + reach),
+                    (bull[1] - reach)..(bull[1] + reach),
+                )?;
+            board
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc("x (m)")
+                .y_desc("y (m)")
+                .draw()?;
+            for field in fields {
+                let mut outline: Vec<(f64, f64)> = field.field.iter().map(|p| (p[0], p[1])).collect();
+                outline.push(outline[0]);
+                board.draw_series(std::iter::once(PathElement::new(outline, BLACK.mix(0.4))))?;
+            }
+            let landings: Vec<Option<[f64; 2]>> = m
+                .detail
+                .get("landings_run0")
+                .and_then(|v| serde_json::from_value(v.clone()).ok())
+                .unwrap_or_default();
+            for (field, landing) in fields.iter().zip(&landings) {
+                let centre = (field.centre[0], field.centre[1]);
+                board.draw_series(std::iter::once(Circle::new(centre, 3, COLORS[0].filled())))?;
+                if let Some(l) = landing {
+                    board.draw_series(std::iter::once(PathElement::new(vec![centre, (l[0], l[1])], COLORS[3])))?;
+                    board.draw_series(std::iter::once(Rectangle::new(
+                        [(l[0] - 0.006, l[1] - 0.006), (l[0] + 0.006, l[1] + 0.006)],
+                        COLORS[3].filled(),
+                    )))?;
+                }
+            }
+            let curves: BTreeMap<String, Vec<f64>> = m
+                .detail
+                .get("selections_per_field")
+                .and_then(|s| serde_json::from_value(s["cumulative"].clone()).ok())
+                .unwrap_or_default();
+            let longest = curves.values().map(Vec::len).max().unwrap_or(0);
+            let top = curves.values().flatten().copied().fold(1.0, f64::max);
+            let mut chart = ChartBuilder::on(&right)
+                .caption("average selections per field of each ring", ("sans-serif", 15))
+                .margin(10)
+                .x_label_area_size(30)
+                .y_label_area_size(45)
+                .build_cartesian_2d(0.0..(100.0 * longest.max(1) as f64), 0.0..top * 1.05)?;
+            chart
+                .configure_mesh()
+                .x_desc("episode")
+                .y_desc("selections per field")
+                .draw()?;
+            for (index, (category, values)) in curves.iter().enumerate() {
+                let color = COLORS[index % COLORS.len()];
+                chart
+                    .draw_series(LineSeries::new(
+                        values.iter().enumerate().map(|(i, &v)| (100.0 * (i + 1) as f64, v)),
+                        color.stroke_width(2),
+                    ))?
+                    .label(category.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()?;
+        }
+        Ok(())
+    }
 }
 
 /// A side view of one throw: the arm every 0.1 s until the release, then the ball's flight,
 /// projected on the vertical plane through the base and the landing point.
-pub fn throw_side_view(robot: &Robot, trajectory: &JointTrajectory, path: &Path) -> PlotResult {
-    let (q, qd) = trajectory.last().ok_or("empty trajectory")?;
-    let (release, velocity) = robot.ball_state(q, qd);
-    let landing = robot.landing(&release, &velocity).ok_or("the ball does not land")?;
-    let norm = (landing[0].powi(2) + landing[1].powi(2)).sqrt().max(1e-9);
-    let along = |x: f64, y: f64| (x * landing[0] + y * landing[1]) / norm;
-    let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "throw of theta_0: arm every 0.1 s, ball after release",
-            ("sans-serif", 16),
-        )
-        .margin(12)
-        .x_label_area_size(35)
-        .y_label_area_size(45)
-        .build_cartesian_2d(-1.0..(norm + 0.3), 0.0..2.2)?;
-    chart
-        .configure_mesh()
-        .x_desc("distance towards the landing point (m)")
-        .y_desc("height (m)")
-        .draw()?;
-    let every = ((0.1 / trajectory.dt).round() as usize).max(1);
-    let samples: Vec<usize> = (0..trajectory.len())
-        .step_by(every)
-        .chain(std::iter::once(trajectory.len() - 1))
-        .collect();
-    for (k, &i) in samples.iter().enumerate() {
-        let frames = robot.frames(&trajectory.positions[i]);
-        let points: Vec<(f64, f64)> = std::iter::once((0.0, 0.0))
-            .chain(
-                frames
-                    .iter()
-                    .map(|f| (along(f.translation.x, f.translation.y), f.translation.z)),
-            )
-            .collect();
-        let shade = COLORS[0].mix(0.25 + 0.75 * k as f64 / samples.len() as f64);
-        chart.draw_series(std::iter::once(PathElement::new(points, shade.stroke_width(2))))?;
+struct ThrowSideView<'a> {
+    robot: &'a Robot,
+    trajectory: &'a JointTrajectory,
+    title: &'a str,
+}
+
+impl Picture for ThrowSideView<'_> {
+    fn size(&self) -> (u32, u32) {
+        (1000, 420)
     }
-    let flight_time = ((velocity.z
-        + (velocity.z.powi(2) + 2.0 * robot.gravity * (release.z - robot.ball.radius)).sqrt())
-        / robot.gravity)
-        .max(0.0);
-    let ball: Vec<(f64, f64)> = (0..=100)
-        .map(|i| {
-            let t = flight_time * i as f64 / 100.0;
-            let p = release + velocity * t;
-            (along(p.x, p.y), p.z - 0.5 * robot.gravity * t * t)
-        })
-        .collect();
-    chart.draw_series(LineSeries::new(ball, COLORS[3].stroke_width(2)))?;
-    chart.draw_series(std::iter::once(Circle::new(
-        (norm, robot.ball.radius),
-        5,
-        COLORS[3].filled(),
-    )))?;
-    root.present()?;
-    Ok(())
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let (robot, trajectory) = (self.robot, self.trajectory);
+        let (q, qd) = trajectory.last().ok_or("empty trajectory")?;
+        let (release, velocity) = robot.ball_state(q, qd);
+        let landing = robot.landing(&release, &velocity).ok_or("the ball does not land")?;
+        let norm = (landing[0].powi(2) + landing[1].powi(2)).sqrt().max(1e-9);
+        let along = |x: f64, y: f64| (x * landing[0] + y * landing[1]) / norm;
+        let mut chart = ChartBuilder::on(root)
+            .caption(self.title, ("sans-serif", 16))
+            .margin(12)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(-1.0..(norm + 0.3), 0.0..2.2)?;
+        chart
+            .configure_mesh()
+            .x_desc("distance towards the landing point (m)")
+            .y_desc("height (m)")
+            .draw()?;
+        let every = ((0.1 / trajectory.dt).round() as usize).max(1);
+        let samples: Vec<usize> = (0..trajectory.len())
+            .step_by(every)
+            .chain(std::iter::once(trajectory.len() - 1))
+            .collect();
+        for (k, &i) in samples.iter().enumerate() {
+            let frames = robot.frames(&trajectory.positions[i]);
+            let points: Vec<(f64, f64)> = std::iter::once((0.0, 0.0))
+                .chain(
+                    frames
+                        .iter()
+                        .map(|f| (along(f.translation.x, f.translation.y), f.translation.z)),
+                )
+                .collect();
+            let shade = COLORS[0].mix(0.25 + 0.75 * k as f64 / samples.len() as f64);
+            chart.draw_series(std::iter::once(PathElement::new(points, shade.stroke_width(2))))?;
+        }
+        let flight_time = ((velocity.z
+            + (velocity.z.powi(2) + 2.0 * robot.gravity * (release.z - robot.ball.radius)).sqrt())
+            / robot.gravity)
+            .max(0.0);
+        let ball: Vec<(f64, f64)> = (0..=100)
+            .map(|i| {
+                let t = flight_time * i as f64 / 100.0;
+                let p = release + velocity * t;
+                (along(p.x, p.y), p.z - 0.5 * robot.gravity * t * t)
+            })
+            .collect();
+        chart.draw_series(LineSeries::new(ball, COLORS[3].stroke_width(2)))?;
+        chart.draw_series(std::iter::once(Circle::new(
+            (norm, robot.ball.radius),
+            5,
+            COLORS[3].filled(),
+        )))?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bins cover every episode exactly once, as the heat map's cells are drawn.
+    #[test]
+    fn bins_partition_the_episodes() {
+        for (bins, episodes) in [(50, 50), (50, 200), (50, 1001), (7, 9), (1, 5)] {
+            let widths: Vec<usize> = (0..bins).map(|b| bin_width(b, bins, episodes)).collect();
+            assert_eq!(widths.iter().sum::<usize>(), episodes);
+            for t in 0..episodes {
+                let bin = t * bins / episodes;
+                let first: usize = widths[..bin].iter().sum();
+                assert!(first <= t && t < first + widths[bin], "{t} in bin {bin} of {widths:?}");
+            }
+        }
+    }
 }

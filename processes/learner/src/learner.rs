@@ -373,6 +373,11 @@ impl Learner {
         &self.stats
     }
 
+    /// The seed of every random stream of the run.
+    pub fn seed(&self) -> u64 {
+        self.config.seed
+    }
+
     /// The problem being learned.
     pub fn problem(&self) -> &Problem {
         &self.problem

@@ -19,6 +19,7 @@ mod error;
 mod features;
 mod memory;
 mod policy;
+mod snapshot;
 mod solver;
 
 pub use dual::{DualOptions, DualSolution, feature_matching_residual, kl_to_uniform, solve_dual};
@@ -26,6 +27,7 @@ pub use error::CRepsError;
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
+pub use snapshot::{PolicySnapshot, RestoredPolicy, SnapshotError};
 
 use nalgebra::{DMatrix, DVector};
 use rand::RngCore;

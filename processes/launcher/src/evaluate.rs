@@ -1,0 +1,249 @@
+//! `acps evaluate`: replay a learned policy greedily (its mean, exploration off) at chosen
+//! targets or at the problem's test contexts, in the environment the run learned in.
+
+use crate::records::SavedPolicy;
+use acps_learner::creps::RestoredPolicy;
+use acps_models::environment;
+use acps_models::robot::Robot;
+use acps_models::throw::{ThrowDesign, ThrowPolicy};
+use acps_shared::{ContextSpace, Outcome, Stream, Task, TaskKind, derive_seed};
+use anyhow::{Context, bail};
+use std::path::Path;
+
+/// One greedy rollout.
+#[derive(Debug, Clone)]
+pub struct Throw {
+    /// The context (target).
+    pub context: Vec<f64>,
+    /// The parameters the policy chose.
+    pub theta: Vec<f64>,
+    /// What the environment returned.
+    pub outcome: Outcome,
+    /// A dartboard target off the field centres, scored as on the grid (reward -||s - b||^2).
+    pub free_target: bool,
+}
+
+/// The greedy rollouts of a replay and their aggregate.
+#[derive(Debug, Clone)]
+pub struct Replay {
+    /// One per context, in order.
+    pub throws: Vec<Throw>,
+    /// The problem's aggregate of the successful rollouts' scores (as the learner's evaluation
+    /// computes it); `None` when every rollout failed.
+    pub score: Option<f64>,
+}
+
+/// Parse `X,Y,...` into a context.
+pub fn parse_target(text: &str) -> Result<Vec<f64>, String> {
+    text.split(',')
+        .map(|x| {
+            let value: f64 = x
+                .trim()
+                .parse()
+                .map_err(|_| format!("'{x}' in '{text}' is not a number; write the target as X,Y"))?;
+            if value.is_finite() {
+                Ok(value)
+            } else {
+                Err(format!("target coordinates must be finite, got '{x}' in '{text}'"))
+            }
+        })
+        .collect()
+}
+
+/// `x,y,...` as typed on the command line.
+fn coordinates(s: &[f64]) -> String {
+    s.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",")
+}
+
+/// Refuse targets the saved problem cannot take: a wrong dimension or a point outside the
+/// context space.
+pub fn check_targets(saved: &SavedPolicy, targets: &[Vec<f64>]) -> anyhow::Result<()> {
+    let problem = &saved.problem;
+    for target in targets {
+        if target.len() != problem.context_dim() {
+            bail!(
+                "--target {}: the {} problem's targets have {} coordinates",
+                coordinates(target),
+                problem.name,
+                problem.context_dim()
+            );
+        }
+        if !problem.space.contains(target) {
+            bail!(
+                "--target {}: outside the {} problem's context space, which takes {}",
+                coordinates(target),
+                problem.name,
+                describe(&problem.space)
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The space in words: the accepted range of a target.
+fn describe(space: &ContextSpace) -> String {
+    match space {
+        ContextSpace::Box { low, high } => low
+            .iter()
+            .zip(high)
+            .enumerate()
+            .map(|(d, (l, h))| format!("coordinate {d} in [{l}, {h}]"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        ContextSpace::Ball { radius, .. } => format!("distance from the origin <= {radius}"),
+    }
+}
+
+/// Throw `policy` greedily at `contexts` in the environment `saved` names. Task ids and seeds
+/// are the context's index and its derived seed; the built-in environments of saved policies do
+/// not draw random numbers, so the outcome depends on the context and the policy only. On the
+/// dartboard, whose reward exists at field centres only, other targets get the grid's reward.
+pub fn replay(saved: &SavedPolicy, policy: &RestoredPolicy, contexts: &[Vec<f64>]) -> anyhow::Result<Replay> {
+    let spec = saved.environment.with_context(|| {
+        format!(
+            "the {} experiment's environment keeps state between rollouts and cannot be rebuilt for a replay",
+            saved.experiment
+        )
+    })?;
+    let mut environment = environment::build(&spec).context("rebuilding the run's environment")?;
+    let mut free = environment::free_targets(&spec)
+        .map(|spec| environment::build(&spec))
+        .transpose()
+        .context("rebuilding the run's environment")?;
+    let throws: Vec<Throw> = contexts
+        .iter()
+        .enumerate()
+        .map(|(index, context)| {
+            let task = Task {
+                id: index as u64,
+                kind: TaskKind::Evaluate,
+                seed: derive_seed(saved.seed, Stream::Environment, index as u64),
+                context: context.clone(),
+                theta: policy.greedy(context),
+            };
+            let field_centre = saved.problem.training_contexts.contains(context);
+            let (outcome, free_target) = match free.as_mut() {
+                Some(free) if !field_centre => (free.rollout(&task), true),
+                _ => (environment.rollout(&task), false),
+            };
+            Throw {
+                context: task.context,
+                theta: task.theta,
+                outcome,
+                free_target,
+            }
+        })
+        .collect();
+    let scores: Vec<f64> = throws
+        .iter()
+        .filter(|t| t.outcome.is_ok())
+        .map(|t| t.outcome.score)
+        .collect();
+    Ok(Replay {
+        score: saved.problem.score.apply(&scores),
+        throws,
+    })
+}
+
+/// True for the PA-10 problems, whose outcomes carry the landing point and score the distance in cm.
+pub fn is_throwing(saved: &SavedPolicy) -> bool {
+    matches!(saved.problem.name.as_str(), "grid" | "dartboard")
+}
+
+/// The replay as a table, one line per context, then the statistics of the per-context scores.
+pub fn report(saved: &SavedPolicy, replay: &Replay, test_set: bool) -> String {
+    let throwing = is_throwing(saved);
+    let score_name = if throwing { "error (cm)" } else { "score" };
+    let format = |v: &[f64]| v.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");
+    let mut lines = vec![format!(
+        "{} {} run {} (seed {}, {} training episodes), greedy policy:",
+        saved.experiment, saved.method, saved.run, saved.seed, saved.training_episodes
+    )];
+    for throw in &replay.throws {
+        let o = &throw.outcome;
+        let line = match (o.is_ok(), throwing) {
+            (false, _) => format!("  target ({}): the rollout failed", format(&throw.context)),
+            (true, true) => format!(
+                "  target ({}): landed ({}), error {:.3} cm, reward {:.6}{}",
+                format(&throw.context),
+                format(&o.diagnostics),
+                o.score,
+                o.reward,
+                if throw.free_target {
+                    " (not a field centre: -||target - landing||^2)"
+                } else {
+                    ""
+                }
+            ),
+            (true, false) => format!(
+                "  context ({}): return {:.6}, score {:.6}",
+                format(&throw.context),
+                o.reward,
+                o.score
+            ),
+        };
+        lines.push(line);
+    }
+    let mut scores: Vec<f64> = replay
+        .throws
+        .iter()
+        .filter(|t| t.outcome.is_ok())
+        .map(|t| t.outcome.score)
+        .collect();
+    scores.sort_by(f64::total_cmp);
+    let failed = replay.throws.len() - scores.len();
+    if let (Some(first), Some(last)) = (scores.first(), scores.last()) {
+        let mean = scores.iter().sum::<f64>() / scores.len() as f64;
+        let middle = scores.len() / 2;
+        let median = if scores.len() % 2 == 1 {
+            scores[middle]
+        } else {
+            (scores[middle - 1] + scores[middle]) / 2.0
+        };
+        lines.push(format!(
+            "{score_name}: mean {mean:.4}, median {median:.4}, min {first:.4}, max {last:.4} over {} contexts, {failed} failed",
+            scores.len()
+        ));
+    } else {
+        lines.push(format!("every one of the {failed} rollouts failed"));
+    }
+    if test_set {
+        let show = |s: Option<f64>| s.map_or("n/a".to_string(), |s| s.to_string());
+        lines.push(format!(
+            "test-set score ({}): {} (the learner's last evaluation: {})",
+            saved.problem.metric,
+            show(replay.score),
+            show(saved.final_score)
+        ));
+    }
+    lines.join("\n") + "\n"
+}
+
+/// Refuse a `--render` file before anything is thrown: the problem must have throws and the
+/// file must be .svg or .png.
+pub fn check_render(saved: &SavedPolicy, path: &Path) -> anyhow::Result<()> {
+    if !is_throwing(saved) {
+        bail!(
+            "--render draws a throw; the {} experiment has no throws",
+            saved.experiment
+        );
+    }
+    if !matches!(path.extension().and_then(|e| e.to_str()), Some("svg" | "png")) {
+        bail!("--render {}: the file name must end in .svg or .png", path.display());
+    }
+    Ok(())
+}
+
+/// Draw the side view of the throw at `throw`'s target into `path` (.svg or .png).
+pub fn render(saved: &SavedPolicy, throw: &Throw, path: &Path) -> anyhow::Result<()> {
+    check_render(saved, path)?;
+    let trajectory = ThrowPolicy::new(ThrowDesign::pa10(), 0.01)
+        .and_then(|policy| policy.trajectory(&throw.theta))
+        .map_err(|e| anyhow::anyhow!("rolling out the throw: {e}"))?;
+    let title = format!(
+        "{} run {}: throw at ({:.3}, {:.3}), arm every 0.1 s, ball after release",
+        saved.method, saved.run, throw.context[0], throw.context[1]
+    );
+    crate::plot::save_throw(&Robot::pa10(), &trajectory, &title, path)
+        .map_err(|e| anyhow::anyhow!("rendering {}: {e}", path.display()))
+}

@@ -1,0 +1,308 @@
+//! The run directory's tables, policies and pictures, and `acps evaluate` replaying a saved
+//! policy.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+fn acps(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_acps"))
+        .args(args)
+        .output()
+        .expect("acps runs")
+}
+
+fn stdout(out: &Output) -> String {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout.clone()).unwrap()
+}
+
+/// The error message of a command that must fail.
+fn refusal(args: &[&str]) -> String {
+    let out = acps(args);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    String::from_utf8(out.stderr).unwrap()
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("acps-rundir-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn experiment(name: &str, method: &str, episodes: &str) -> PathBuf {
+    let dir = temp_dir(name);
+    let out = acps(&[
+        "experiment",
+        name,
+        "--runs",
+        "1",
+        "--episodes",
+        episodes,
+        "--seed",
+        "3",
+        "--method",
+        method,
+        "-q",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    stdout(&out);
+    dir
+}
+
+/// One short grid run shared by the tests of this file.
+fn grid() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| experiment("grid", "monotonic-progress", "200"))
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// The rows of a CSV file after checking its header.
+fn csv(path: &Path, header: &str) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(header), "{}", path.display());
+    lines
+        .map(|l| l.split(',').map(str::to_string).collect::<Vec<_>>())
+        .collect()
+}
+
+fn number(field: &str) -> f64 {
+    field.parse().unwrap_or_else(|_| panic!("'{field}' is not a number"))
+}
+
+#[test]
+fn the_csv_tables_repeat_summary_json() {
+    let dir = grid();
+    let s = summary(dir);
+    let m = &s["methods"]["monotonic-progress"];
+    let episodes = m["episodes"].as_array().unwrap();
+    assert_eq!(episodes.len(), 3, "evaluations at 0, 100 and 200");
+
+    let curves = csv(&dir.join("curves.csv"), "method,episode,mean,sem");
+    assert_eq!(curves.len(), episodes.len());
+    for (i, row) in curves.iter().enumerate() {
+        assert_eq!(row[0], "monotonic-progress");
+        assert_eq!(number(&row[1]), episodes[i].as_f64().unwrap());
+        assert_eq!(number(&row[2]), m["mean"][i].as_f64().unwrap());
+        assert_eq!(number(&row[3]), m["sem"][i].as_f64().unwrap());
+    }
+
+    // One run: its scores are the mean curve.
+    let runs = csv(&dir.join("runs.csv"), "method,run,seed,episode,score");
+    assert_eq!(runs.len(), episodes.len());
+    for (i, row) in runs.iter().enumerate() {
+        assert_eq!((row[1].as_str(), row[2].as_str()), ("0", "3"));
+        assert_eq!(number(&row[4]), m["mean"][i].as_f64().unwrap());
+    }
+
+    let selections = csv(&dir.join("selections.csv"), "method,episode,arm,s0,s1,reward");
+    let chosen = m["selections_run0"].as_array().unwrap();
+    assert_eq!(selections.len(), 200);
+    let contexts = s["training_contexts"].as_array().unwrap();
+    for (t, row) in selections.iter().enumerate() {
+        assert_eq!(number(&row[1]), t as f64);
+        let arm = chosen[t].as_u64().unwrap() as usize;
+        assert_eq!(row[2], arm.to_string());
+        assert_eq!(number(&row[3]), contexts[arm][0].as_f64().unwrap());
+        assert_eq!(number(&row[4]), contexts[arm][1].as_f64().unwrap());
+        assert!(number(&row[5]) < 0.0, "grid rewards are -||s - b||^2");
+    }
+}
+
+#[test]
+fn every_picture_is_written_as_svg_and_png() {
+    let dir = grid();
+    for stem in ["curves", "selections", "selections-time", "throw"] {
+        let png = std::fs::read(dir.join(format!("{stem}.png"))).unwrap();
+        assert!(png.starts_with(b"\x89PNG\r\n\x1a\n"), "{stem}.png");
+        assert!(png.len() > 5_000, "{stem}.png has only {} bytes", png.len());
+        let svg = std::fs::read_to_string(dir.join(format!("{stem}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg"), "{stem}.svg");
+    }
+    let heatmap = std::fs::read_to_string(dir.join("selections-time.svg")).unwrap();
+    assert!(heatmap.contains("monotonic-progress: share of selections"));
+}
+
+#[test]
+fn the_policy_file_describes_the_final_policy() {
+    let dir = grid();
+    let s = summary(dir);
+    let path = dir.join("policies/monotonic-progress-run0.json");
+    let policy: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    assert_eq!(policy["format"], "acps-policy-1");
+    assert_eq!(
+        (policy["experiment"].as_str(), policy["run"].as_u64()),
+        (Some("grid"), Some(0))
+    );
+    assert_eq!(policy["seed"], 3);
+    assert_eq!(policy["final_score"], s["methods"]["monotonic-progress"]["final_mean"]);
+    assert_eq!(policy["problem"]["test_contexts"].as_array().unwrap().len(), 16);
+    assert_eq!(policy["policy"]["features"], "polar-quadratic");
+    let weights = policy["policy"]["weights"].as_array().unwrap();
+    assert_eq!(weights.len(), 6);
+    assert!(weights.iter().all(|row| row.as_array().unwrap().len() == 21));
+    // The C-REPS updates (one per 50 rollouts) moved the mean away from theta_0.
+    assert!(
+        weights
+            .iter()
+            .flat_map(|r| r.as_array().unwrap())
+            .any(|w| w.as_f64().unwrap() != 0.0)
+    );
+    assert_eq!(policy["policy"]["covariance"].as_array().unwrap().len(), 21);
+}
+
+/// The value after `label` on the line that starts with it.
+fn value_after<'a>(text: &'a str, label: &str) -> &'a str {
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(label))
+        .unwrap_or_else(|| panic!("no '{label}' in\n{text}"));
+    line[label.len()..].split_whitespace().next().unwrap()
+}
+
+#[test]
+fn evaluate_reproduces_the_learners_final_test_score() {
+    let dir = grid();
+    let s = summary(dir);
+    let text = stdout(&acps(&["evaluate", dir.to_str().unwrap()]));
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("  target (")).count(),
+        16,
+        "{text}"
+    );
+    let score = value_after(
+        &text,
+        "test-set score (mean distance to the test targets in cm, exploration off):",
+    );
+    assert_eq!(
+        number(score),
+        s["methods"]["monotonic-progress"]["final_mean"].as_f64().unwrap(),
+        "{text}"
+    );
+    assert!(text.contains("error (cm): mean "), "{text}");
+}
+
+#[test]
+fn evaluate_reproduces_a_function_run() {
+    let dir = experiment("function", "random", "100");
+    let s = summary(&dir);
+    let text = stdout(&acps(&[
+        "evaluate",
+        dir.to_str().unwrap(),
+        "--method",
+        "random",
+        "--run",
+        "0",
+    ]));
+    assert_eq!(text.lines().filter(|l| l.starts_with("  context (")).count(), 100);
+    let score = value_after(
+        &text,
+        "test-set score (natural log of the mean cost |f - f*| over the test contexts, exploration off):",
+    );
+    assert_eq!(number(score), s["methods"]["random"]["final_mean"].as_f64().unwrap());
+}
+
+#[test]
+fn evaluate_throws_at_chosen_targets_and_renders() {
+    let dir = grid();
+    let picture = dir.join("chosen.png");
+    let text = stdout(&acps(&[
+        "evaluate",
+        dir.to_str().unwrap(),
+        "--target",
+        "-3.25,-3.25",
+        "--target",
+        "-4.6,-3.1",
+        "--render",
+        picture.to_str().unwrap(),
+    ]));
+    let throws: Vec<&str> = text.lines().filter(|l| l.starts_with("  target (")).collect();
+    assert_eq!(throws.len(), 2, "{text}");
+    assert!(throws[1].starts_with("  target (-4.6000, -3.1000): landed ("), "{text}");
+    assert!(!text.contains("test-set score"), "targets were given: {text}");
+    // The first target is also the first test target: the same throw as in the test-set replay.
+    let test_set = stdout(&acps(&["evaluate", dir.to_str().unwrap()]));
+    assert_eq!(
+        test_set.lines().find(|l| l.starts_with("  target (")),
+        Some(throws[0]),
+        "{text}\n{test_set}"
+    );
+    let png = std::fs::read(picture).unwrap();
+    assert!(png.starts_with(b"\x89PNG") && png.len() > 5_000);
+}
+
+#[test]
+fn evaluate_refuses_bad_targets_with_the_accepted_range() {
+    let dir = grid().to_str().unwrap();
+    let error = refusal(&["evaluate", dir, "--target", "-9,-4"]);
+    assert!(
+        error.contains("--target -9,-4: outside the grid problem's context space, which takes coordinate 0 in [-5, -3], coordinate 1 in [-5, -3]"),
+        "{error}"
+    );
+    let error = refusal(&["evaluate", dir, "--target", "NaN,-4"]);
+    assert!(
+        error.contains("target coordinates must be finite, got 'NaN'"),
+        "{error}"
+    );
+    let error = refusal(&["evaluate", dir, "--target", "-4,-4,1"]);
+    assert!(
+        error.contains("the grid problem's targets have 2 coordinates"),
+        "{error}"
+    );
+    let error = refusal(&["evaluate", dir, "--target", "-4;-4"]);
+    assert!(error.contains("is not a number; write the target as X,Y"), "{error}");
+    let error = refusal(&["evaluate", dir, "--render", "throw.jpg"]);
+    assert!(
+        error.contains("--render throw.jpg: the file name must end in .svg or .png"),
+        "{error}"
+    );
+}
+
+#[test]
+fn evaluate_refuses_missing_and_corrupted_policies() {
+    let grid = grid();
+    let dir = grid.to_str().unwrap();
+    let error = refusal(&["evaluate", dir, "--method", "diversity"]);
+    assert!(
+        error.contains("diversity-run0.json does not exist; --method must be one of [monotonic-progress]"),
+        "{error}"
+    );
+    let error = refusal(&["evaluate", dir, "--run", "4"]);
+    assert!(error.contains("holds no policy file of run 4 (--run)"), "{error}");
+    let empty = temp_dir("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let error = refusal(&["evaluate", empty.to_str().unwrap()]);
+    assert!(error.contains("has no policies/ directory"), "{error}");
+
+    let original = std::fs::read_to_string(grid.join("policies/monotonic-progress-run0.json")).unwrap();
+    let broken = temp_dir("broken");
+    std::fs::create_dir_all(&broken).unwrap();
+    let file = broken.join("policy.json");
+    let check = |text: &str, expected: &str| {
+        std::fs::write(&file, text).unwrap();
+        let error = refusal(&["evaluate", file.to_str().unwrap()]);
+        assert!(error.contains(&file.display().to_string()), "{error}");
+        assert!(error.contains(expected), "{error}");
+    };
+    check(&original[..original.len() / 2], "not an acps policy file");
+    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
+    policy["policy"]["weights"].as_array_mut().unwrap().pop();
+    check(&policy.to_string(), "policy weights: must have 6 rows, got 5");
+    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
+    policy["policy"]["covariance"][3][4] = serde_json::json!(1e3);
+    check(&policy.to_string(), "policy covariance: covariance must be");
+    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
+    policy["format"] = serde_json::json!("acps-policy-0");
+    check(&policy.to_string(), "format must be \"acps-policy-1\"");
+    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
+    policy["problem"]["theta0"].as_array_mut().unwrap().pop();
+    check(
+        &policy.to_string(),
+        "policy.weights must have 20 columns (the problem's n_theta), got 21",
+    );
+}
