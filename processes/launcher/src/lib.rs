@@ -2,6 +2,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod checkpoints;
 pub mod experiment;
 pub mod paper;
 pub mod plot;

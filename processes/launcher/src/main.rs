@@ -1,5 +1,6 @@
 //! `acps`: the command line of Active Contextual Policy Search.
 
+use acps::checkpoints::Checkpoints;
 use acps::experiment::{Experiment, Summary, progress_bar};
 use acps::paper::{self, Options, Overrides};
 use acps_learner::Method;
@@ -177,6 +178,16 @@ struct ExperimentArgs {
     /// Output directory (default: runs/NAME).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Write each (method, run) job's checkpoint to DIR/checkpoints after every N learning
+    /// rounds (C-REPS updates; evaluations for the toy model, which has no policy) and when the
+    /// job ends; 0: no checkpoints. A run started without --resume removes old checkpoints there.
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    checkpoint_every: u64,
+    /// Continue the run whose output directory is DIR from its checkpoints, after a crash, a
+    /// kill or Ctrl-C; give the arguments the run was started with. The result is bit for bit
+    /// that of an uninterrupted run.
+    #[arg(long, value_name = "DIR")]
+    resume: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
@@ -277,7 +288,17 @@ fn experiments(args: &ExperimentArgs) -> anyhow::Result<Vec<(Experiment, PathBuf
         SimArg::Analytic => paper::Sim::Analytic,
         SimArg::Rapier => paper::Sim::Rapier,
     };
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(default_dir));
+    let out = match (&args.resume, &args.out) {
+        (Some(resume), Some(out)) if resume != out => {
+            bail!(
+                "--resume {} and --out {} name different directories; --resume DIR continues the run whose output directory is DIR",
+                resume.display(),
+                out.display()
+            )
+        }
+        (Some(dir), _) | (None, Some(dir)) => dir.clone(),
+        (None, None) => PathBuf::from(default_dir),
+    };
     let jobs: Vec<(Experiment, PathBuf)> = match args.name {
         ExperimentName::Toy => {
             if args.n_s.is_some() {
@@ -327,12 +348,43 @@ fn experiments(args: &ExperimentArgs) -> anyhow::Result<Vec<(Experiment, PathBuf
     Ok(jobs)
 }
 
+/// The checkpoints of the experiment that writes into `dir`, if it keeps or resumes any.
+fn checkpoints(args: &ExperimentArgs, dir: &Path) -> Option<Checkpoints> {
+    (args.checkpoint_every > 0 || args.resume.is_some()).then(|| Checkpoints {
+        dir: dir.join("checkpoints"),
+        every: args.checkpoint_every,
+        resume: args.resume.is_some(),
+    })
+}
+
+/// Refuse to resume where no run ever wrote checkpoints (a mistyped directory, or a run started
+/// with --checkpoint-every 0).
+fn check_resumable(args: &ExperimentArgs, experiments: &[(Experiment, PathBuf)]) -> anyhow::Result<()> {
+    let Some(resume) = &args.resume else {
+        return Ok(());
+    };
+    if !experiments.iter().any(|(_, dir)| dir.join("checkpoints").is_dir()) {
+        bail!(
+            "nothing to resume in {}: it has no checkpoints directory (was the run started with this --out and --checkpoint-every > 0?)",
+            resume.display()
+        );
+    }
+    Ok(())
+}
+
 fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
-    for (experiment, dir) in experiments(&args)? {
+    let experiments = experiments(&args)?;
+    check_resumable(&args, &experiments)?;
+    for (experiment, dir) in experiments {
         let progress = progress_bar(args.quiet);
-        let summary = experiment
-            .run(&progress)
-            .with_context(|| format!("experiment {}", experiment.name))?;
+        let summary = match checkpoints(&args, &dir) {
+            Some(checkpoints) => experiment
+                .run_with_checkpoints(&progress, &checkpoints)
+                .with_context(|| format!("experiment {}", experiment.name))?,
+            None => experiment
+                .run(&progress)
+                .with_context(|| format!("experiment {}", experiment.name))?,
+        };
         progress.finish_and_clear();
         write(&experiment, &summary, &dir, args.quiet)?;
     }
@@ -353,6 +405,7 @@ fn check_worker_in_flight(option: &str, value: usize) -> anyhow::Result<()> {
 fn fleet(args: RunArgs) -> anyhow::Result<()> {
     check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
     let experiments = experiments(&args.experiment)?;
+    check_resumable(&args.experiment, &experiments)?;
     let run = RunName::new(
         &args
             .run
@@ -373,7 +426,9 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight)?;
             let progress = fleet_progress(args.experiment.quiet, experiment);
             let mut workers_lost = false;
-            let outcome = experiment.run_fleet(&run, acps::workers::spin(workers), &stop, |p| {
+            let checkpoints = checkpoints(&args.experiment, dir);
+            let spin = acps::workers::spin(workers);
+            let outcome = experiment.run_fleet(&run, spin, &stop, checkpoints.as_ref(), |p| {
                 if acps::workers::all_exited(&mut children) {
                     workers_lost = true;
                     stop.store(true, Ordering::Relaxed);

@@ -3,11 +3,15 @@
 //! way of running an experiment drives.
 #![warn(missing_docs)]
 
+pub mod checkpoint;
 pub mod creps;
 pub mod fleet;
 pub mod learner;
 pub mod method;
 pub mod selection;
 
-pub use learner::{Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerStats, TellError, run_in_process};
+pub use learner::{
+    Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerSnapshot, LearnerStats, RestoreError, TellError,
+    run_in_process,
+};
 pub use method::{Method, SelectorConfig, UnknownMethod};
