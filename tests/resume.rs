@@ -53,9 +53,18 @@ impl Environment for Flaky {
 #[derive(Clone, Copy, Debug)]
 enum Setup {
     /// The contextual function with `method`, a per-task memory when `per_task`.
-    Function { method: Method, seed: u64, in_flight: usize, per_task: bool },
+    Function {
+        method: Method,
+        seed: u64,
+        in_flight: usize,
+        per_task: bool,
+    },
     /// The Section 4 model: no policy, and an environment that keeps state.
-    Toy { method: Method, seed: u64, in_flight: usize },
+    Toy {
+        method: Method,
+        seed: u64,
+        in_flight: usize,
+    },
 }
 
 impl Setup {
@@ -172,7 +181,10 @@ fn interrupted(setup: Setup, cuts: &[usize], shuffled: Option<u64>) -> Vec<u8> {
         let saved = checkpoint::decode(&bytes, STAMP).unwrap();
         (learner, environment) = setup.build();
         saved.apply(&mut learner, environment.as_mut()).unwrap();
-        assert!(bits(&learner, environment.as_ref()) == bytes, "{setup:?}: restore is exact");
+        assert!(
+            bits(&learner, environment.as_ref()) == bytes,
+            "{setup:?}: restore is exact"
+        );
     }
     run_in_process(&mut learner, environment.as_mut());
     bits(&learner, environment.as_ref())
@@ -260,7 +272,10 @@ fn the_interrupted_runs_did_fail_retry_and_update() {
     .build();
     run_in_process(&mut learner, environment.as_mut());
     let stats = learner.stats();
-    assert!(stats.retries > 0 && stats.failed_episodes > 0 && stats.updates > 0, "{stats:?}");
+    assert!(
+        stats.retries > 0 && stats.failed_episodes > 0 && stats.updates > 0,
+        "{stats:?}"
+    );
 }
 
 #[test]

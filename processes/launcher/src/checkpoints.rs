@@ -146,11 +146,9 @@ pub(crate) fn restore(
     let Some(saved) = checkpoint::read(path, stamp)? else {
         return Ok(false);
     };
-    saved
-        .apply(learner, environment)
-        .map_err(|kind| CheckpointError {
-            path: path.to_path_buf(),
-            kind,
-        })?;
+    saved.apply(learner, environment).map_err(|kind| CheckpointError {
+        path: path.to_path_buf(),
+        kind,
+    })?;
     Ok(true)
 }

@@ -269,20 +269,15 @@ impl Experiment {
             .iter()
             .flat_map(|m| (0..self.runs).map(move |r| checkpoints.file(m.method.name(), r)))
             .collect();
-        checkpoints.prepare(&files)?;
         let jobs = self.jobs()?;
+        checkpoints.prepare(&files)?;
         jobs.into_par_iter()
             .zip(files)
             .enumerate()
             .map(|(index, (mut job, file))| {
                 if checkpoints.resume {
-                    restore(
-                        &file,
-                        self.stamp(index),
-                        &mut job.learner,
-                        job.environment.as_mut(),
-                    )
-                    .map_err(CheckpointsError::from)?;
+                    restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())
+                        .map_err(CheckpointsError::from)?;
                 }
                 let writer = Writer::new(file, self.stamp(index), checkpoints.every, &job.learner);
                 Ok((job, writer))
@@ -339,7 +334,9 @@ impl Experiment {
             stop,
             observe,
             |job, learner| match &mut writers[job] {
-                Some(writer) => writer.after_tell(learner, environments[job].as_ref()).map_err(Into::into),
+                Some(writer) => writer
+                    .after_tell(learner, environments[job].as_ref())
+                    .map_err(Into::into),
                 None => Ok(()),
             },
         );

@@ -210,7 +210,9 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) if interrupted(&error) => {
-            eprintln!("interrupted; the run's workers were stopped and its shared memory removed");
+            eprintln!(
+                "interrupted; the run's workers were stopped and its shared memory removed (with checkpoints on, --resume DIR continues the run)"
+            );
             ExitCode::from(130)
         }
         Err(error) => {

@@ -263,11 +263,6 @@ impl LearnerSnapshot {
         self.train_consumed == self.fit.episodes && self.pending.is_empty()
     }
 
-    /// Training episodes consumed when the snapshot was taken.
-    pub fn episodes_consumed(&self) -> u64 {
-        self.train_consumed
-    }
-
     /// Why the snapshot cannot be a state of a learner, if it cannot (ids and roles that point
     /// nowhere, counters that contradict each other).
     fn check(&self) -> Result<(), String> {

@@ -143,7 +143,17 @@ fn refused(dir: &Path, bytes: &[u8], stamp: Stamp) -> (ErrorKind, String) {
 fn truncated_files_are_refused_as_truncated() {
     let dir = temp_dir("truncated");
     let bytes = encode(STAMP, &half_way());
-    for len in [0, 5, 8, 30, HEADER_LEN - 1, HEADER_LEN, HEADER_LEN + 1, bytes.len() / 2, bytes.len() - 1] {
+    for len in [
+        0,
+        5,
+        8,
+        30,
+        HEADER_LEN - 1,
+        HEADER_LEN,
+        HEADER_LEN + 1,
+        bytes.len() / 2,
+        bytes.len() - 1,
+    ] {
         let (kind, message) = refused(&dir, &bytes[..len], STAMP);
         assert!(
             matches!(kind, ErrorKind::Truncated { len: l, .. } if l == len as u64),
@@ -189,11 +199,16 @@ fn foreign_wrong_job_wrong_magic_and_wrong_version_are_named() {
     let (kind, message) = refused(&dir, &bytes, other_run);
     assert!(matches!(kind, ErrorKind::Foreign { found, expected } if found == STAMP.identity && expected == 0xfeed));
     assert!(
-        message.contains("another experiment") && message.contains("123456789abcdef0") && message.contains("000000000000feed"),
+        message.contains("another experiment")
+            && message.contains("123456789abcdef0")
+            && message.contains("000000000000feed"),
         "{message}"
     );
     let (kind, message) = refused(&dir, &bytes, Stamp { job: 4, ..STAMP });
-    assert!(matches!(kind, ErrorKind::WrongJob { found: 3, expected: 4 }), "{message}");
+    assert!(
+        matches!(kind, ErrorKind::WrongJob { found: 3, expected: 4 }),
+        "{message}"
+    );
 
     let (kind, message) = refused(&dir, b"{\"not\": \"a checkpoint\"}", STAMP);
     assert!(matches!(kind, ErrorKind::NotACheckpoint), "{message}");
@@ -206,7 +221,10 @@ fn foreign_wrong_job_wrong_magic_and_wrong_version_are_named() {
     future[40..48].copy_from_slice(&checksum.to_le_bytes());
     let (kind, message) = refused(&dir, &future, STAMP);
     assert!(matches!(kind, ErrorKind::Version { found, supported: FORMAT_VERSION } if found == FORMAT_VERSION + 1));
-    assert!(message.contains("format version 2") && message.contains("version 1"), "{message}");
+    assert!(
+        message.contains("format version 2") && message.contains("version 1"),
+        "{message}"
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 

@@ -102,10 +102,13 @@ impl Memory {
                     ));
                 }
             }
-            (Memory::PerTask { per_task, buckets }, Memory::PerTask {
-                per_task: expected,
-                buckets: expected_buckets,
-            }) => {
+            (
+                Memory::PerTask { per_task, buckets },
+                Memory::PerTask {
+                    per_task: expected,
+                    buckets: expected_buckets,
+                },
+            ) => {
                 if per_task != expected
                     || buckets.len() != expected_buckets.len()
                     || buckets.iter().any(|b| b.len() > *per_task)
@@ -119,8 +122,13 @@ impl Memory {
             }
             _ => return Err("a memory of another kind than configured".into()),
         }
-        if self.samples().any(|s| s.features.len() != n_phi || s.theta.len() != n_theta) {
-            return Err(format!("a sample that does not have {n_phi} features and {n_theta} parameters"));
+        if self
+            .samples()
+            .any(|s| s.features.len() != n_phi || s.theta.len() != n_theta)
+        {
+            return Err(format!(
+                "a sample that does not have {n_phi} features and {n_theta} parameters"
+            ));
         }
         Ok(())
     }

@@ -18,10 +18,10 @@ mod validate;
 
 pub use bandit::BanditSelector;
 pub use baselines::{RoundRobin, UniformContinuous, UniformDiscrete};
+pub use ducb::DUcbState;
 pub use ducb::{DUcb, DUcbConfig};
 pub use error::SelectionError;
 pub use intrinsic::{FirstVisit, IntrinsicReward, IntrinsicTracker};
-pub use ducb::DUcbState;
 pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig, SaggRiacState};
 
 use rand::RngCore;

@@ -206,7 +206,9 @@ impl SaggRiac {
                         return Err(format!("a sample of region {index} does not have dimension {dim}"));
                     }
                 }
-                Node::Split { dim: cut_dim, children, .. } => {
+                Node::Split {
+                    dim: cut_dim, children, ..
+                } => {
                     if *cut_dim >= dim || children.iter().any(|&c| c <= index || c >= regions.len()) {
                         return Err(format!("region {index} is split inconsistently"));
                     }
