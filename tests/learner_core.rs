@@ -312,10 +312,15 @@ fn progress_reports_episodes_and_the_latest_complete_evaluation() {
     for seed in [1, 2, 3] {
         let (mut learner, mut environment) = function_learner(Method::MonotonicProgress, seed, 4, 200);
         let mut observed = Vec::new();
-        acps_learner::run_in_process_observed(&mut learner, &mut environment, 37, |learner, rollouts| {
-            observed.push((learner.progress(), rollouts));
-        });
-        // Every rollout is reported once: training, evaluations and first-visit baselines.
+        let mut rollouts = 0;
+        while let Some(task) = learner.ask() {
+            learner.tell(environment.rollout(&task)).unwrap();
+            rollouts += 1;
+            if rollouts % 37 == 0 || learner.is_done() {
+                observed.push((learner.progress(), rollouts));
+            }
+        }
+        // The rollouts are the training episodes, the evaluations and the first-visit baselines.
         let evaluation_rollouts: usize = learner.evaluations().iter().map(|e| e.outcomes.len()).sum();
         let rollouts: u64 = observed.iter().map(|(_, r)| r).sum();
         let baselines = learner.problem().training_contexts.len() as u64;

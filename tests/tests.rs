@@ -2,3 +2,4 @@
 
 mod learner_core;
 mod paper_claims;
+mod resume;

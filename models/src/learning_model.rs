@@ -164,6 +164,25 @@ impl Environment for LearningModel {
         let noise = Normal::new(0.0, self.config.sigma_r).expect("sigma_r was checked to be finite and >= 0");
         Outcome::new(task.id, r + noise.sample(&mut rng), r)
     }
+
+    /// The competences, which training rollouts raise: ten little-endian f64.
+    fn save_state(&self) -> Vec<u8> {
+        self.competence.iter().flat_map(|l| l.to_le_bytes()).collect()
+    }
+
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), String> {
+        if state.len() != 8 * CONTEXTS {
+            return Err(format!(
+                "a learning-model state has {} bytes (ten competences), got {}",
+                8 * CONTEXTS,
+                state.len()
+            ));
+        }
+        for (l, bytes) in self.competence.iter_mut().zip(state.chunks_exact(8)) {
+            *l = f64::from_le_bytes(bytes.try_into().expect("chunks of 8 bytes"));
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]

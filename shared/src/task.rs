@@ -104,6 +104,26 @@ pub trait Environment: Send {
     fn param_dim(&self) -> usize;
     /// Perform one rollout. Never panics on bad numbers: a failed simulation is a failed outcome.
     fn rollout(&mut self, task: &Task) -> Outcome;
+
+    /// What the environment carries from one rollout to the next, encoded exactly (every bit of
+    /// a float), for a checkpoint. Empty, the default, for environments whose rollouts depend
+    /// on the task only.
+    fn save_state(&self) -> Vec<u8> {
+        Vec::new()
+    }
+
+    /// Continue from a state saved by [`save_state`](Environment::save_state) of an environment
+    /// built the same way. The default accepts only the empty state.
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), String> {
+        if state.is_empty() {
+            Ok(())
+        } else {
+            Err(format!(
+                "a state of {} bytes for an environment that keeps none",
+                state.len()
+            ))
+        }
+    }
 }
 
 #[cfg(test)]

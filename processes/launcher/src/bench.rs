@@ -222,6 +222,7 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Resu
                         stop.store(true, std::sync::atomic::Ordering::Relaxed);
                     }
                 },
+                |_, _| Ok(()),
             );
             let seconds = start.elapsed().as_secs_f64();
             let reaped = workers::reap(&mut children);

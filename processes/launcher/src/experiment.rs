@@ -4,12 +4,13 @@
 //! Run `r` of every method uses the seed `base_seed + r` for both the problem instance and the
 //! learner, so methods are compared on the same problem instances (paired runs).
 
+use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::Progress;
+use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress};
 use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, run_in_process,
-    run_in_process_observed,
 };
 use acps_shared::ipc::RunName;
 use acps_shared::wire::EnvironmentSpec;
@@ -191,12 +192,15 @@ impl Job {
     }
 }
 
-/// A fleet run that could not start or complete.
+/// A run that could not start or complete.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     /// A learner refused its configuration.
     #[error(transparent)]
     Learner(#[from] LearnerError),
+    /// Checkpoints could not be written or resumed from.
+    #[error(transparent)]
+    Checkpoints(#[from] CheckpointsError),
     /// The fleet failed.
     #[error(transparent)]
     Fleet(#[from] FleetError),
@@ -244,25 +248,94 @@ impl Experiment {
     }
 
     /// Run every (method, run) pair in parallel in this process and summarise.
-    pub fn run(&self, progress: &Progress) -> Result<Summary, LearnerError> {
-        let mut jobs = self.jobs()?;
+    pub fn run(&self, progress: &Progress) -> Result<Summary, RunError> {
+        let jobs = self.jobs()?.into_iter().map(|job| (job, None)).collect();
+        self.run_jobs(jobs, progress)
+    }
+
+    /// [`run`](Self::run) with checkpoints: every job continues from its checkpoint when
+    /// resuming, and writes checkpoints as it goes. The summary is the same bit for bit.
+    pub fn run_with_checkpoints(&self, progress: &Progress, checkpoints: &Checkpoints) -> Result<Summary, RunError> {
+        let jobs = self
+            .resumed_jobs(checkpoints)?
+            .into_iter()
+            .map(|(job, writer)| (job, Some(writer)))
+            .collect();
+        self.run_jobs(jobs, progress)
+    }
+
+    fn run_jobs(&self, mut jobs: Vec<(Job, Option<Writer>)>, progress: &Progress) -> Result<Summary, RunError> {
+        // Rollouts between two updates of the progress line by one job.
+        const REPORT_EVERY: u64 = 256;
         let shown = Mutex::new(Shown {
-            jobs: jobs.iter().map(|job| job.learner.progress()).collect(),
+            jobs: jobs.iter().map(|(job, _)| job.learner.progress()).collect(),
             rollouts: 0,
         });
-        jobs.par_iter_mut().enumerate().for_each(|(index, job)| {
-            run_in_process_observed(&mut job.learner, job.environment.as_mut(), 256, |learner, rollouts| {
-                let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
-                shown.jobs[index] = learner.progress();
-                shown.rollouts += rollouts;
-                progress.show(
-                    &LearningProgress::combine(shown.jobs.iter().copied()),
-                    shown.rollouts,
-                    None,
-                );
-            });
-        });
+        let report = |index: usize, learner: &Learner, rollouts: u64| {
+            let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
+            shown.jobs[index] = learner.progress();
+            shown.rollouts += rollouts;
+            progress.show(
+                &LearningProgress::combine(shown.jobs.iter().copied()),
+                shown.rollouts,
+                None,
+            );
+        };
+        jobs.par_iter_mut()
+            .enumerate()
+            .map(|(index, (job, writer))| {
+                let mut unreported = 0;
+                while let Some(task) = job.learner.ask() {
+                    let outcome = job.environment.rollout(&task);
+                    job.learner
+                        .tell(outcome)
+                        .expect("the outcome answers a task just handed out");
+                    if let Some(writer) = writer {
+                        writer.after_tell(&job.learner, job.environment.as_ref())?;
+                    }
+                    unreported += 1;
+                    if unreported == REPORT_EVERY {
+                        report(index, &job.learner, unreported);
+                        unreported = 0;
+                    }
+                }
+                report(index, &job.learner, unreported);
+                Ok(())
+            })
+            .collect::<Result<Vec<()>, CheckpointsError>>()?;
+        let jobs: Vec<Job> = jobs.into_iter().map(|(job, _)| job).collect();
         Ok(self.summary(&jobs))
+    }
+
+    /// The checkpoint stamp of job `index`.
+    fn stamp(&self, index: usize) -> Stamp {
+        Stamp {
+            identity: self.identity(),
+            job: index as u64,
+        }
+    }
+
+    /// Every job with its checkpoint writer, each continued from its checkpoint when resuming.
+    fn resumed_jobs(&self, checkpoints: &Checkpoints) -> Result<Vec<(Job, Writer)>, RunError> {
+        let files: Vec<_> = self
+            .methods
+            .iter()
+            .flat_map(|m| (0..self.runs).map(move |r| checkpoints.file(m.method.name(), r)))
+            .collect();
+        let jobs = self.jobs()?;
+        checkpoints.prepare(&files)?;
+        jobs.into_par_iter()
+            .zip(files)
+            .enumerate()
+            .map(|(index, (mut job, file))| {
+                if checkpoints.resume {
+                    restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())
+                        .map_err(CheckpointsError::from)?;
+                }
+                let writer = Writer::new(file, self.stamp(index), checkpoints.every, &job.learner);
+                Ok((job, writer))
+            })
+            .collect()
     }
 
     /// One learner run of `selector` with `seed`, in this thread.
@@ -273,15 +346,25 @@ impl Experiment {
     }
 
     /// Serve every (method, run) learner to the workers of `run` and summarise; `observe` sees
-    /// the fleet's progress every tick.
+    /// the fleet's progress every tick. With `checkpoints`, jobs continue from their checkpoints
+    /// when resuming and write checkpoints between outcomes, and every unfinished job writes one
+    /// when the run is interrupted.
     pub fn run_fleet(
         &self,
         run: &RunName,
         spin: std::time::Duration,
         stop: &AtomicBool,
+        checkpoints: Option<&Checkpoints>,
         observe: impl FnMut(&FleetProgress),
     ) -> Result<(Summary, FleetProgress), RunError> {
-        let jobs = self.jobs()?;
+        let (jobs, mut writers): (Vec<Job>, Vec<Option<Writer>>) = match checkpoints {
+            Some(checkpoints) => self
+                .resumed_jobs(checkpoints)?
+                .into_iter()
+                .map(|(job, writer)| (job, Some(writer)))
+                .unzip(),
+            None => self.jobs()?.into_iter().map(|job| (job, None)).unzip(),
+        };
         let mut fleet_jobs = Vec::with_capacity(jobs.len());
         let mut optimal = Vec::with_capacity(jobs.len());
         for job in jobs {
@@ -296,7 +379,31 @@ impl Experiment {
             ));
         }
         let (mut learners, environments): (Vec<FleetJob>, Vec<_>) = fleet_jobs.into_iter().unzip();
-        let progress = fleet::serve(&mut learners, run, self.identity(), spin, stop, observe)?;
+        let served = fleet::serve(
+            &mut learners,
+            run,
+            self.identity(),
+            spin,
+            stop,
+            observe,
+            |job, learner| match &mut writers[job] {
+                Some(writer) => writer
+                    .after_tell(learner, environments[job].as_ref())
+                    .map_err(Into::into),
+                None => Ok(()),
+            },
+        );
+        if let Err(FleetError::Interrupted) = served {
+            // Tasks out with workers are handed out again after a restore, so nothing is lost.
+            for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {
+                if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner.is_done()) {
+                    writer
+                        .write(&job.learner, environment.as_ref())
+                        .map_err(CheckpointsError::from)?;
+                }
+            }
+        }
+        let progress = served?;
         let jobs: Vec<Job> = learners
             .into_iter()
             .zip(environments)

@@ -2,6 +2,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod checkpoints;
 pub mod config;
 pub mod evaluate;
 pub mod experiment;

@@ -1,5 +1,6 @@
 //! `acps`: the command line of Active Contextual Policy Search.
 
+use acps::checkpoints::Checkpoints;
 use acps::config::{self, ExperimentFile, Job, LoadedFile, Plan};
 use acps::experiment::{Experiment, Summary};
 use acps::progress::Progress;
@@ -231,6 +232,16 @@ struct ExperimentArgs {
     /// Output directory [default: runs/NAME, or runs/STEM for --config STEM.toml].
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Write each (method, run) job's checkpoint to DIR/checkpoints after every N learning
+    /// rounds (C-REPS updates; evaluations for the toy model, which has no policy) and when the
+    /// job ends; 0: no checkpoints. A run started without --resume removes old checkpoints there.
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    checkpoint_every: u64,
+    /// Continue the run whose output directory is DIR from its checkpoints, after a crash, a
+    /// kill or Ctrl-C; give the arguments the run was started with. The result is bit for bit
+    /// that of an uninterrupted run.
+    #[arg(long, value_name = "DIR")]
+    resume: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
@@ -242,7 +253,9 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) if interrupted(&error) => {
-            eprintln!("interrupted; the run's workers were stopped and its shared memory removed");
+            eprintln!(
+                "interrupted; the run's workers were stopped and its shared memory removed (with checkpoints on, --resume DIR continues the run)"
+            );
             ExitCode::from(130)
         }
         Err(error) => {
@@ -285,17 +298,49 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
         println!("{} -> {}", plan.name().name(), path.display());
         return Ok(None);
     }
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| config::default_out(args.config.as_deref(), plan.name()));
+    let out = match (&args.resume, &args.out) {
+        (Some(resume), Some(out)) if resume != out => {
+            bail!(
+                "--resume {} and --out {} name different directories; --resume DIR continues the run whose output directory is DIR",
+                resume.display(),
+                out.display()
+            )
+        }
+        (Some(dir), _) | (None, Some(dir)) => dir.clone(),
+        (None, None) => config::default_out(args.config.as_deref(), plan.name()),
+    };
     Ok(Some(plan.jobs(&out)))
+}
+
+/// The checkpoints of the experiment that writes into `dir`, if it keeps or resumes any.
+fn checkpoints(args: &ExperimentArgs, dir: &Path) -> Option<Checkpoints> {
+    (args.checkpoint_every > 0 || args.resume.is_some()).then(|| Checkpoints {
+        dir: dir.join("checkpoints"),
+        every: args.checkpoint_every,
+        resume: args.resume.is_some(),
+    })
+}
+
+/// Refuse to resume where no run ever wrote checkpoints (a mistyped directory, or a run started
+/// with --checkpoint-every 0).
+fn check_resumable(args: &ExperimentArgs, jobs: &[Job]) -> anyhow::Result<()> {
+    let Some(resume) = &args.resume else {
+        return Ok(());
+    };
+    if !jobs.iter().any(|job| job.dir.join("checkpoints").is_dir()) {
+        bail!(
+            "nothing to resume in {}: it has no checkpoints directory (was the run started with this --out and --checkpoint-every > 0?)",
+            resume.display()
+        );
+    }
+    Ok(())
 }
 
 fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     let Some(jobs) = jobs(&args)? else {
         return Ok(());
     };
+    check_resumable(&args, &jobs)?;
     for Job {
         experiment,
         dir,
@@ -303,9 +348,11 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     } in jobs
     {
         let progress = Progress::new(&experiment.name, args.quiet);
-        let summary = experiment
-            .run(&progress)
-            .with_context(|| format!("experiment {}", experiment.name))?;
+        let summary = match checkpoints(&args, &dir) {
+            Some(checkpoints) => experiment.run_with_checkpoints(&progress, &checkpoints),
+            None => experiment.run(&progress),
+        }
+        .with_context(|| format!("experiment {}", experiment.name))?;
         progress.finish();
         write(&experiment, &summary, &dir, &config, args.quiet)?;
     }
@@ -328,6 +375,7 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
     let Some(jobs) = jobs(&args.experiment)? else {
         return Ok(());
     };
+    check_resumable(&args.experiment, &jobs)?;
     let run = RunName::new(
         &args
             .run
@@ -353,7 +401,9 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight)?;
             let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
-            let outcome = experiment.run_fleet(&run, acps::workers::spin(workers), &stop, |p| {
+            let checkpoints = checkpoints(&args.experiment, dir);
+            let spin = acps::workers::spin(workers);
+            let outcome = experiment.run_fleet(&run, spin, &stop, checkpoints.as_ref(), |p| {
                 if acps::workers::all_exited(&mut children) {
                     workers_lost = true;
                     stop.store(true, Ordering::Relaxed);

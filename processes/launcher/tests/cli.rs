@@ -297,3 +297,130 @@ fn fleet_options_are_checked_before_anything_starts() {
         );
     }
 }
+
+/// The function experiment with a checkpoint every 2 C-REPS updates, into `dir`.
+fn checkpointed(dir: &Path, extra: &[&str]) -> Vec<String> {
+    let mut args: Vec<String> = [
+        "experiment",
+        "function",
+        "--runs",
+        "2",
+        "--episodes",
+        "1000",
+        "--checkpoint-every",
+        "2",
+        "-q",
+    ]
+    .map(String::from)
+    .to_vec();
+    args.extend(extra.iter().map(|a| a.to_string()));
+    args.extend(["--out".into(), dir.to_str().unwrap().into()]);
+    args
+}
+
+fn acps_strings(args: &[String]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_acps"))
+        .args(args)
+        .output()
+        .expect("acps runs")
+}
+
+fn checkpoint_files(dir: &Path) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(dir.join("checkpoints"))
+        .map(|entries| {
+            entries
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.extension().is_some_and(|e| e == "ckpt"))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_run_killed_mid_way_resumes_to_the_same_summary() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = temp_dir("resume");
+    let reference_dir = dir.join("reference");
+    let out = acps_strings(&checkpointed(&reference_dir, &[]));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let reference = std::fs::read(reference_dir.join("summary.json")).unwrap();
+    // One file per (method, run) job.
+    let methods = summary(&reference_dir.join("summary.json"))["methods"]
+        .as_object()
+        .unwrap()
+        .len();
+    assert_eq!(checkpoint_files(&reference_dir).len(), 2 * methods);
+
+    // The same command, killed with SIGKILL as soon as its first checkpoint is on disk.
+    let killed_dir = dir.join("killed");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_acps"))
+        .args(checkpointed(&killed_dir, &[]))
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while checkpoint_files(&killed_dir).is_empty() {
+        assert!(start.elapsed().as_secs() < 60, "no checkpoint appeared");
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    child.kill().unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(status.signal(), Some(9), "killed mid-run, not finished: {status:?}");
+    assert!(!killed_dir.join("summary.json").exists());
+
+    // Resumed with the arguments it was started with: the uninterrupted run's summary.
+    let resume = ["--resume", killed_dir.to_str().unwrap()];
+    let mut args = checkpointed(&killed_dir, &resume);
+    args.truncate(args.len() - 2); // --resume names the output directory
+    let out = acps_strings(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(std::fs::read(killed_dir.join("summary.json")).unwrap(), reference);
+    // Resuming a finished run rebuilds the same summary from the final checkpoints.
+    let out = acps_strings(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(std::fs::read(killed_dir.join("summary.json")).unwrap(), reference);
+
+    // Other arguments: another experiment, refused naming a checkpoint file.
+    let resumed = |extra: &[&str]| {
+        let mut args = checkpointed(&killed_dir, extra);
+        args.truncate(args.len() - 2);
+        args.extend(resume.map(String::from));
+        let out = acps_strings(&args);
+        assert!(!out.status.success(), "{extra:?} succeeded");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let stderr = resumed(&["--seed", "1"]);
+    assert!(
+        stderr.contains("belongs to another experiment") && stderr.contains(".ckpt"),
+        "{stderr}"
+    );
+    let stderr = resumed(&["--method", "corners"]);
+    assert!(stderr.contains("belongs to no job of this experiment"), "{stderr}");
+    // A truncated checkpoint.
+    let victim = killed_dir.join("checkpoints").join("monotonic-progress-run-1.ckpt");
+    let bytes = std::fs::read(&victim).unwrap();
+    std::fs::write(&victim, &bytes[..bytes.len() / 2]).unwrap();
+    let stderr = resumed(&[]);
+    assert!(
+        stderr.contains("truncated") && stderr.contains("monotonic-progress-run-1.ckpt"),
+        "{stderr}"
+    );
+    // --resume where no run wrote checkpoints, and --resume against --out.
+    let stderr = String::from_utf8_lossy(
+        &acps(&[
+            "experiment",
+            "function",
+            "--resume",
+            dir.join("nowhere").to_str().unwrap(),
+        ])
+        .stderr,
+    )
+    .into_owned();
+    assert!(stderr.contains("nothing to resume"), "{stderr}");
+    let stderr =
+        String::from_utf8_lossy(&acps(&["experiment", "function", "--resume", "a", "--out", "b"]).stderr).into_owned();
+    assert!(
+        stderr.contains("--resume a and --out b name different directories"),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}

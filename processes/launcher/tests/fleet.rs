@@ -353,3 +353,72 @@ fn an_embedded_worker_stops_cleanly_when_asked() {
     ipc::remove_run_files(&run).unwrap();
     assert_clean(&run);
 }
+
+#[test]
+fn a_killed_fleet_learner_resumes_from_its_checkpoints_to_the_in_process_result() {
+    let dir = temp_dir("resume");
+    let args = [
+        "grid",
+        "--sim",
+        "rapier",
+        "--runs",
+        "1",
+        "--episodes",
+        "300",
+        "--method",
+        "monotonic-progress",
+        "--checkpoint-every",
+        "1",
+        "-q",
+    ];
+    let reference = in_process(&args, &dir.join("in-process"));
+    let run = run_name("resume");
+    let out = dir.join("fleet");
+    let mut learner = acps()
+        .arg("run")
+        .args(args)
+        .args(["--workers", "2", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&out)
+        .spawn()
+        .unwrap();
+    // SIGKILL as soon as a checkpoint is written, with tasks out at the workers.
+    let start = Instant::now();
+    let written = || {
+        std::fs::read_dir(out.join("checkpoints"))
+            .map(|entries| {
+                entries
+                    .flatten()
+                    .any(|e| e.path().extension().is_some_and(|x| x == "ckpt"))
+            })
+            .unwrap_or(false)
+    };
+    while !written() {
+        assert!(start.elapsed() < Duration::from_secs(120), "no checkpoint appeared");
+        assert!(
+            learner.try_wait().unwrap().is_none(),
+            "the learner ended before a checkpoint"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    kill(&mut learner);
+    assert!(!out.join("summary.json").exists(), "killed before the end");
+    // Its workers notice and leave.
+    let start = Instant::now();
+    while ipc::live_nodes(&run).map_or(true, |alive| alive > 0) && start.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    check(
+        watched()
+            .arg("run")
+            .args(args)
+            .args(["--workers", "2", "--run", run.as_str()])
+            .arg("--resume")
+            .arg(&out)
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -64,12 +64,16 @@ pub enum FleetError {
     /// The stop flag was set (Ctrl-C).
     #[error("interrupted")]
     Interrupted,
+    /// The caller's `after_tell` hook failed (for example writing a checkpoint).
+    #[error(transparent)]
+    Hook(Box<dyn std::error::Error + Send + Sync>),
 }
 
 /// Serve `jobs` to the workers of `run` until every job is done; `identity` is the run's
 /// identity (a hash of its configuration), checked against every worker's requests. When idle,
 /// the server polls (yielding the CPU) for `spin` before it blocks: worth it only when every
-/// process has a core of its own.
+/// process has a core of its own. `after_tell` sees a job's learner after every outcome it
+/// accepted (the place to write checkpoints); an error it returns ends the run.
 pub fn serve(
     jobs: &mut [FleetJob],
     run: &RunName,
@@ -77,6 +81,7 @@ pub fn serve(
     spin: std::time::Duration,
     stop: &AtomicBool,
     mut observe: impl FnMut(&FleetProgress),
+    mut after_tell: impl FnMut(usize, &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
 ) -> Result<FleetProgress, FleetError> {
     let node = ipc::node(run, "learner")?;
     let services = ipc::open_services(&node)?;
@@ -142,7 +147,10 @@ pub fn serve(
             let told = jobs.get_mut(job as usize).map(|j| j.learner.tell(outcome));
             progress.learner_seconds += started.elapsed().as_secs_f64();
             match told {
-                Some(Ok(())) => progress.outcomes += 1,
+                Some(Ok(())) => {
+                    progress.outcomes += 1;
+                    after_tell(job as usize, &jobs[job as usize].learner).map_err(FleetError::Hook)?;
+                }
                 Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
                     progress.duplicates += 1
                 }

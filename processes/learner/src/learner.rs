@@ -22,9 +22,16 @@
 //! counted, kept out of the C-REPS memory, and the selector observes the lowest return consumed
 //! so far in the run (0 before any). A failed evaluation rollout is left out of that evaluation's aggregate and
 //! counted in [`Evaluation::failed`].
+//!
+//! # Checkpoints
+//! [`Learner::snapshot`] captures everything that evolves (policy, memory, selector, random
+//! streams, counters, results, tasks not yet consumed); [`Learner::restore`] applies it to a
+//! learner freshly built from the same configuration, problem and selector, which then continues
+//! exactly as the original would have. Tasks that were handed out but whose outcome had not
+//! arrived are handed out again (same task, same seed), before the tasks never handed out.
 
-use crate::creps::{CReps, CRepsConfig, CRepsError, UpdateOutcome};
-use crate::selection::{Choice, ContextSelector};
+use crate::creps::{CReps, CRepsConfig, CRepsError, CRepsState, UpdateOutcome};
+use crate::selection::{Choice, ContextSelector, SelectionError, SelectorState};
 use acps_shared::{Outcome, Problem, Stream, Task, TaskKind, derive_seed};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -160,15 +167,175 @@ pub struct LearnerStats {
     pub last_rejection: Option<String>,
 }
 
+/// A snapshot that does not belong to the learner it is restored into.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RestoreError {
+    /// The snapshot was taken of a learner of another configuration or problem.
+    #[error("the checkpoint is of a learner with {what} {checkpoint}, this one has {what} {learner}")]
+    Mismatch {
+        /// What differs.
+        what: &'static str,
+        /// The snapshot's value.
+        checkpoint: String,
+        /// This learner's value.
+        learner: String,
+    },
+    /// The selector refused its saved state.
+    #[error(transparent)]
+    Selector(#[from] SelectionError),
+    /// C-REPS refused its saved state.
+    #[error(transparent)]
+    Policy(#[from] CRepsError),
+    /// The snapshot contradicts itself.
+    #[error("the checkpoint's learner state is inconsistent: {0}")]
+    Inconsistent(String),
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
 enum Role {
     Train { choice: Choice, bucket: usize },
     Evaluate { evaluation: usize, index: usize },
     Baseline { arm: usize },
 }
 
+#[derive(Debug, Clone, Serialize, Deserialize)]
 struct Pending {
     task: Task,
     role: Role,
+}
+
+/// What a learner must be to take a snapshot: the configuration and problem dimensions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Fit {
+    seed: u64,
+    episodes: u64,
+    in_flight: u64,
+    eval_every: u64,
+    problem: String,
+    training_contexts: u64,
+    test_contexts: u64,
+    context_dim: u64,
+    n_theta: u64,
+}
+
+impl Fit {
+    fn of(learner: &Learner) -> Self {
+        Self {
+            seed: learner.config.seed,
+            episodes: learner.config.episodes,
+            in_flight: learner.config.in_flight as u64,
+            eval_every: learner.config.eval_every,
+            problem: learner.problem.name.clone(),
+            training_contexts: learner.problem.training_contexts.len() as u64,
+            test_contexts: learner.problem.test_contexts.len() as u64,
+            context_dim: learner.problem.context_dim() as u64,
+            n_theta: learner.problem.theta0.len() as u64,
+        }
+    }
+
+    /// The first field in which `self` (the snapshot's) differs from `learner` (this one's).
+    fn check(&self, learner: &Fit) -> Result<(), RestoreError> {
+        let mismatch = |what, checkpoint: &dyn ToString, learner: &dyn ToString| {
+            Err(RestoreError::Mismatch {
+                what,
+                checkpoint: checkpoint.to_string(),
+                learner: learner.to_string(),
+            })
+        };
+        let numbers = [
+            ("seed", self.seed, learner.seed),
+            ("episodes", self.episodes, learner.episodes),
+            ("in_flight", self.in_flight, learner.in_flight),
+            ("eval_every", self.eval_every, learner.eval_every),
+            ("training contexts", self.training_contexts, learner.training_contexts),
+            ("test contexts", self.test_contexts, learner.test_contexts),
+            ("context dimension", self.context_dim, learner.context_dim),
+            ("policy parameters", self.n_theta, learner.n_theta),
+        ];
+        if self.problem != learner.problem {
+            return mismatch("problem", &self.problem, &learner.problem);
+        }
+        match numbers.into_iter().find(|(_, a, b)| a != b) {
+            Some((what, checkpoint, here)) => mismatch(what, &checkpoint, &here),
+            None => Ok(()),
+        }
+    }
+}
+
+/// A learner's whole evolving state, taken by [`Learner::snapshot`] and applied by
+/// [`Learner::restore`]. Serialise it with a format that keeps every bit of a float (bincode
+/// does; JSON does not keep NaN payloads).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LearnerSnapshot {
+    fit: Fit,
+    selector: SelectorState,
+    policy: Option<CRepsState>,
+    selection_rng: ChaCha8Rng,
+    exploration_rng: ChaCha8Rng,
+    next_id: u64,
+    train_issued: u64,
+    train_consumed: u64,
+    next_to_consume: u64,
+    /// Tasks to hand out after a restore, in order: those out without an outcome, then the
+    /// queue of those never handed out.
+    outbox: Vec<u64>,
+    pending: BTreeMap<u64, Pending>,
+    arrived: BTreeMap<u64, Outcome>,
+    evaluations: Vec<Evaluation>,
+    episodes: Vec<Episode>,
+    lowest_reward: Option<f64>,
+    retried: Vec<u64>,
+    stats: LearnerStats,
+}
+
+impl LearnerSnapshot {
+    /// True when the run was complete when the snapshot was taken.
+    pub fn is_done(&self) -> bool {
+        self.train_consumed == self.fit.episodes && self.pending.is_empty()
+    }
+
+    /// Why the snapshot cannot be a state of a learner, if it cannot (ids and roles that point
+    /// nowhere, counters that contradict each other).
+    fn check(&self) -> Result<(), String> {
+        let arms = self.fit.training_contexts as usize;
+        if self.train_consumed != self.episodes.len() as u64
+            || self.train_consumed > self.train_issued
+            || self.train_issued > self.fit.episodes
+            || self.next_to_consume > self.next_id
+        {
+            return Err(format!(
+                "counters (issued {}, consumed {}, episodes {}, next id {}, next to consume {}) contradict each other",
+                self.train_issued,
+                self.train_consumed,
+                self.episodes.len(),
+                self.next_id,
+                self.next_to_consume
+            ));
+        }
+        for (&id, pending) in &self.pending {
+            let role_ok = match &pending.role {
+                Role::Train { bucket, choice } => *bucket < arms && choice.arm.is_none_or(|a| a < arms),
+                Role::Evaluate { evaluation, index } => self
+                    .evaluations
+                    .get(*evaluation)
+                    .is_some_and(|e| *index < e.outcomes.len()),
+                Role::Baseline { arm } => *arm < arms,
+            };
+            if pending.task.id != id || id < self.next_to_consume || id >= self.next_id || !role_ok {
+                return Err(format!("pending task {id} does not fit the run"));
+            }
+        }
+        let unknown = self
+            .outbox
+            .iter()
+            .chain(self.arrived.keys())
+            .chain(&self.retried)
+            .find(|id| !self.pending.contains_key(id));
+        if let Some(id) = unknown {
+            return Err(format!("task {id} is queued or answered but not pending"));
+        }
+        Ok(())
+    }
 }
 
 /// The learner: context selection plus C-REPS behind an ask/tell interface.
@@ -393,6 +560,90 @@ impl Learner {
         self.pending.len()
     }
 
+    /// Learning rounds so far, the clock checkpoints are counted in: C-REPS updates run
+    /// (applied or rejected), or, for a problem without policy parameters, evaluations started
+    /// (the first one, before training, included).
+    pub fn rounds(&self) -> u64 {
+        if self.policy.is_some() {
+            self.stats.updates + self.stats.rejected_updates
+        } else {
+            self.evaluations.len() as u64
+        }
+    }
+
+    /// The whole evolving state, for a checkpoint. Tasks handed out whose outcome has not
+    /// arrived are recorded as to be handed out again, ahead of the queue.
+    pub fn snapshot(&self) -> LearnerSnapshot {
+        let out: Vec<u64> = self
+            .pending
+            .keys()
+            .copied()
+            .filter(|id| !self.arrived.contains_key(id) && !self.outbox.contains(id))
+            .collect();
+        let mut retried: Vec<u64> = self.retried.iter().copied().collect();
+        retried.sort_unstable();
+        LearnerSnapshot {
+            fit: Fit::of(self),
+            selector: self.selector.save_state(),
+            policy: self.policy.as_ref().map(CReps::state),
+            selection_rng: self.selection_rng.clone(),
+            exploration_rng: self.exploration_rng.clone(),
+            next_id: self.next_id,
+            train_issued: self.train_issued,
+            train_consumed: self.train_consumed,
+            next_to_consume: self.next_to_consume,
+            outbox: out.into_iter().chain(self.outbox.iter().copied()).collect(),
+            pending: self.pending.clone(),
+            arrived: self.arrived.clone(),
+            evaluations: self.evaluations.clone(),
+            episodes: self.episodes.clone(),
+            lowest_reward: self.lowest_reward,
+            retried,
+            stats: self.stats.clone(),
+        }
+    }
+
+    /// Continue from `snapshot`. The learner must have been built like the one the snapshot was
+    /// taken of (configuration, problem, selector); nothing is kept of its own progress. A
+    /// snapshot of another seed, length, P, problem or selector kind is refused and leaves the
+    /// learner unchanged.
+    pub fn restore(&mut self, snapshot: LearnerSnapshot) -> Result<(), RestoreError> {
+        snapshot.fit.check(&Fit::of(self))?;
+        snapshot.check().map_err(RestoreError::Inconsistent)?;
+        let policy = match (&self.policy, snapshot.policy) {
+            (Some(policy), Some(state)) => {
+                let mut policy = policy.clone();
+                policy.restore(state)?;
+                Some(policy)
+            }
+            (None, None) => None,
+            (_, saved) => {
+                return Err(RestoreError::Inconsistent(format!(
+                    "it {} a C-REPS state, this learner {} a policy",
+                    if saved.is_some() { "has" } else { "lacks" },
+                    if saved.is_some() { "has no" } else { "has" }
+                )));
+            }
+        };
+        self.selector.restore_state(snapshot.selector)?;
+        self.policy = policy;
+        self.selection_rng = snapshot.selection_rng;
+        self.exploration_rng = snapshot.exploration_rng;
+        self.next_id = snapshot.next_id;
+        self.train_issued = snapshot.train_issued;
+        self.train_consumed = snapshot.train_consumed;
+        self.next_to_consume = snapshot.next_to_consume;
+        self.outbox = snapshot.outbox.into();
+        self.pending = snapshot.pending;
+        self.arrived = snapshot.arrived;
+        self.evaluations = snapshot.evaluations;
+        self.episodes = snapshot.episodes;
+        self.lowest_reward = snapshot.lowest_reward;
+        self.retried = snapshot.retried.into_iter().collect();
+        self.stats = snapshot.stats;
+        Ok(())
+    }
+
     fn create(&mut self, kind: TaskKind, context: Vec<f64>, role: Role) {
         let theta = match (&self.policy, kind) {
             (None, _) => Vec::new(),
@@ -516,29 +767,11 @@ fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
 
 /// Drive `learner` to the end with `environment` in this thread.
 pub fn run_in_process(learner: &mut Learner, environment: &mut dyn acps_shared::Environment) {
-    run_in_process_observed(learner, environment, u64::MAX, |_, _| {});
-}
-
-/// [`run_in_process`], calling `observe(learner, rollouts since the last call)` after every
-/// `every` rollouts and once at the end, for progress displays.
-pub fn run_in_process_observed(
-    learner: &mut Learner,
-    environment: &mut dyn acps_shared::Environment,
-    every: u64,
-    mut observe: impl FnMut(&Learner, u64),
-) {
-    let mut unreported = 0;
     while let Some(task) = learner.ask() {
         let outcome = environment.rollout(&task);
         learner
             .tell(outcome)
             .expect("the outcome answers a task just handed out");
-        unreported += 1;
-        if unreported >= every {
-            observe(learner, unreported);
-            unreported = 0;
-        }
     }
-    observe(learner, unreported);
     debug_assert!(learner.is_done());
 }

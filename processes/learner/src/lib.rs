@@ -3,6 +3,7 @@
 //! way of running an experiment drives.
 #![warn(missing_docs)]
 
+pub mod checkpoint;
 pub mod creps;
 pub mod fleet;
 pub mod learner;
@@ -10,7 +11,7 @@ pub mod method;
 pub mod selection;
 
 pub use learner::{
-    Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, TellError,
-    run_in_process, run_in_process_observed,
+    Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerSnapshot, LearnerStats, LearningProgress,
+    RestoreError, TellError, run_in_process,
 };
 pub use method::{Method, SelectorConfig, UnknownMethod};

@@ -96,6 +96,9 @@ pub enum CRepsError {
     /// A singular weighted least-squares system.
     #[error("the weighted least-squares matrix Phi^T D Phi + ridge I is not positive definite; use ridge > 0")]
     SingularRegression,
+    /// A saved state that does not fit this learner (see [`CReps::restore`](super::CReps::restore)).
+    #[error("C-REPS state: {0}")]
+    State(String),
 }
 
 /// `value` must be finite and > 0.

@@ -22,14 +22,14 @@ pub enum MemoryConfig {
 }
 
 /// One stored rollout.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Sample {
     pub features: DVector<f64>,
     pub theta: DVector<f64>,
     pub reward: f64,
 }
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) enum Memory {
     Window {
         capacity: usize,
@@ -87,6 +87,50 @@ impl Memory {
             Memory::Window { samples, .. } => samples.len(),
             Memory::PerTask { buckets, .. } => buckets.iter().map(Vec::len).sum(),
         }
+    }
+
+    /// Whether `self` (a saved memory) can replace `fresh`, a memory built from the same
+    /// configuration: the same kind and size, and samples of `n_phi` features and `n_theta`
+    /// parameters. Says why not.
+    pub fn check_fits(&self, fresh: &Memory, n_phi: usize, n_theta: usize) -> Result<(), String> {
+        match (self, fresh) {
+            (Memory::Window { capacity, samples }, Memory::Window { capacity: expected, .. }) => {
+                if capacity != expected || samples.len() > *capacity {
+                    return Err(format!(
+                        "a sliding window of {capacity} holding {}, expected one of {expected}",
+                        samples.len()
+                    ));
+                }
+            }
+            (
+                Memory::PerTask { per_task, buckets },
+                Memory::PerTask {
+                    per_task: expected,
+                    buckets: expected_buckets,
+                },
+            ) => {
+                if per_task != expected
+                    || buckets.len() != expected_buckets.len()
+                    || buckets.iter().any(|b| b.len() > *per_task)
+                {
+                    return Err(format!(
+                        "a per-task memory of {per_task} x {} tasks, expected {expected} x {}",
+                        buckets.len(),
+                        expected_buckets.len()
+                    ));
+                }
+            }
+            _ => return Err("a memory of another kind than configured".into()),
+        }
+        if self
+            .samples()
+            .any(|s| s.features.len() != n_phi || s.theta.len() != n_theta)
+        {
+            return Err(format!(
+                "a sample that does not have {n_phi} features and {n_theta} parameters"
+            ));
+        }
+        Ok(())
     }
 }
 

@@ -31,6 +31,7 @@ pub use snapshot::{PolicySnapshot, RestoredPolicy, SnapshotError};
 
 use nalgebra::{DMatrix, DVector};
 use rand::RngCore;
+use serde::{Deserialize, Serialize};
 
 use error::{check_at_least_one, check_finite, check_non_negative, check_positive};
 use memory::{Memory, Sample};
@@ -98,6 +99,18 @@ pub enum UpdateOutcome {
         /// The failed step's error message.
         reason: String,
     },
+}
+
+/// Everything of a [`CReps`] that changes while it learns (for checkpoints): the policy's W,
+/// Sigma and sampling factor, the sample memory and the update schedule's position.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CRepsState {
+    weights: DMatrix<f64>,
+    covariance: DMatrix<f64>,
+    sampling_factor: DMatrix<f64>,
+    memory: Memory,
+    since_update: usize,
+    dropped: usize,
 }
 
 /// A C-REPS learner: a contextual Gaussian policy, its sample memory and its update schedule.
@@ -235,6 +248,55 @@ impl CReps {
     /// The number of rollouts [`record`](CReps::record) refused because of non-finite values.
     pub fn dropped(&self) -> usize {
         self.dropped
+    }
+
+    /// The learning state, for a checkpoint. The sampling factor is saved as it is rather than
+    /// recomputed on restore, so sampling continues bit for bit.
+    pub fn state(&self) -> CRepsState {
+        CRepsState {
+            weights: self.policy.weights().clone(),
+            covariance: self.policy.covariance().clone(),
+            sampling_factor: self.policy.sampling_factor().clone(),
+            memory: self.memory.clone(),
+            since_update: self.since_update,
+            dropped: self.dropped,
+        }
+    }
+
+    /// Continue from `state`, saved by [`state`](CReps::state) of a learner built with the same
+    /// configuration and dimensions. A state of other dimensions or another memory is refused
+    /// and leaves the learner unchanged.
+    pub fn restore(&mut self, state: CRepsState) -> Result<(), CRepsError> {
+        let (n_phi, n_theta) = (self.policy.n_features(), self.policy.n_params());
+        let shape = |m: &DMatrix<f64>| (m.nrows(), m.ncols());
+        let error = |reason: String| Err(CRepsError::State(reason));
+        if shape(&state.weights) != (n_phi, n_theta)
+            || shape(&state.covariance) != (n_theta, n_theta)
+            || shape(&state.sampling_factor) != (n_theta, n_theta)
+        {
+            return error(format!(
+                "W {:?}, Sigma {:?} and its factor {:?}; this policy has W {:?} and Sigma {:?}",
+                shape(&state.weights),
+                shape(&state.covariance),
+                shape(&state.sampling_factor),
+                (n_phi, n_theta),
+                (n_theta, n_theta)
+            ));
+        }
+        if let Err(reason) = state.memory.check_fits(&self.memory, n_phi, n_theta) {
+            return error(format!("the saved memory is {reason}"));
+        }
+        if state.since_update >= self.config.update_every {
+            return error(format!(
+                "{} rollouts since the last update, but an update runs every {}",
+                state.since_update, self.config.update_every
+            ));
+        }
+        self.policy = LinearGaussianPolicy::from_parts(state.weights, state.covariance, state.sampling_factor);
+        self.memory = state.memory;
+        self.since_update = state.since_update;
+        self.dropped = state.dropped;
+        Ok(())
     }
 
     fn features(&self, context: &[f64]) -> DVector<f64> {

@@ -66,6 +66,15 @@ impl LinearGaussianPolicy {
         })
     }
 
+    /// A policy from saved parts, unchecked (restoring a checkpoint).
+    pub(crate) fn from_parts(weights: DMatrix<f64>, covariance: DMatrix<f64>, sampling_factor: DMatrix<f64>) -> Self {
+        Self {
+            weights,
+            covariance,
+            sampling_factor,
+        }
+    }
+
     /// W, n_phi x n_theta.
     pub fn weights(&self) -> &DMatrix<f64> {
         &self.weights

@@ -9,7 +9,10 @@
 //! choice is made, and the selector is exactly the paper's sequential D-UCB.
 
 use super::validate::check_contexts;
-use super::{Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, SelectionError};
+use super::{
+    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, SelectionError,
+    SelectorState,
+};
 use rand::RngCore;
 use std::collections::VecDeque;
 
@@ -111,6 +114,38 @@ impl ContextSelector for BanditSelector {
 
     fn wants_initial_returns(&self) -> bool {
         self.intrinsic.wants_initial_returns()
+    }
+
+    fn save_state(&self) -> SelectorState {
+        SelectorState::Bandit {
+            ducb: self.ducb.state(),
+            baselines: self.intrinsic.baselines().to_vec(),
+            pending: self.pending.iter().copied().collect(),
+        }
+    }
+
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+        let SelectorState::Bandit {
+            ducb,
+            baselines,
+            pending,
+        } = state
+        else {
+            return Err(state.wrong_kind("D-UCB"));
+        };
+        let arms = self.contexts.len();
+        if let Some(&arm) = pending.iter().find(|&&arm| arm >= arms) {
+            return Err(SelectionError::State(format!(
+                "pending arm {arm} of a D-UCB selector over {arms} arms"
+            )));
+        }
+        // Check everything before changing anything.
+        let mut restored = self.clone();
+        restored.ducb.restore(ducb)?;
+        restored.intrinsic.restore_baselines(baselines)?;
+        restored.pending = pending.into();
+        *self = restored;
+        Ok(())
     }
 }
 

@@ -3,7 +3,7 @@
 //! (Sec. 5.1.3, 5.2).
 
 use super::validate::{check_contexts, check_space};
-use super::{Choice, ContextSelector, SelectionError};
+use super::{Choice, ContextSelector, SelectionError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
 
@@ -72,6 +72,24 @@ impl ContextSelector for RoundRobin {
     }
 
     fn observe(&mut self, _choice: &Choice, _reward: f64) {}
+
+    fn save_state(&self) -> SelectorState {
+        SelectorState::RoundRobin { next: self.next }
+    }
+
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+        match state {
+            SelectorState::RoundRobin { next } if next < self.order.len() => {
+                self.next = next;
+                Ok(())
+            }
+            SelectorState::RoundRobin { next } => Err(SelectionError::State(format!(
+                "round-robin position {next} is outside its order of {} arms",
+                self.order.len()
+            ))),
+            other => Err(other.wrong_kind("round-robin")),
+        }
+    }
 }
 
 /// Draws a training context uniformly at random.
@@ -98,6 +116,17 @@ impl ContextSelector for UniformDiscrete {
     }
 
     fn observe(&mut self, _choice: &Choice, _reward: f64) {}
+
+    fn save_state(&self) -> SelectorState {
+        SelectorState::UniformDiscrete
+    }
+
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+        match state {
+            SelectorState::UniformDiscrete => Ok(()),
+            other => Err(other.wrong_kind("uniform over the training contexts")),
+        }
+    }
 }
 
 /// Draws a context uniformly from the continuous context space; the choice names no arm.
@@ -123,6 +152,17 @@ impl ContextSelector for UniformContinuous {
     }
 
     fn observe(&mut self, _choice: &Choice, _reward: f64) {}
+
+    fn save_state(&self) -> SelectorState {
+        SelectorState::UniformContinuous
+    }
+
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+        match state {
+            SelectorState::UniformContinuous => Ok(()),
+            other => Err(other.wrong_kind("uniform over the context space")),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -38,6 +38,19 @@ impl DUcbConfig {
     }
 }
 
+/// The statistics of a [`DUcb`], everything that changes while it runs (for checkpoints).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DUcbState {
+    /// Discounted pull counts N_i.
+    pub counts: Vec<f64>,
+    /// Discounted mean rewards m_i.
+    pub means: Vec<f64>,
+    /// Discounted total n.
+    pub total: f64,
+    /// Selections made so far.
+    pub selections: usize,
+}
+
 /// A discounted-UCB bandit over `K` arms.
 #[derive(Debug, Clone)]
 pub struct DUcb {
@@ -193,6 +206,33 @@ impl DUcb {
     /// Discounted total count n.
     pub fn total(&self) -> f64 {
         self.total
+    }
+
+    /// The statistics, for a checkpoint.
+    pub fn state(&self) -> DUcbState {
+        DUcbState {
+            counts: self.counts.clone(),
+            means: self.means.clone(),
+            total: self.total,
+            selections: self.selections,
+        }
+    }
+
+    /// Continue from saved statistics, which must have one count and one mean per arm.
+    pub fn restore(&mut self, state: DUcbState) -> Result<(), SelectionError> {
+        if state.counts.len() != self.arms() || state.means.len() != self.arms() {
+            return Err(SelectionError::State(format!(
+                "D-UCB statistics for {} counts and {} means, this bandit has {} arms",
+                state.counts.len(),
+                state.means.len(),
+                self.arms()
+            )));
+        }
+        self.counts = state.counts;
+        self.means = state.means;
+        self.total = state.total;
+        self.selections = state.selections;
+        Ok(())
     }
 }
 

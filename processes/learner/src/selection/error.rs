@@ -74,4 +74,7 @@ pub enum SelectionError {
     /// SAGG-RIAC's neighbourhood radius is negative or not finite.
     #[error("SAGG-RIAC near_radius must be finite and >= 0, got {0}")]
     NearRadius(f64),
+    /// A saved selector state that does not fit the selector it is restored into.
+    #[error("selector state: {0}")]
+    State(String),
 }

@@ -168,6 +168,24 @@ impl IntrinsicTracker {
     pub fn baseline(&self, arm: usize) -> Option<f64> {
         self.baselines.get(arm).copied().flatten()
     }
+
+    /// Every arm's baseline, for a checkpoint.
+    pub fn baselines(&self) -> &[Option<f64>] {
+        &self.baselines
+    }
+
+    /// Continue from saved baselines, one per arm.
+    pub fn restore_baselines(&mut self, baselines: Vec<Option<f64>>) -> Result<(), SelectionError> {
+        if baselines.len() != self.baselines.len() {
+            return Err(SelectionError::State(format!(
+                "{} intrinsic-reward baselines, this tracker has {} arms",
+                baselines.len(),
+                self.baselines.len()
+            )));
+        }
+        self.baselines = baselines;
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -18,15 +18,17 @@ mod validate;
 
 pub use bandit::BanditSelector;
 pub use baselines::{RoundRobin, UniformContinuous, UniformDiscrete};
+pub use ducb::DUcbState;
 pub use ducb::{DUcb, DUcbConfig};
 pub use error::SelectionError;
 pub use intrinsic::{FirstVisit, IntrinsicReward, IntrinsicTracker};
-pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig};
+pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig, SaggRiacState};
 
 use rand::RngCore;
+use serde::{Deserialize, Serialize};
 
 /// A selected training context.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Choice {
     /// Index of the chosen training context, or `None` for a context drawn from the continuous
     /// space that is not one of the training contexts.
@@ -56,5 +58,61 @@ pub trait ContextSelector: Send {
     /// whether the baseline rollouts are worth running.
     fn wants_initial_returns(&self) -> bool {
         false
+    }
+
+    /// Everything about this selector that changes while it runs, for a checkpoint. Whatever
+    /// its constructor derives from the configuration and the problem is left out.
+    fn save_state(&self) -> SelectorState;
+
+    /// Continue from `state`, saved by [`save_state`](ContextSelector::save_state) of a selector
+    /// built the same way. A state of another kind of selector, or one that does not fit this
+    /// selector's arms or space, is refused and leaves the selector unchanged.
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError>;
+}
+
+/// The evolving state of a context selector (see [`ContextSelector::save_state`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum SelectorState {
+    /// [`RoundRobin`]: the position in its cycle.
+    RoundRobin {
+        /// Index into the order of the next arm.
+        next: usize,
+    },
+    /// [`UniformDiscrete`]: nothing; its choices come from the learner's random stream only.
+    UniformDiscrete,
+    /// [`UniformContinuous`]: nothing; its choices come from the learner's random stream only.
+    UniformContinuous,
+    /// [`BanditSelector`]: the bandit's statistics, the intrinsic-reward baselines and the
+    /// choices not yet observed.
+    Bandit {
+        /// The bandit's statistics.
+        ducb: DUcbState,
+        /// Per-arm intrinsic-reward baselines.
+        baselines: Vec<Option<f64>>,
+        /// Arms chosen but not yet observed, oldest first.
+        pending: Vec<usize>,
+    },
+    /// [`SaggRiac`]: the region tree with its samples.
+    SaggRiac(SaggRiacState),
+    /// A selector defined elsewhere, in an encoding of its own.
+    Custom(Vec<u8>),
+}
+
+impl SelectorState {
+    /// The kind of selector the state belongs to, for messages.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SelectorState::RoundRobin { .. } => "round-robin",
+            SelectorState::UniformDiscrete => "uniform over the training contexts",
+            SelectorState::UniformContinuous => "uniform over the context space",
+            SelectorState::Bandit { .. } => "D-UCB",
+            SelectorState::SaggRiac(_) => "SAGG-RIAC",
+            SelectorState::Custom(_) => "custom",
+        }
+    }
+
+    /// The error for restoring this state into a selector of kind `expected`.
+    pub(crate) fn wrong_kind(&self, expected: &'static str) -> SelectionError {
+        SelectionError::State(format!("a {} state cannot restore a {expected} selector", self.kind()))
     }
 }

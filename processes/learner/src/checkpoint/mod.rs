@@ -1,0 +1,272 @@
+//! Checkpoint files: a learner's snapshot and its environment's state, so that a run can be
+//! resumed after it was stopped (even by `kill -9`) and end bit for bit as if it never was.
+//!
+//! # Format (version 1)
+//! A 48-byte header, all integers little-endian, then the payload:
+//!
+//! | offset | bytes | field |
+//! |---|---|---|
+//! | 0 | 8 | magic `ACPSCKPT` |
+//! | 8 | 4 | format version (u32) |
+//! | 12 | 4 | reserved, 0 |
+//! | 16 | 8 | identity of the run the checkpoint belongs to (u64; the launcher's hash of the experiment's configuration) |
+//! | 24 | 8 | job index within the run (u64) |
+//! | 32 | 8 | payload length in bytes (u64) |
+//! | 40 | 8 | FNV-1a 64 checksum of bytes 0..40 and the payload |
+//! | 48 | n | payload: [`Checkpoint`] in bincode 2's standard encoding (serde) |
+//!
+//! Reading checks, in this order: magic, version, length (a short file is "truncated"),
+//! checksum ("corrupted"), identity ("another experiment") and job; every error names the file.
+//! The version is raised whenever the payload's layout changes, since bincode is not
+//! self-describing. Files are written to a temporary file beside the target and renamed over it,
+//! so a process killed during a write leaves the previous checkpoint intact.
+
+use crate::learner::{Learner, LearnerSnapshot, RestoreError};
+use acps_shared::Environment;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// The first eight bytes of every checkpoint file.
+pub const MAGIC: [u8; 8] = *b"ACPSCKPT";
+/// The format version this build writes and reads.
+pub const FORMAT_VERSION: u32 = 1;
+/// Header length in bytes.
+pub const HEADER_LEN: usize = 48;
+
+/// What a checkpoint holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Checkpoint {
+    /// The learner's whole evolving state.
+    pub learner: LearnerSnapshot,
+    /// The environment's state ([`Environment::save_state`]); empty for environments without.
+    pub environment: Vec<u8>,
+}
+
+impl Checkpoint {
+    /// The state of `learner` and `environment` now. With an environment that keeps state
+    /// between rollouts, take it only when no task is out (in-process runs: between a `tell` and
+    /// the next `ask`), since tasks out are performed again after a restore.
+    pub fn take(learner: &Learner, environment: &dyn Environment) -> Self {
+        Self {
+            learner: learner.snapshot(),
+            environment: environment.save_state(),
+        }
+    }
+
+    /// Continue `learner` and `environment`, freshly built as the ones the checkpoint was taken
+    /// of, from this checkpoint.
+    pub fn apply(self, learner: &mut Learner, environment: &mut dyn Environment) -> Result<(), ErrorKind> {
+        learner.restore(self.learner)?;
+        environment
+            .restore_state(&self.environment)
+            .map_err(ErrorKind::Environment)
+    }
+}
+
+/// Whose checkpoint a file is: the run's identity and the job's index in it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stamp {
+    /// A hash of everything that determines the run's results.
+    pub identity: u64,
+    /// The job's index within the run.
+    pub job: u64,
+}
+
+/// A checkpoint that could not be written, read or applied, naming the file.
+#[derive(Debug, thiserror::Error)]
+#[error("checkpoint {}: {kind}", path.display())]
+pub struct CheckpointError {
+    /// The checkpoint file.
+    pub path: PathBuf,
+    /// What went wrong.
+    pub kind: ErrorKind,
+}
+
+/// What is wrong with a checkpoint.
+#[derive(Debug, thiserror::Error)]
+pub enum ErrorKind {
+    /// Reading or writing failed.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// The file does not start with [`MAGIC`].
+    #[error("not an acps checkpoint (it does not start with the magic bytes \"ACPSCKPT\")")]
+    NotACheckpoint,
+    /// Another format version.
+    #[error("format version {found}, but this build reads version {supported} only; start the run afresh")]
+    Version {
+        /// The file's version.
+        found: u32,
+        /// The version this build reads.
+        supported: u32,
+    },
+    /// Shorter than its header says.
+    #[error("truncated: {len} bytes, but the checkpoint is {expected} bytes long")]
+    Truncated {
+        /// The file's length.
+        len: u64,
+        /// The length it should have (the header alone, if that is cut short).
+        expected: u64,
+    },
+    /// The checksum does not match, or bytes follow the payload.
+    #[error("corrupted: {0}")]
+    Corrupt(String),
+    /// A checkpoint of another run.
+    #[error(
+        "belongs to another experiment (identity {found:016x}, this one is {expected:016x}): resume with the arguments the run was started with, or use another directory"
+    )]
+    Foreign {
+        /// The file's identity.
+        found: u64,
+        /// This run's identity.
+        expected: u64,
+    },
+    /// A checkpoint of another job of the same run.
+    #[error("belongs to job {found} of this run, not to job {expected}")]
+    WrongJob {
+        /// The file's job.
+        found: u64,
+        /// The job it was read for.
+        expected: u64,
+    },
+    /// The payload does not decode (a build with another payload layout under the same version).
+    #[error("the payload cannot be decoded: {0}")]
+    Decode(String),
+    /// The learner refused the snapshot.
+    #[error(transparent)]
+    Restore(#[from] RestoreError),
+    /// The environment refused its state.
+    #[error("environment state: {0}")]
+    Environment(String),
+}
+
+/// FNV-1a, 64 bit: any single changed byte changes it.
+fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
+    bytes.iter().fold(hash, |hash, &byte| {
+        (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+fn config() -> bincode::config::Configuration {
+    bincode::config::standard()
+}
+
+/// The bytes of a checkpoint file.
+pub fn encode(stamp: Stamp, checkpoint: &Checkpoint) -> Vec<u8> {
+    let payload = bincode::serde::encode_to_vec(checkpoint, config()).expect("a checkpoint always encodes");
+    let mut bytes = Vec::with_capacity(HEADER_LEN + payload.len());
+    bytes.extend_from_slice(&MAGIC);
+    bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    bytes.extend_from_slice(&0u32.to_le_bytes());
+    bytes.extend_from_slice(&stamp.identity.to_le_bytes());
+    bytes.extend_from_slice(&stamp.job.to_le_bytes());
+    bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    let checksum = fnv1a(fnv1a(FNV_OFFSET, &bytes), &payload);
+    bytes.extend_from_slice(&checksum.to_le_bytes());
+    bytes.extend_from_slice(&payload);
+    bytes
+}
+
+/// The checkpoint in `bytes`, if they are a complete, intact checkpoint of `stamp`.
+pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, ErrorKind> {
+    let magic_len = bytes.len().min(MAGIC.len());
+    if bytes[..magic_len] != MAGIC[..magic_len] {
+        return Err(ErrorKind::NotACheckpoint);
+    }
+    if bytes.len() < HEADER_LEN {
+        return Err(ErrorKind::Truncated {
+            len: bytes.len() as u64,
+            expected: HEADER_LEN as u64,
+        });
+    }
+    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+    let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+    let version = u32_at(8);
+    if version != FORMAT_VERSION {
+        return Err(ErrorKind::Version {
+            found: version,
+            supported: FORMAT_VERSION,
+        });
+    }
+    let payload_len = u64_at(32);
+    let expected = (HEADER_LEN as u64).saturating_add(payload_len);
+    let len = bytes.len() as u64;
+    if len < expected {
+        return Err(ErrorKind::Truncated { len, expected });
+    }
+    if len > expected {
+        return Err(ErrorKind::Corrupt(format!(
+            "{} bytes follow the {payload_len}-byte payload",
+            len - expected
+        )));
+    }
+    let payload = &bytes[HEADER_LEN..];
+    if fnv1a(fnv1a(FNV_OFFSET, &bytes[..40]), payload) != u64_at(40) {
+        return Err(ErrorKind::Corrupt("the checksum does not match the contents".into()));
+    }
+    if u32_at(12) != 0 {
+        return Err(ErrorKind::Corrupt("reserved header bytes are not zero".into()));
+    }
+    let (identity, job) = (u64_at(16), u64_at(24));
+    if identity != stamp.identity {
+        return Err(ErrorKind::Foreign {
+            found: identity,
+            expected: stamp.identity,
+        });
+    }
+    if job != stamp.job {
+        return Err(ErrorKind::WrongJob {
+            found: job,
+            expected: stamp.job,
+        });
+    }
+    let (checkpoint, used) = bincode::serde::decode_from_slice::<Checkpoint, _>(payload, config())
+        .map_err(|e| ErrorKind::Decode(e.to_string()))?;
+    if used != payload.len() {
+        return Err(ErrorKind::Decode(format!(
+            "{} of {} payload bytes decode to a checkpoint",
+            used,
+            payload.len()
+        )));
+    }
+    Ok(checkpoint)
+}
+
+/// Write `checkpoint` to `path` atomically: into `path` + ".tmp", then renamed over `path`, so a
+/// reader, or a process killed at any moment, sees the old file or the new one, never a mix. The
+/// file is not synced to disk (that would cost milliseconds per checkpoint); after a crash of
+/// the whole machine a damaged file is refused on reading, as truncated or corrupted.
+pub fn write(path: &Path, stamp: Stamp, checkpoint: &Checkpoint) -> Result<(), CheckpointError> {
+    let error = |kind: ErrorKind| CheckpointError {
+        path: path.to_path_buf(),
+        kind,
+    };
+    let bytes = encode(stamp, checkpoint);
+    let mut temporary = path.as_os_str().to_owned();
+    temporary.push(".tmp");
+    let temporary = PathBuf::from(temporary);
+    let written = (|| {
+        let mut file = std::fs::File::create(&temporary)?;
+        file.write_all(&bytes)?;
+        std::fs::rename(&temporary, path)
+    })();
+    written.map_err(|e| error(e.into()))
+}
+
+/// The checkpoint at `path` if there is a file, checked against `stamp`; `None` without one.
+pub fn read(path: &Path, stamp: Stamp) -> Result<Option<Checkpoint>, CheckpointError> {
+    let error = |kind: ErrorKind| CheckpointError {
+        path: path.to_path_buf(),
+        kind,
+    };
+    match std::fs::read(path) {
+        Ok(bytes) => decode(&bytes, stamp).map(Some).map_err(error),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(error(e.into())),
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,257 @@
+//! The file format: round trips, and every kind of bad file refused with its own error.
+
+use super::*;
+use crate::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+use crate::selection::RoundRobin;
+use crate::{LearnerConfig, run_in_process};
+use acps_shared::{ContextSpace, Outcome, Problem, ScoreAggregate, Task};
+
+/// A stateless environment: reward -(theta - s)^2 summed.
+struct Quadratic;
+
+impl Environment for Quadratic {
+    fn context_dim(&self) -> usize {
+        1
+    }
+
+    fn param_dim(&self) -> usize {
+        2
+    }
+
+    fn rollout(&mut self, task: &Task) -> Outcome {
+        let cost: f64 = task.theta.iter().map(|t| (t - task.context[0]).powi(2)).sum();
+        Outcome::new(task.id, -cost, cost)
+    }
+}
+
+fn learner(seed: u64, episodes: u64) -> Learner {
+    let problem = Problem {
+        name: "quadratic".into(),
+        training_contexts: vec![vec![0.0], vec![0.5], vec![1.0]],
+        test_contexts: vec![vec![0.25], vec![0.75]],
+        space: ContextSpace::new_box(vec![0.0], vec![1.0]).unwrap(),
+        theta0: vec![0.0, 0.0],
+        score: ScoreAggregate::Mean,
+        metric: "cost".into(),
+    };
+    let selector = Box::new(RoundRobin::all(problem.training_contexts.clone()).unwrap());
+    let config = LearnerConfig {
+        seed,
+        episodes,
+        in_flight: 2,
+        eval_every: 10,
+        creps: Some(CRepsConfig {
+            update_every: 10,
+            memory: MemoryConfig::SlidingWindow { capacity: 20 },
+            features: FeatureMap::Affine,
+            ..CRepsConfig::default()
+        }),
+    };
+    Learner::new(config, problem, selector).unwrap()
+}
+
+const STAMP: Stamp = Stamp {
+    identity: 0x1234_5678_9abc_def0,
+    job: 3,
+};
+
+/// A checkpoint half way through a run.
+fn half_way() -> Checkpoint {
+    let mut learner = learner(7, 60);
+    let mut environment = Quadratic;
+    for _ in 0..40 {
+        let task = learner.ask().unwrap();
+        learner.tell(environment.rollout(&task)).unwrap();
+    }
+    Checkpoint::take(&learner, &environment)
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("acps-checkpoint-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn encoding_round_trips_and_the_header_is_as_documented() {
+    let checkpoint = half_way();
+    let bytes = encode(STAMP, &checkpoint);
+    assert_eq!(&bytes[..8], b"ACPSCKPT");
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), FORMAT_VERSION);
+    assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), STAMP.identity);
+    assert_eq!(u64::from_le_bytes(bytes[24..32].try_into().unwrap()), STAMP.job);
+    assert_eq!(
+        u64::from_le_bytes(bytes[32..40].try_into().unwrap()) as usize,
+        bytes.len() - HEADER_LEN
+    );
+    let decoded = decode(&bytes, STAMP).unwrap();
+    assert_eq!(encode(STAMP, &decoded), bytes);
+}
+
+#[test]
+fn a_restored_learner_finishes_like_the_original() {
+    let mut original = learner(7, 60);
+    let mut environment = Quadratic;
+    for _ in 0..33 {
+        let task = original.ask().unwrap();
+        original.tell(environment.rollout(&task)).unwrap();
+    }
+    let saved = decode(&encode(STAMP, &Checkpoint::take(&original, &environment)), STAMP).unwrap();
+    let mut restored = learner(7, 60);
+    saved.apply(&mut restored, &mut Quadratic).unwrap();
+    run_in_process(&mut original, &mut environment);
+    run_in_process(&mut restored, &mut Quadratic);
+    assert!(restored.stats().updates > 0);
+    let final_bytes = |l: &Learner| encode(STAMP, &Checkpoint::take(l, &Quadratic));
+    assert_eq!(final_bytes(&restored), final_bytes(&original));
+}
+
+#[test]
+fn files_are_written_atomically_and_read_back() {
+    let dir = temp_dir("files");
+    let path = dir.join("job.ckpt");
+    assert!(read(&path, STAMP).unwrap().is_none(), "no file, no checkpoint");
+    let checkpoint = half_way();
+    write(&path, STAMP, &checkpoint).unwrap();
+    // Overwriting replaces the file; no temporary file stays behind.
+    write(&path, STAMP, &checkpoint).unwrap();
+    let names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    assert_eq!(names, ["job.ckpt"]);
+    let read_back = read(&path, STAMP).unwrap().unwrap();
+    assert_eq!(encode(STAMP, &read_back), encode(STAMP, &checkpoint));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The error `bytes` give when read from a file, and its message.
+fn refused(dir: &Path, bytes: &[u8], stamp: Stamp) -> (ErrorKind, String) {
+    let path = dir.join("bad.ckpt");
+    std::fs::write(&path, bytes).unwrap();
+    let error = read(&path, stamp).unwrap_err();
+    let message = error.to_string();
+    assert!(
+        message.starts_with(&format!("checkpoint {}: ", path.display())),
+        "the message names the file: {message}"
+    );
+    (error.kind, message)
+}
+
+#[test]
+fn truncated_files_are_refused_as_truncated() {
+    let dir = temp_dir("truncated");
+    let bytes = encode(STAMP, &half_way());
+    for len in [
+        0,
+        5,
+        8,
+        30,
+        HEADER_LEN - 1,
+        HEADER_LEN,
+        HEADER_LEN + 1,
+        bytes.len() / 2,
+        bytes.len() - 1,
+    ] {
+        let (kind, message) = refused(&dir, &bytes[..len], STAMP);
+        assert!(
+            matches!(kind, ErrorKind::Truncated { len: l, .. } if l == len as u64),
+            "{len} bytes: {message}"
+        );
+        assert!(message.contains("truncated"), "{message}");
+    }
+    let mut longer = bytes.clone();
+    longer.push(0);
+    let (kind, message) = refused(&dir, &longer, STAMP);
+    assert!(matches!(kind, ErrorKind::Corrupt(_)), "{message}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn every_flipped_byte_is_detected() {
+    let bytes = encode(STAMP, &half_way());
+    for at in 0..bytes.len() {
+        for flip in [0x01, 0x80] {
+            let mut bad = bytes.clone();
+            bad[at] ^= flip;
+            let kind = decode(&bad, STAMP).unwrap_err();
+            let expected = match at {
+                0..8 => matches!(kind, ErrorKind::NotACheckpoint),
+                8..12 => matches!(kind, ErrorKind::Version { .. }),
+                // The length: too long a file reads as corrupt, too short as truncated.
+                32..40 => matches!(kind, ErrorKind::Truncated { .. } | ErrorKind::Corrupt(_)),
+                _ => matches!(kind, ErrorKind::Corrupt(_)),
+            };
+            assert!(expected, "byte {at} ^ {flip:#x}: {kind}");
+        }
+    }
+}
+
+#[test]
+fn foreign_wrong_job_wrong_magic_and_wrong_version_are_named() {
+    let dir = temp_dir("foreign");
+    let bytes = encode(STAMP, &half_way());
+    let other_run = Stamp {
+        identity: 0xfeed,
+        ..STAMP
+    };
+    let (kind, message) = refused(&dir, &bytes, other_run);
+    assert!(matches!(kind, ErrorKind::Foreign { found, expected } if found == STAMP.identity && expected == 0xfeed));
+    assert!(
+        message.contains("another experiment")
+            && message.contains("123456789abcdef0")
+            && message.contains("000000000000feed"),
+        "{message}"
+    );
+    let (kind, message) = refused(&dir, &bytes, Stamp { job: 4, ..STAMP });
+    assert!(
+        matches!(kind, ErrorKind::WrongJob { found: 3, expected: 4 }),
+        "{message}"
+    );
+
+    let (kind, message) = refused(&dir, b"{\"not\": \"a checkpoint\"}", STAMP);
+    assert!(matches!(kind, ErrorKind::NotACheckpoint), "{message}");
+    assert!(message.contains("not an acps checkpoint"), "{message}");
+
+    // A future version, with a consistent checksum: refused by version before anything else.
+    let mut future = bytes.clone();
+    future[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    let checksum = fnv1a(fnv1a(FNV_OFFSET, &future[..40]), &future[HEADER_LEN..]);
+    future[40..48].copy_from_slice(&checksum.to_le_bytes());
+    let (kind, message) = refused(&dir, &future, STAMP);
+    assert!(matches!(kind, ErrorKind::Version { found, supported: FORMAT_VERSION } if found == FORMAT_VERSION + 1));
+    assert!(
+        message.contains("format version 2") && message.contains("version 1"),
+        "{message}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_checkpoint_of_another_learner_is_refused_by_restore() {
+    let checkpoint = half_way();
+    // Another seed.
+    let error = checkpoint
+        .clone()
+        .apply(&mut learner(8, 60), &mut Quadratic)
+        .unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "the checkpoint is of a learner with seed 7, this one has seed 8"
+    );
+    // Another length.
+    let error = checkpoint
+        .clone()
+        .apply(&mut learner(7, 61), &mut Quadratic)
+        .unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "the checkpoint is of a learner with episodes 60, this one has episodes 61"
+    );
+    // An environment state for an environment that keeps none.
+    let mut with_state = checkpoint;
+    with_state.environment = vec![1, 2, 3];
+    let error = with_state.apply(&mut learner(7, 60), &mut Quadratic).unwrap_err();
+    assert!(error.to_string().starts_with("environment state: "), "{error}");
+}

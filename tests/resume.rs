@@ -1,0 +1,316 @@
+//! Checkpoint and resume at the learner level: a learner restored from a checkpoint taken at any
+//! point (before training, between tells, mid-window with P > 1 while tasks are out and outcomes
+//! wait in the reorder buffer, after the end) finishes bit for bit as the uninterrupted run.
+
+use acps_learner::checkpoint::{self, Checkpoint, Stamp};
+use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
+use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, run_in_process};
+use acps_models::contextual_function::ContextualFunction;
+use acps_models::learning_model::{LearningModel, LearningModelConfig};
+use acps_shared::{Environment, Outcome, Task};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+
+const STAMP: Stamp = Stamp { identity: 1, job: 0 };
+
+fn selector_config(method: Method) -> SelectorConfig {
+    SelectorConfig {
+        method,
+        ducb: DUcbConfig {
+            gamma: 0.99,
+            xi: 1e-8,
+            b: 1.0,
+        },
+        first_visit: FirstVisit::InitialReturn,
+        sagg_riac: SaggRiacConfig::default(),
+    }
+}
+
+/// The contextual function, failing every rollout of a task whose id is 5 mod 13 (so that
+/// retries and failed episodes are part of the state).
+struct Flaky(ContextualFunction);
+
+impl Environment for Flaky {
+    fn context_dim(&self) -> usize {
+        self.0.context_dim()
+    }
+
+    fn param_dim(&self) -> usize {
+        self.0.param_dim()
+    }
+
+    fn rollout(&mut self, task: &Task) -> Outcome {
+        if task.id % 13 == 5 {
+            Outcome::failed(task.id)
+        } else {
+            self.0.rollout(task)
+        }
+    }
+}
+
+/// A run to interrupt: a learner and its environment, built afresh for every attempt.
+#[derive(Clone, Copy, Debug)]
+enum Setup {
+    /// The contextual function with `method`, a per-task memory when `per_task`.
+    Function {
+        method: Method,
+        seed: u64,
+        in_flight: usize,
+        per_task: bool,
+    },
+    /// The Section 4 model: no policy, and an environment that keeps state.
+    Toy {
+        method: Method,
+        seed: u64,
+        in_flight: usize,
+    },
+}
+
+impl Setup {
+    fn build(self) -> (Learner, Box<dyn Environment>) {
+        match self {
+            Setup::Function {
+                method,
+                seed,
+                in_flight,
+                per_task,
+            } => {
+                let problem = ContextualFunction::grid_problem(6, seed);
+                let selector = selector_config(method).build(&problem).unwrap();
+                let memory = if per_task {
+                    MemoryConfig::BestPerTask { per_task: 3 }
+                } else {
+                    MemoryConfig::SlidingWindow { capacity: 50 }
+                };
+                let creps = CRepsConfig {
+                    epsilon: 1.0,
+                    update_every: 20,
+                    memory,
+                    features: FeatureMap::Quadratic,
+                    ..CRepsConfig::default()
+                };
+                let config = LearnerConfig {
+                    seed,
+                    episodes: 240,
+                    in_flight,
+                    eval_every: 40,
+                    creps: Some(creps),
+                };
+                let environment = Flaky(ContextualFunction::new(2, 6, seed).unwrap());
+                (Learner::new(config, problem, selector).unwrap(), Box::new(environment))
+            }
+            Setup::Toy {
+                method,
+                seed,
+                in_flight,
+            } => {
+                let problem = LearningModel::problem();
+                let selector = selector_config(method).build(&problem).unwrap();
+                let config = LearnerConfig {
+                    seed,
+                    episodes: 200,
+                    in_flight,
+                    eval_every: 10,
+                    creps: None,
+                };
+                let model = LearningModel::new(
+                    LearningModelConfig {
+                        sigma_r: 0.01,
+                        sigma_b: 0.2,
+                    },
+                    seed,
+                )
+                .unwrap();
+                (Learner::new(config, problem, selector).unwrap(), Box::new(model))
+            }
+        }
+    }
+
+    /// Whether tasks may be out, or told out of order, when the checkpoint is taken: not with
+    /// an environment whose rollouts change it.
+    fn stateless(self) -> bool {
+        matches!(self, Setup::Function { .. })
+    }
+}
+
+/// The bytes of a checkpoint of `learner`: every bit of its state.
+fn bits(learner: &Learner, environment: &dyn Environment) -> Vec<u8> {
+    checkpoint::encode(STAMP, &Checkpoint::take(learner, environment))
+}
+
+/// Drive `learner` for `tells` outcomes, then stop as if killed. Sequentially, or, `shuffled`,
+/// by taking every task offered, performing them all and telling the outcomes in a shuffled
+/// order, so that at the stop tasks are out and outcomes wait in the reorder buffer.
+fn drive(learner: &mut Learner, environment: &mut dyn Environment, tells: usize, shuffled: Option<u64>) {
+    let mut told = 0;
+    let Some(order_seed) = shuffled else {
+        while told < tells {
+            let Some(task) = learner.ask() else { return };
+            learner.tell(environment.rollout(&task)).unwrap();
+            told += 1;
+        }
+        return;
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(order_seed);
+    while told < tells {
+        let mut outcomes: Vec<Outcome> = std::iter::from_fn(|| learner.ask())
+            .map(|task| environment.rollout(&task))
+            .collect();
+        if outcomes.is_empty() {
+            return;
+        }
+        outcomes.shuffle(&mut rng);
+        for outcome in outcomes {
+            if told == tells {
+                return;
+            }
+            learner.tell(outcome).unwrap();
+            told += 1;
+        }
+    }
+}
+
+/// Interrupt `setup` after each count of `cuts` in turn (each time checkpoint, encode, decode,
+/// restore into a freshly built learner and environment), finish, and return the final bits.
+fn interrupted(setup: Setup, cuts: &[usize], shuffled: Option<u64>) -> Vec<u8> {
+    let (mut learner, mut environment) = setup.build();
+    for &tells in cuts {
+        drive(&mut learner, environment.as_mut(), tells, shuffled);
+        let bytes = bits(&learner, environment.as_ref());
+        let saved = checkpoint::decode(&bytes, STAMP).unwrap();
+        (learner, environment) = setup.build();
+        saved.apply(&mut learner, environment.as_mut()).unwrap();
+        assert!(
+            bits(&learner, environment.as_ref()) == bytes,
+            "{setup:?}: restore is exact"
+        );
+    }
+    run_in_process(&mut learner, environment.as_mut());
+    bits(&learner, environment.as_ref())
+}
+
+fn uninterrupted(setup: Setup) -> Vec<u8> {
+    let (mut learner, mut environment) = setup.build();
+    run_in_process(&mut learner, environment.as_mut());
+    assert!(learner.is_done());
+    bits(&learner, environment.as_ref())
+}
+
+fn check(setup: Setup) {
+    let reference = uninterrupted(setup);
+    let cut_lists: [&[usize]; 6] = [&[0], &[1], &[57], &[130], &[3, 41, 90], &[10_000]];
+    for cuts in cut_lists {
+        assert!(
+            interrupted(setup, cuts, None) == reference,
+            "{setup:?} interrupted after {cuts:?} tells"
+        );
+        if setup.stateless() {
+            for order_seed in [0, 1] {
+                assert!(
+                    interrupted(setup, cuts, Some(order_seed)) == reference,
+                    "{setup:?} interrupted after {cuts:?} shuffled tells (order {order_seed})"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn resumed_function_runs_are_bit_identical_for_every_selector() {
+    let methods = [
+        Method::MonotonicProgress,
+        Method::BestReward,
+        Method::OneStepProgress,
+        Method::RoundRobin,
+        Method::Corners,
+        Method::Random,
+        Method::RandomContinuous,
+        Method::SaggRiac,
+    ];
+    for method in methods {
+        for (seed, in_flight) in [(0, 1), (1, 4)] {
+            check(Setup::Function {
+                method,
+                seed,
+                in_flight,
+                per_task: false,
+            });
+        }
+    }
+    // The per-task memory, mid-window.
+    check(Setup::Function {
+        method: Method::Diversity,
+        seed: 2,
+        in_flight: 3,
+        per_task: true,
+    });
+}
+
+#[test]
+fn resumed_toy_runs_are_bit_identical_with_the_model_state() {
+    for method in [Method::MonotonicProgress, Method::SaggRiac, Method::Random] {
+        for (seed, in_flight) in [(0, 1), (3, 5)] {
+            check(Setup::Toy {
+                method,
+                seed,
+                in_flight,
+            });
+        }
+    }
+}
+
+#[test]
+fn the_interrupted_runs_did_fail_retry_and_update() {
+    // The reference runs above exercise retries, failed episodes and updates.
+    let (mut learner, mut environment) = Setup::Function {
+        method: Method::MonotonicProgress,
+        seed: 1,
+        in_flight: 4,
+        per_task: false,
+    }
+    .build();
+    run_in_process(&mut learner, environment.as_mut());
+    let stats = learner.stats();
+    assert!(
+        stats.retries > 0 && stats.failed_episodes > 0 && stats.updates > 0,
+        "{stats:?}"
+    );
+}
+
+#[test]
+fn a_checkpoint_of_another_selector_or_window_is_refused() {
+    let setup = |method, in_flight| Setup::Function {
+        method,
+        seed: 0,
+        in_flight,
+        per_task: false,
+    };
+    let (mut learner, mut environment) = setup(Method::RoundRobin, 2).build();
+    drive(&mut learner, environment.as_mut(), 30, None);
+    let saved = Checkpoint::take(&learner, environment.as_ref());
+
+    let (mut other, mut environment) = setup(Method::MonotonicProgress, 2).build();
+    let error = saved.clone().apply(&mut other, environment.as_mut()).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "selector state: a round-robin state cannot restore a D-UCB selector"
+    );
+    let (mut other, mut environment) = setup(Method::RoundRobin, 3).build();
+    let error = saved.apply(&mut other, environment.as_mut()).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "the checkpoint is of a learner with in_flight 2, this one has in_flight 3"
+    );
+    // A toy checkpoint (no policy, a model state) for a function learner.
+    let toy = Setup::Toy {
+        method: Method::RoundRobin,
+        seed: 0,
+        in_flight: 2,
+    };
+    let (learner, environment) = toy.build();
+    let saved = Checkpoint::take(&learner, environment.as_ref());
+    let (mut other, mut environment) = setup(Method::RoundRobin, 2).build();
+    let error = saved.apply(&mut other, environment.as_mut()).unwrap_err();
+    assert!(error.to_string().contains("problem learning-model"), "{error}");
+}
