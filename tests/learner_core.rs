@@ -312,7 +312,7 @@ fn progress_reports_episodes_and_the_latest_complete_evaluation() {
     for seed in [1, 2, 3] {
         let (mut learner, mut environment) = function_learner(Method::MonotonicProgress, seed, 4, 200);
         let mut observed = Vec::new();
-        let mut rollouts = 0;
+        let mut rollouts = 0u64;
         while let Some(task) = learner.ask() {
             learner.tell(environment.rollout(&task)).unwrap();
             rollouts += 1;
@@ -322,7 +322,6 @@ fn progress_reports_episodes_and_the_latest_complete_evaluation() {
         }
         // The rollouts are the training episodes, the evaluations and the first-visit baselines.
         let evaluation_rollouts: usize = learner.evaluations().iter().map(|e| e.outcomes.len()).sum();
-        let rollouts: u64 = observed.iter().map(|(_, r)| r).sum();
         let baselines = learner.problem().training_contexts.len() as u64;
         assert_eq!(rollouts, 200 + evaluation_rollouts as u64 + baselines);
         let (last, _) = observed.last().unwrap();
