@@ -316,7 +316,7 @@ fn progress_reports_episodes_and_the_latest_complete_evaluation() {
         while let Some(task) = learner.ask() {
             learner.tell(environment.rollout(&task)).unwrap();
             rollouts += 1;
-            if rollouts % 37 == 0 || learner.is_done() {
+            if rollouts.is_multiple_of(37) || learner.is_done() {
                 observed.push((learner.progress(), rollouts));
             }
         }
