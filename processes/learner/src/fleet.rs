@@ -112,6 +112,7 @@ pub fn serve(
     let mut refused_clients = HashSet::new();
     let mut idle_since: Option<Instant> = None;
     let mut outcomes = VecDeque::new();
+    let mut unannounced = 0;
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
@@ -139,8 +140,12 @@ pub fn serve(
         // ready ones wait in the cores, and workers get them without waiting for C-REPS updates
         // (a millisecond each) of the outcomes queued before theirs.
         let answered = answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?;
-        if answered > 0 {
+        // Workers that are simulating need no wake-up; one per 8 answers, or once the queued
+        // outcomes are told, reaches those that wait without a syscall per task.
+        unannounced += answered;
+        if unannounced > 0 && (outcomes.is_empty() || unannounced >= 8) {
             notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
+            unannounced = 0;
         }
         let told_one = if let Some((job, outcome)) = outcomes.pop_front() {
             let started = Instant::now();
