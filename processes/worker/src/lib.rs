@@ -16,6 +16,9 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+/// How often a starting worker looks for the run's learner.
+const JOIN_POLL: Duration = Duration::from_millis(2);
+
 /// Where a worker gets the environment a task names.
 pub trait EnvironmentFactory {
     /// The environment for `spec`, or why there is none.
@@ -178,7 +181,9 @@ pub fn serve(
                 waited: started.elapsed(),
             });
         }
-        std::thread::sleep(TICK);
+        // Spawned workers usually start before the learner serves; a short poll lets them join
+        // within a few milliseconds (a benchmark row lasts about a second).
+        std::thread::sleep(JOIN_POLL);
     }
     tracing::info!("worker {} joins run '{run}'", options.name);
     let client = services
