@@ -4,22 +4,23 @@
 //!
 //! Services of a run:
 //! - `tasks`: request-response; the learner is the only server, every worker a client. A request
-//!   carries the previous task's outcome, its response the next task (workers pull work).
+//!   carries the outcomes of tasks the worker performed, its response up to as many new tasks
+//!   as it asks for (workers pull work).
 //! - `to-learner`: event; workers wake the learner after sending requests.
 //! - `to-workers`: event; the learner wakes workers after answering.
 
-use crate::wire::{WireTask, WorkerMessage};
+use crate::wire::{TaskBatch, WorkerMessage};
 use iceoryx2::prelude::*;
 use std::time::Duration;
 
 /// Most workers one run serves.
 pub const MAX_WORKERS: usize = 128;
-/// Most requests one worker keeps in flight.
+/// Most tasks (and so requests) one worker keeps in flight.
 pub const MAX_IN_FLIGHT_PER_WORKER: usize = 64;
 
 /// The task service.
 pub type TaskService =
-    iceoryx2::service::port_factory::request_response::PortFactory<ipc::Service, WorkerMessage, (), WireTask, ()>;
+    iceoryx2::service::port_factory::request_response::PortFactory<ipc::Service, WorkerMessage, (), TaskBatch, ()>;
 /// An event service.
 pub type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
 
@@ -125,7 +126,7 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         |name: &str| ServiceName::new(name).map_err(|e| IpcError::new(format!("service name '{name}'"), e));
     let tasks = node
         .service_builder(&service_name("tasks")?)
-        .request_response::<WorkerMessage, WireTask>()
+        .request_response::<WorkerMessage, TaskBatch>()
         .max_servers(1)
         .max_clients(MAX_WORKERS)
         .max_nodes(nodes)

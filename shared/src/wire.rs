@@ -3,18 +3,25 @@
 //! Both are `#[repr(C)]`, free of pointers and `Drop`, and carry a stable type name, so that every
 //! process of one build agrees on them. A worker announces the protocol version and the run's
 //! identity in every message; the learner refuses mismatches instead of mixing them in.
+//!
+//! Messages are batches: a worker's request carries the outcomes of up to [`MAX_BATCH`] tasks
+//! and asks for up to as many new ones, and the learner answers with every ready task it may
+//! give, so cheap rollouts pay the per-message cost (a shared-memory hand-over, a wake-up) once
+//! per batch instead of once per task.
 
 use crate::{Outcome, OutcomeStatus, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 /// Largest context a task can carry.
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
 pub const MAX_THETA: usize = 64;
 /// Largest diagnostics vector an outcome can carry.
 pub const MAX_DIAGNOSTICS: usize = 4;
+/// Most tasks one answer carries, and most outcomes one request carries.
+pub const MAX_BATCH: usize = 16;
 
 /// Which environment a task needs: workers build environments from this and cache them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, ZeroCopySend, serde::Serialize, serde::Deserialize)]
@@ -28,11 +35,11 @@ pub struct EnvironmentSpec {
     pub problem_seed: u64,
 }
 
-/// What a response to a worker means.
+/// What an answer to a worker means.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
 pub enum Response {
-    /// A task to perform.
+    /// Tasks to perform.
     Task = 1,
     /// The run is over: stop.
     Stop = 2,
@@ -40,48 +47,53 @@ pub enum Response {
     Refused = 3,
 }
 
-/// The learner's answer to a worker's request.
+/// One task of a [`TaskBatch`].
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
-#[type_name("acps::WireTask")]
 pub struct WireTask {
-    /// A [`Response`].
-    pub response: u32,
     /// The learner's [`TaskKind`] (0 train, 1 evaluate, 2 baseline).
     pub kind: u32,
     /// Which learner (method x run) of the experiment the task belongs to.
     pub job: u32,
     /// Number of valid entries of `context`.
     pub context_len: u32,
+    /// Number of valid entries of `theta`.
+    pub theta_len: u32,
     /// The task's id within its job.
     pub task_id: u64,
     /// Seed of everything random inside the rollout.
     pub seed: u64,
     /// The environment to perform it in.
     pub environment: EnvironmentSpec,
-    /// Number of valid entries of `theta`.
-    pub theta_len: u32,
-    /// With `Refused`: the learner's protocol version.
-    pub protocol: u32,
-    /// With `Refused`: the learner's run identity.
-    pub run: u64,
     /// The context.
     pub context: [f64; MAX_CONTEXT],
     /// The parameters.
     pub theta: [f64; MAX_THETA],
 }
 
-/// What a worker sends: a request for work, carrying the outcome of its previous task if any.
+/// The learner's answer to a worker's request.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
-#[type_name("acps::WorkerMessage")]
-pub struct WorkerMessage {
-    /// The worker's [`PROTOCOL_VERSION`].
+#[type_name("acps::TaskBatch")]
+pub struct TaskBatch {
+    /// A [`Response`].
+    pub response: u32,
+    /// Number of valid entries of `tasks`.
+    pub count: u32,
+    /// The learner's protocol version.
     pub protocol: u32,
-    /// 1 when the outcome fields are valid.
-    pub has_outcome: u32,
-    /// The run the worker means to join.
+    /// Padding, always 0.
+    pub reserved: u32,
+    /// The learner's run identity.
     pub run: u64,
+    /// The tasks.
+    pub tasks: [WireTask; MAX_BATCH],
+}
+
+/// One outcome of a [`WorkerMessage`].
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+pub struct WireOutcome {
     /// The outcome's job.
     pub job: u32,
     /// 1 for an ok outcome, 0 for a failed one.
@@ -98,6 +110,26 @@ pub struct WorkerMessage {
     pub reserved: u32,
     /// The diagnostics.
     pub diagnostics: [f64; MAX_DIAGNOSTICS],
+}
+
+/// What a worker sends: a request for up to `want` tasks, carrying the outcomes of tasks it
+/// performed.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+#[type_name("acps::WorkerMessage")]
+pub struct WorkerMessage {
+    /// The worker's [`PROTOCOL_VERSION`].
+    pub protocol: u32,
+    /// How many tasks the worker asks for, 1..=[`MAX_BATCH`].
+    pub want: u32,
+    /// The run the worker means to join.
+    pub run: u64,
+    /// Number of valid entries of `outcomes`.
+    pub count: u32,
+    /// Padding, always 0.
+    pub reserved: u32,
+    /// The outcomes.
+    pub outcomes: [WireOutcome; MAX_BATCH],
 }
 
 /// A task or outcome that does not fit the fixed capacities.
@@ -133,57 +165,27 @@ fn kind_code(kind: TaskKind) -> u32 {
     }
 }
 
+/// The batch is full (at most [`MAX_BATCH`] entries).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("a batch carries at most {MAX_BATCH} entries")]
+pub struct BatchFull;
+
 impl WireTask {
     /// A task of `job` to perform in `environment`.
-    pub fn task(job: u32, task: &Task, environment: EnvironmentSpec) -> Result<Self, CapacityError> {
+    pub fn new(job: u32, task: &Task, environment: EnvironmentSpec) -> Result<Self, CapacityError> {
         let (context, context_len) = fit::<MAX_CONTEXT>("a task's context", &task.context)?;
         let (theta, theta_len) = fit::<MAX_THETA>("a task's theta", &task.theta)?;
         Ok(Self {
-            response: Response::Task as u32,
             kind: kind_code(task.kind),
             job,
             context_len,
+            theta_len,
             task_id: task.id,
             seed: task.seed,
             environment,
-            theta_len,
-            protocol: PROTOCOL_VERSION,
-            run: 0,
             context,
             theta,
         })
-    }
-
-    /// A response without a task: `Stop`, or `Refused` carrying the learner's identity.
-    pub fn control(response: Response, run: u64) -> Self {
-        Self {
-            response: response as u32,
-            kind: 0,
-            job: 0,
-            context_len: 0,
-            task_id: 0,
-            seed: 0,
-            environment: EnvironmentSpec {
-                model: 0,
-                options: [0; 3],
-                problem_seed: 0,
-            },
-            theta_len: 0,
-            protocol: PROTOCOL_VERSION,
-            run,
-            context: [0.0; MAX_CONTEXT],
-            theta: [0.0; MAX_THETA],
-        }
-    }
-
-    /// The response kind, `None` for an unknown code.
-    pub fn response(&self) -> Option<Response> {
-        match self.response {
-            1 => Some(Response::Task),
-            2 => Some(Response::Stop),
-            3 => Some(Response::Refused),
-            _ => None,
-        }
     }
 
     /// The task it carries (lengths are clamped to the capacities, so a corrupt message cannot
@@ -204,47 +206,78 @@ impl WireTask {
     }
 }
 
-impl WorkerMessage {
-    /// A request for work without an outcome.
-    pub fn hello(run: u64) -> Self {
-        Self {
-            protocol: PROTOCOL_VERSION,
-            has_outcome: 0,
-            run,
+impl TaskBatch {
+    /// An answer without tasks: `Task` (to be filled with [`TaskBatch::push`]), `Stop`, or
+    /// `Refused`; it carries the learner's identity.
+    pub fn control(response: Response, run: u64) -> Self {
+        const EMPTY: WireTask = WireTask {
+            kind: 0,
             job: 0,
-            ok: 0,
+            context_len: 0,
+            theta_len: 0,
             task_id: 0,
-            reward: 0.0,
-            score: 0.0,
-            diagnostics_len: 0,
+            seed: 0,
+            environment: EnvironmentSpec {
+                model: 0,
+                options: [0; 3],
+                problem_seed: 0,
+            },
+            context: [0.0; MAX_CONTEXT],
+            theta: [0.0; MAX_THETA],
+        };
+        Self {
+            response: response as u32,
+            count: 0,
+            protocol: PROTOCOL_VERSION,
             reserved: 0,
-            diagnostics: [0.0; MAX_DIAGNOSTICS],
+            run,
+            tasks: [EMPTY; MAX_BATCH],
         }
     }
 
-    /// A request for work carrying the outcome of `job`'s task. Diagnostics beyond the capacity
-    /// are an error rather than silently cut.
-    pub fn with_outcome(run: u64, job: u32, outcome: &Outcome) -> Result<Self, CapacityError> {
+    /// Add a task.
+    pub fn push(&mut self, task: WireTask) -> Result<(), BatchFull> {
+        let slot = self.tasks.get_mut(self.count as usize).ok_or(BatchFull)?;
+        *slot = task;
+        self.count += 1;
+        Ok(())
+    }
+
+    /// The answer's kind, `None` for an unknown code.
+    pub fn response(&self) -> Option<Response> {
+        match self.response {
+            1 => Some(Response::Task),
+            2 => Some(Response::Stop),
+            3 => Some(Response::Refused),
+            _ => None,
+        }
+    }
+
+    /// The tasks (the count is clamped to the capacity).
+    pub fn tasks(&self) -> &[WireTask] {
+        &self.tasks[..(self.count as usize).min(MAX_BATCH)]
+    }
+}
+
+impl WireOutcome {
+    /// `job`'s outcome. Diagnostics beyond the capacity are an error rather than silently cut.
+    pub fn new(job: u32, outcome: &Outcome) -> Result<Self, CapacityError> {
         let (diagnostics, diagnostics_len) = fit::<MAX_DIAGNOSTICS>("an outcome's diagnostics", &outcome.diagnostics)?;
         Ok(Self {
-            has_outcome: 1,
             job,
             ok: u32::from(outcome.is_ok()),
             task_id: outcome.task_id,
             reward: outcome.reward,
             score: outcome.score,
             diagnostics_len,
+            reserved: 0,
             diagnostics,
-            ..Self::hello(run)
         })
     }
 
-    /// The outcome it carries, if any. A message marked ok with non-finite numbers becomes a
-    /// failed outcome (`Outcome::new` checks), so a NaN cannot sneak in through the wire.
-    pub fn outcome(&self) -> Option<(u32, Outcome)> {
-        if self.has_outcome != 1 {
-            return None;
-        }
+    /// The job and the outcome. One marked ok with non-finite numbers becomes a failed outcome
+    /// (`Outcome::new` checks), so a NaN cannot sneak in through the wire.
+    pub fn to_outcome(&self) -> (u32, Outcome) {
         let diagnostics = self.diagnostics[..(self.diagnostics_len as usize).min(MAX_DIAGNOSTICS)].to_vec();
         let outcome = if self.ok == 1 {
             Outcome::new(self.task_id, self.reward, self.score).with_diagnostics(diagnostics)
@@ -254,13 +287,66 @@ impl WorkerMessage {
                 ..Outcome::failed(self.task_id)
             }
         };
-        Some((self.job, outcome))
+        (self.job, outcome)
+    }
+}
+
+impl WorkerMessage {
+    /// A request for `want` tasks (clamped to 1..=[`MAX_BATCH`]) without outcomes, from a worker
+    /// that means to join `run` (0: whatever runs).
+    pub fn request(run: u64, want: usize) -> Self {
+        const EMPTY: WireOutcome = WireOutcome {
+            job: 0,
+            ok: 0,
+            task_id: 0,
+            reward: 0.0,
+            score: 0.0,
+            diagnostics_len: 0,
+            reserved: 0,
+            diagnostics: [0.0; MAX_DIAGNOSTICS],
+        };
+        Self {
+            protocol: PROTOCOL_VERSION,
+            want: want.clamp(1, MAX_BATCH) as u32,
+            run,
+            count: 0,
+            reserved: 0,
+            outcomes: [EMPTY; MAX_BATCH],
+        }
+    }
+
+    /// Add an outcome.
+    pub fn push(&mut self, outcome: WireOutcome) -> Result<(), BatchFull> {
+        let slot = self.outcomes.get_mut(self.count as usize).ok_or(BatchFull)?;
+        *slot = outcome;
+        self.count += 1;
+        Ok(())
+    }
+
+    /// The outcomes it carries (the count is clamped to the capacity).
+    pub fn outcomes(&self) -> impl Iterator<Item = (u32, Outcome)> + '_ {
+        self.outcomes[..(self.count as usize).min(MAX_BATCH)]
+            .iter()
+            .map(WireOutcome::to_outcome)
+    }
+
+    /// Tasks asked for, clamped to 1..=[`MAX_BATCH`].
+    pub fn wanted(&self) -> usize {
+        (self.want as usize).clamp(1, MAX_BATCH)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn spec() -> EnvironmentSpec {
+        EnvironmentSpec {
+            model: 3,
+            options: [1, 0, 0],
+            problem_seed: 9,
+        }
+    }
 
     #[test]
     fn tasks_and_outcomes_survive_the_wire() {
@@ -271,19 +357,54 @@ mod tests {
             context: vec![-3.5, -4.0],
             theta: (0..21).map(f64::from).collect(),
         };
-        let spec = EnvironmentSpec {
-            model: 3,
-            options: [1, 0, 0],
-            problem_seed: 9,
-        };
-        let wire = WireTask::task(5, &task, spec).unwrap();
-        assert_eq!(wire.response(), Some(Response::Task));
-        assert_eq!((wire.job, wire.environment), (5, spec));
-        assert_eq!(wire.to_task(), task);
+        let mut batch = TaskBatch::control(Response::Task, 11);
+        batch.push(WireTask::new(5, &task, spec()).unwrap()).unwrap();
+        assert_eq!(
+            (batch.response(), batch.run, batch.tasks().len()),
+            (Some(Response::Task), 11, 1)
+        );
+        assert_eq!((batch.tasks()[0].job, batch.tasks()[0].environment), (5, spec()));
+        assert_eq!(batch.tasks()[0].to_task(), task);
         let outcome = Outcome::new(42, -1.5, 12.0).with_diagnostics(vec![-3.4, -4.1]);
-        let message = WorkerMessage::with_outcome(11, 5, &outcome).unwrap();
-        assert_eq!(message.outcome(), Some((5, outcome)));
-        assert_eq!(WorkerMessage::hello(11).outcome(), None);
+        let mut message = WorkerMessage::request(11, 4);
+        assert_eq!(message.outcomes().count(), 0);
+        message.push(WireOutcome::new(5, &outcome).unwrap()).unwrap();
+        message
+            .push(WireOutcome::new(6, &Outcome::failed(43)).unwrap())
+            .unwrap();
+        let received: Vec<_> = message.outcomes().collect();
+        assert_eq!(received[0], (5, outcome));
+        assert_eq!(
+            (received[1].0, received[1].1.task_id, received[1].1.is_ok()),
+            (6, 43, false)
+        );
+        assert_eq!(message.wanted(), 4);
+    }
+
+    #[test]
+    fn batches_are_bounded_and_clamped() {
+        let mut message = WorkerMessage::request(0, 0);
+        assert_eq!(message.wanted(), 1, "a request asks for at least one task");
+        assert_eq!(WorkerMessage::request(0, 1000).wanted(), MAX_BATCH);
+        for id in 0..MAX_BATCH as u64 {
+            message
+                .push(WireOutcome::new(0, &Outcome::new(id, 0.0, 0.0)).unwrap())
+                .unwrap();
+        }
+        assert_eq!(
+            message.push(WireOutcome::new(0, &Outcome::new(99, 0.0, 0.0)).unwrap()),
+            Err(BatchFull)
+        );
+        // A corrupt count cannot make the learner read beyond the array.
+        message.count = u32::MAX;
+        assert_eq!(message.outcomes().count(), MAX_BATCH);
+        let mut batch = TaskBatch::control(Response::Stop, 1);
+        batch.count = 1000;
+        assert_eq!(batch.tasks().len(), MAX_BATCH);
+        assert_eq!(
+            TaskBatch::control(Response::Refused, 1).response(),
+            Some(Response::Refused)
+        );
     }
 
     #[test]
@@ -295,24 +416,16 @@ mod tests {
             context: vec![0.0; MAX_CONTEXT + 1],
             theta: vec![],
         };
-        let error = WireTask::task(
-            0,
-            &task,
-            EnvironmentSpec {
-                model: 0,
-                options: [0; 3],
-                problem_seed: 0,
-            },
-        )
-        .unwrap_err();
+        let error = WireTask::new(0, &task, spec()).unwrap_err();
         assert_eq!(
             error.to_string(),
             "a task's context has 9 values, the wire carries at most 8"
         );
-        let mut message = WorkerMessage::with_outcome(1, 0, &Outcome::new(3, 1.0, 1.0)).unwrap();
-        message.reward = f64::NAN;
-        assert!(!message.outcome().unwrap().1.is_ok());
-        let failed = WorkerMessage::with_outcome(1, 0, &Outcome::failed(4)).unwrap();
-        assert!(!failed.outcome().unwrap().1.is_ok());
+        let mut wire = WireOutcome::new(0, &Outcome::new(3, 1.0, 1.0)).unwrap();
+        wire.reward = f64::NAN;
+        assert!(!wire.to_outcome().1.is_ok());
+        assert!(!WireOutcome::new(0, &Outcome::failed(4)).unwrap().to_outcome().1.is_ok());
+        let too_many = Outcome::new(5, 0.0, 0.0).with_diagnostics(vec![0.0; MAX_DIAGNOSTICS + 1]);
+        assert!(WireOutcome::new(0, &too_many).is_err());
     }
 }

@@ -45,7 +45,7 @@ pub struct Row {
 pub struct BenchOptions {
     /// Largest fleet.
     pub max_workers: usize,
-    /// Requests each worker keeps in flight.
+    /// Tasks each worker keeps in flight.
     pub worker_in_flight: usize,
     /// Multiplies the amount of work per row (1 = a few seconds per row).
     pub scale: f64,

@@ -171,7 +171,7 @@ struct BenchArgs {
     /// Largest fleet (default: the number of cores).
     #[arg(long)]
     max_workers: Option<usize>,
-    /// Requests each worker keeps in flight (1..=64).
+    /// Tasks each worker keeps in flight, asked for or queued (1..=64).
     #[arg(long, default_value_t = 16)]
     worker_in_flight: usize,
     /// Multiplies the work per row (1: a few seconds per row).
@@ -186,7 +186,7 @@ struct RunArgs {
     /// Worker processes to start (default: the number of cores).
     #[arg(long)]
     workers: Option<usize>,
-    /// Requests each started worker keeps in flight (1..=64).
+    /// Tasks each started worker keeps in flight, asked for or queued (1..=64).
     #[arg(long, default_value_t = 4)]
     worker_in_flight: usize,
     /// The run's name: its shared-memory prefix, and how workers started by hand join it
@@ -200,7 +200,8 @@ struct WorkerArgs {
     /// The run to join (the learner's --run).
     #[arg(long)]
     run: String,
-    /// Requests kept in flight (1..=64): more hides the wake-up latency between processes.
+    /// Tasks kept in flight, asked for or queued (1..=64): more hides the wake-up latency
+    /// between processes; cheap rollouts travel in batches of up to half of them.
     #[arg(long, default_value_t = 4)]
     in_flight: usize,
     /// The worker's name in iceoryx2's node list (default: worker-PID).

@@ -17,7 +17,7 @@ pub fn spin(workers: usize) -> Duration {
     }
 }
 
-/// Start `workers` worker processes for `run`, each keeping `in_flight` requests in flight.
+/// Start `workers` worker processes for `run`, each keeping `in_flight` tasks in flight.
 pub fn spawn(run: &RunName, workers: usize, in_flight: usize) -> anyhow::Result<Vec<Child>> {
     let spin = spin(workers).as_micros().to_string();
     let exe = std::env::current_exe().context("locating the acps executable")?;

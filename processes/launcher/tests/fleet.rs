@@ -1,7 +1,7 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
 use acps_shared::ipc::{self, RunName};
-use acps_shared::wire::{Response, WireTask, WorkerMessage};
+use acps_shared::wire::{Response, TaskBatch, WorkerMessage};
 use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::path::{Path, PathBuf};
@@ -81,15 +81,23 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
         let reference = in_process(&args, &dir.join("in-process"));
         let written = dir.join("in-process").join("config.toml");
         let from_file = ["--config", written.to_str().unwrap(), "-q"];
-        // One worker runs the options, two run the in-process run's experiment file.
-        for (workers, args) in [("1", &args[..]), ("2", &from_file[..])] {
+        // One worker runs the options; two run the in-process run's experiment file with 16
+        // tasks in flight each, so that tasks and outcomes travel in batches of several.
+        for (workers, in_flight, args) in [("1", "4", &args[..]), ("2", "16", &from_file[..])] {
             let run = run_name(&format!("match-{p}-{workers}"));
             let out = dir.join(format!("fleet-{workers}"));
             check(
                 watched()
                     .arg("run")
                     .args(args)
-                    .args(["--workers", workers, "--run", run.as_str()])
+                    .args([
+                        "--workers",
+                        workers,
+                        "--worker-in-flight",
+                        in_flight,
+                        "--run",
+                        run.as_str(),
+                    ])
                     .arg("--out")
                     .arg(&out)
                     .output()
@@ -277,7 +285,7 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         let _node = node;
         let client = services.tasks.client_builder().create().unwrap();
         let notifier = services.to_learner.notifier_builder().create().unwrap();
-        let ask = |message: WorkerMessage| -> WireTask {
+        let ask = |message: WorkerMessage| -> TaskBatch {
             let pending = client.send_copy(message).unwrap();
             notifier.notify().unwrap();
             let start = Instant::now();
@@ -291,10 +299,10 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         };
         let wrong_protocol = WorkerMessage {
             protocol: 99,
-            ..WorkerMessage::hello(0)
+            ..WorkerMessage::request(0, 1)
         };
         assert_eq!(ask(wrong_protocol).response(), Some(Response::Refused));
-        let wrong_run = WorkerMessage::hello(0x1234_5678);
+        let wrong_run = WorkerMessage::request(0x1234_5678, 1);
         let answer = ask(wrong_run);
         assert_eq!(answer.response(), Some(Response::Refused));
         assert_ne!(answer.run, 0x1234_5678, "the refusal carries the learner's identity");

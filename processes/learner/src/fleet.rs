@@ -12,7 +12,9 @@
 
 use crate::learner::{Learner, LearningProgress, TellError};
 use acps_shared::ipc::{self, IpcError, RunName, TICK};
-use acps_shared::wire::{CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask, WorkerMessage};
+use acps_shared::wire::{
+    CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, TaskBatch, WireTask, WorkerMessage,
+};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -127,21 +129,21 @@ pub fn serve(
                         message.run
                     );
                 }
-                let _ = request.send_copy(WireTask::control(Response::Refused, identity));
+                let _ = request.send_copy(TaskBatch::control(Response::Refused, identity));
                 continue;
             }
-            if let Some((job, outcome)) = message.outcome() {
+            for (job, outcome) in message.outcomes() {
                 holders.remove(&(job, outcome.task_id));
                 outcomes.push_back((job, outcome));
             }
-            parked.push_back(request);
+            parked.push_back((request, message.wanted()));
         }
         // Answer before telling, and tell one outcome per pass: tasks are created eagerly, so
         // ready ones wait in the cores, and workers get them without waiting for C-REPS updates
         // (a millisecond each) of the outcomes queued before theirs.
         let answered = answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?;
-        // Workers that are simulating need no wake-up; one per 8 answers, or once the queued
-        // outcomes are told, reaches those that wait without a syscall per task.
+        // Workers that are simulating need no wake-up; one per 8 tasks answered, or once the
+        // queued outcomes are told, reaches those that wait without a syscall per task.
         unannounced += answered;
         if unannounced > 0 && (outcomes.is_empty() || unannounced >= 8) {
             notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
@@ -166,8 +168,8 @@ pub fn serve(
         };
         progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
         if progress.jobs_done == jobs.len() {
-            for request in parked.drain(..) {
-                let _ = request.send_copy(WireTask::control(Response::Stop, identity));
+            for (request, _) in parked.drain(..) {
+                let _ = request.send_copy(TaskBatch::control(Response::Stop, identity));
             }
             let _ = notifier.notify();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
@@ -228,41 +230,46 @@ pub fn serve(
     }
 }
 
-/// A worker's request: it carries the outcome of its previous task, and is answered with the
-/// next.
+/// A worker's request: it carries the outcomes of tasks it performed, and is answered with up to
+/// the number of tasks it asks for.
 type TaskRequest =
-    iceoryx2::active_request::ActiveRequest<iceoryx2::prelude::ipc::Service, WorkerMessage, (), WireTask, ()>;
+    iceoryx2::active_request::ActiveRequest<iceoryx2::prelude::ipc::Service, WorkerMessage, (), TaskBatch, ()>;
 
-/// Answer parked requests with ready tasks, round robin over the jobs; returns how many.
+/// Answer parked requests, each with as many ready tasks as it asks for (round robin over the
+/// jobs), as soon as at least one is ready; returns how many tasks went out.
 fn answer(
     jobs: &mut [FleetJob],
-    parked: &mut VecDeque<TaskRequest>,
+    parked: &mut VecDeque<(TaskRequest, usize)>,
     holders: &mut HashMap<(u32, u64), UniqueClientId>,
     next_job: &mut usize,
     identity: u64,
     progress: &mut FleetProgress,
 ) -> Result<usize, FleetError> {
     let mut answered = 0;
-    while let Some(request) = parked.pop_front() {
+    while let Some((request, want)) = parked.pop_front() {
         if !request.is_connected() {
             continue;
         }
+        let mut batch = TaskBatch::control(Response::Task, identity);
         let started = Instant::now();
-        let next = next_task(jobs, next_job);
+        while (batch.count as usize) < want {
+            let Some((job, task)) = next_task(jobs, next_job) else {
+                break;
+            };
+            batch
+                .push(WireTask::new(job as u32, &task, jobs[job].environment)?)
+                .expect("want is at most the batch capacity");
+            holders.insert((job as u32, task.id), request.origin());
+        }
         progress.learner_seconds += started.elapsed().as_secs_f64();
-        let Some((job, task)) = next else {
-            parked.push_front(request);
+        if batch.count == 0 {
+            parked.push_front((request, want));
             break;
-        };
-        let wire = WireTask {
-            run: identity,
-            ..WireTask::task(job as u32, &task, jobs[job].environment)?
-        };
-        holders.insert((job as u32, task.id), request.origin());
+        }
         request
-            .send_copy(wire)
+            .send_copy(batch)
             .map_err(|e| IpcError::new("answering a request", e))?;
-        answered += 1;
+        answered += batch.count as usize;
     }
     Ok(answered)
 }

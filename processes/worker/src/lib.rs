@@ -1,7 +1,8 @@
 //! The simulator worker of an acps fleet.
 //!
-//! A worker joins a run by name, keeps up to K requests in flight with the run's learner, and
-//! answers each task it receives with the rollout's outcome, sent as its next request. It stops
+//! A worker joins a run by name, keeps up to K tasks in flight with the run's learner (asked
+//! for, queued or not yet reported), and sends the outcomes of the tasks it performed with its
+//! next request for tasks; cheap rollouts travel in batches. It stops
 //! when the learner says the run is over, when the learner disappears, when the caller's stop
 //! flag is set, or when the learner refuses it (another build or another run).
 //!
@@ -9,7 +10,9 @@
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 
 use acps_shared::ipc::{self, IpcError, MAX_IN_FLIGHT_PER_WORKER, RunName, TICK};
-use acps_shared::wire::{EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask, WorkerMessage};
+use acps_shared::wire::{
+    EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, TaskBatch, WireOutcome, WireTask, WorkerMessage,
+};
 use acps_shared::{Environment, Outcome};
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::{HashMap, VecDeque};
@@ -53,7 +56,8 @@ impl<E: Environment> EnvironmentFactory for Single<E> {
 /// How a worker behaves.
 #[derive(Debug, Clone)]
 pub struct WorkerOptions {
-    /// Requests kept in flight, 1..=64: more hides the wake-up latency between processes.
+    /// Tasks kept in flight (asked for, queued or not yet reported), 1..=64: more hides the
+    /// wake-up latency between processes. Cheap rollouts travel in batches of up to half of them.
     pub in_flight: usize,
     /// The worker's node name (shown by iceoryx2's tools).
     pub name: String,
@@ -201,26 +205,17 @@ pub fn serve(
         .listener_builder()
         .create()
         .map_err(|e| IpcError::new("creating the worker's listener", e))?;
-    let send = |message: WorkerMessage| {
-        client
-            .send_copy(message)
-            .map_err(|e| IpcError::new("sending a request", e))
-    };
     // The learner's identity, learnt from its first answer; 0 asks to join whatever runs.
     let mut identity = 0u64;
-    let mut pending: Vec<_> = (0..options.in_flight)
-        .map(|_| send(WorkerMessage::hello(identity)).map(Some))
-        .collect::<Result<_, _>>()?;
-    notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
+    // Requests in flight, each with the number of tasks it asks for; `None` is a free slot.
+    let mut slots: Vec<Option<(PendingTasks, usize)>> = (0..options.in_flight).map(|_| None).collect();
+    // Tasks answered by the learner and not yet simulated.
+    let mut queue: VecDeque<WireTask> = VecDeque::new();
+    // Outcomes not yet sent.
+    let mut outbox = WorkerMessage::request(identity, 1);
+    let mut batching = Batching::new(options.in_flight);
     let mut rollouts = 0;
     let mut idle_since = None;
-    // Tasks answered by the learner and not yet simulated, with the slot each frees.
-    let mut queue = VecDeque::new();
-    // Outcomes sent since the learner was last woken: waking it once per half window (rather
-    // than per outcome) keeps it from preempting a worker thousands of times a second when
-    // processes share cores, while the other half window keeps this worker busy meanwhile.
-    let mut unannounced = 0;
-    let wake_every = options.in_flight.div_ceil(2);
     loop {
         if stop.load(Ordering::Relaxed) {
             return Ok(WorkerReport {
@@ -228,53 +223,88 @@ pub fn serve(
                 rollouts,
             });
         }
+        // Budget: tasks queued, unsent or asked for stay within `in_flight`. The outcomes of a
+        // batch go out when the batch is full or nothing else is left to simulate, and ask for
+        // as many tasks as the budget then allows; a worker with room to spare asks for more.
+        // A free slot always exists for outcomes: every pending request asks for at least one
+        // task, and the outcomes' own tasks still count against the budget.
+        let mut sent = false;
+        loop {
+            let asked: usize = slots.iter().flatten().map(|(_, want)| want).sum();
+            let room = options.in_flight - queue.len() - asked;
+            let batch = batching.size();
+            let flush = outbox.count > 0 && (outbox.count as usize >= batch || queue.is_empty());
+            let top_up = outbox.count == 0 && (room >= batch || (asked == 0 && queue.is_empty()));
+            if !(flush || top_up) || room == 0 {
+                break;
+            }
+            let slot = slots
+                .iter_mut()
+                .find(|slot| slot.is_none())
+                .expect("a pending request asks for at least one task of the budget");
+            let want = room.min(batch);
+            outbox.run = identity;
+            outbox.want = want as u32;
+            let request = client
+                .send_copy(outbox)
+                .map_err(|e| IpcError::new("sending a request", e))?;
+            *slot = Some((request, want));
+            outbox = WorkerMessage::request(identity, 1);
+            sent = true;
+        }
+        if sent {
+            notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
+        }
         // Polling every slot costs about as much as a trivial rollout, so it waits until the
         // queue runs dry: answers that arrive meanwhile wait in their slots.
-        let slots = if queue.is_empty() { pending.len() } else { 0 };
-        for (index, slot) in pending.iter_mut().enumerate().take(slots) {
-            let Some(request) = slot.as_ref() else { continue };
-            let Some(response) = request
-                .receive()
-                .map_err(|e| IpcError::new("receiving a response", e))?
-            else {
-                continue;
-            };
-            let wire: WireTask = *response.payload();
-            drop(response);
-            // The answered request must be gone before the next one is sent: the service allows
-            // only `in_flight` active requests per client.
-            *slot = None;
-            match wire.response() {
-                Some(Response::Task) => queue.push_back((index, wire)),
-                Some(Response::Stop) => {
-                    return Ok(WorkerReport {
-                        exit: WorkerExit::Finished,
-                        rollouts,
-                    });
+        if queue.is_empty() {
+            for slot in slots.iter_mut() {
+                let Some((request, _)) = slot.as_ref() else { continue };
+                let Some(response) = request
+                    .receive()
+                    .map_err(|e| IpcError::new("receiving a response", e))?
+                else {
+                    continue;
+                };
+                let answer: &TaskBatch = response.payload();
+                match answer.response() {
+                    Some(Response::Task) => {
+                        if identity == 0 {
+                            identity = answer.run;
+                        }
+                        queue.extend(answer.tasks());
+                    }
+                    Some(Response::Stop) => {
+                        return Ok(WorkerReport {
+                            exit: WorkerExit::Finished,
+                            rollouts,
+                        });
+                    }
+                    Some(Response::Refused) | None => {
+                        let reason = if answer.protocol != PROTOCOL_VERSION {
+                            format!(
+                                "protocol version {} here, {} at the learner (another build)",
+                                PROTOCOL_VERSION, answer.protocol
+                            )
+                        } else {
+                            format!(
+                                "this worker belongs to run identity {identity:016x}, the learner runs {:016x}",
+                                answer.run
+                            )
+                        };
+                        return Err(WorkerError::Refused {
+                            run: run.to_string(),
+                            reason,
+                        });
+                    }
                 }
-                Some(Response::Refused) | None => {
-                    let reason = if wire.protocol != PROTOCOL_VERSION {
-                        format!(
-                            "protocol version {} here, {} at the learner (another build)",
-                            PROTOCOL_VERSION, wire.protocol
-                        )
-                    } else {
-                        format!(
-                            "this worker belongs to run identity {identity:016x}, the learner runs {:016x}",
-                            wire.run
-                        )
-                    };
-                    return Err(WorkerError::Refused {
-                        run: run.to_string(),
-                        reason,
-                    });
-                }
+                // The answered request must be gone before the next one is sent: the service
+                // allows only `in_flight` active requests per client.
+                drop(response);
+                *slot = None;
             }
         }
-        if let Some((index, wire)) = queue.pop_front() {
-            if identity == 0 {
-                identity = wire.run;
-            }
+        if let Some(wire) = queue.pop_front() {
             let task = wire.to_task();
             let environment = factory
                 .environment(&wire.environment)
@@ -283,18 +313,17 @@ pub fn serve(
                     task_id: task.id,
                     reason,
                 })?;
+            let started = Instant::now();
             let outcome = environment.rollout(&task);
+            batching.observe(started.elapsed());
             rollouts += 1;
             // An outcome the wire cannot carry is reported as failed rather than cut.
-            let message = WorkerMessage::with_outcome(identity, wire.job, &outcome)
-                .or_else(|_| WorkerMessage::with_outcome(identity, wire.job, &Outcome::failed(task.id)))
+            let wire_outcome = WireOutcome::new(wire.job, &outcome)
+                .or_else(|_| WireOutcome::new(wire.job, &Outcome::failed(task.id)))
                 .expect("a failed outcome has no diagnostics");
-            pending[index] = Some(send(message)?);
-            unannounced += 1;
-            if unannounced >= wake_every || queue.is_empty() {
-                notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
-                unannounced = 0;
-            }
+            outbox
+                .push(wire_outcome)
+                .expect("the outbox is sent before it holds a full batch");
             idle_since = None;
             continue;
         }
@@ -313,5 +342,78 @@ pub fn serve(
                 rollouts,
             });
         }
+    }
+}
+
+/// A request in flight.
+type PendingTasks =
+    iceoryx2::pending_response::PendingResponse<iceoryx2::prelude::ipc::Service, WorkerMessage, (), TaskBatch, ()>;
+
+/// How much simulation one request should carry: enough to pay for the message, little enough
+/// that outcomes return promptly, since the learner creates new tasks only from outcomes.
+const BATCH_TIME: Duration = Duration::from_micros(200);
+
+/// Tasks per request, from the measured rollout time: 1 until a rollout has been timed (and
+/// for rollouts longer than [`BATCH_TIME`]), at most half the budget so that a second request
+/// is in flight while a batch is simulated, and at most [`MAX_BATCH`].
+struct Batching {
+    largest: usize,
+    mean_seconds: Option<f64>,
+}
+
+impl Batching {
+    fn new(in_flight: usize) -> Self {
+        Self {
+            largest: (in_flight / 2).clamp(1, MAX_BATCH),
+            mean_seconds: None,
+        }
+    }
+
+    fn observe(&mut self, rollout: Duration) {
+        let seconds = rollout.as_secs_f64();
+        self.mean_seconds = Some(self.mean_seconds.map_or(seconds, |mean| 0.9 * mean + 0.1 * seconds));
+    }
+
+    fn size(&self) -> usize {
+        self.mean_seconds.map_or(1, |mean| {
+            let fits = (BATCH_TIME.as_secs_f64() / mean.max(1e-9)).floor();
+            (fits.min(self.largest as f64) as usize).max(1)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn batches_follow_the_rollout_time_within_half_the_budget() {
+        let batch = |in_flight: usize, rollout: Option<Duration>| {
+            let mut batching = Batching::new(in_flight);
+            if let Some(rollout) = rollout {
+                batching.observe(rollout);
+            }
+            batching.size()
+        };
+        assert_eq!(batch(16, None), 1, "an untimed rollout travels alone");
+        assert_eq!(
+            batch(16, Some(Duration::from_millis(2))),
+            1,
+            "a rapier throw is worth a message"
+        );
+        assert_eq!(
+            batch(16, Some(Duration::from_micros(25))),
+            8,
+            "200 us of 25 us rollouts"
+        );
+        assert_eq!(batch(16, Some(Duration::from_micros(40))), 5);
+        assert_eq!(batch(64, Some(Duration::from_nanos(100))), MAX_BATCH);
+        assert_eq!(batch(3, Some(Duration::from_nanos(100))), 1, "half of 3 is 1");
+        let mut batching = Batching::new(16);
+        batching.observe(Duration::from_micros(25));
+        for _ in 0..50 {
+            batching.observe(Duration::from_millis(1));
+        }
+        assert_eq!(batching.size(), 1, "the mean follows slower rollouts");
     }
 }

@@ -1,7 +1,7 @@
 //! A worker told by the learner that it belongs to another run stops with a message naming both.
 
 use acps_shared::ipc::{self, RunName};
-use acps_shared::wire::{Response, WireTask};
+use acps_shared::wire::{Response, TaskBatch};
 use acps_worker::{ModelFactory, WorkerError, WorkerOptions};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -27,7 +27,7 @@ fn a_refused_worker_stops_and_says_why() {
         let start = Instant::now();
         while !worker.is_finished() {
             while let Some(request) = server.receive().unwrap() {
-                request.send_copy(WireTask::control(Response::Refused, 42)).unwrap();
+                request.send_copy(TaskBatch::control(Response::Refused, 42)).unwrap();
             }
             assert!(start.elapsed() < Duration::from_secs(20), "the worker never asked");
             std::thread::sleep(Duration::from_millis(5));
