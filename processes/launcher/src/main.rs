@@ -403,8 +403,7 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
             let checkpoints = checkpoints(&args.experiment, dir);
-            let spin = acps::workers::spin(workers);
-            let outcome = experiment.run_fleet(&run, spin, &stop, checkpoints.as_ref(), |p| {
+            let outcome = experiment.run_fleet(&run, acps::workers::LEARNER_SPIN, &stop, checkpoints.as_ref(), |p| {
                 if acps::workers::all_exited(&mut children) {
                     workers_lost = true;
                     stop.store(true, Ordering::Relaxed);
