@@ -469,7 +469,9 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let json = serde_json::to_string_pretty(&serde_json::json!({ "rows": rows }))?;
     let path = args.out.join("bench.json");
     std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;
-    println!("-> {}", path.display());
+    acps::plot::save_bench(&rows, &args.out)
+        .map_err(|e| anyhow::anyhow!("drawing {}: {e}", args.out.join("bench.svg").display()))?;
+    println!("-> {} and bench.svg / bench.png", path.display());
     Ok(())
 }
 

@@ -11,6 +11,7 @@
 //!   of episodes, averaged over runs (Fig. 3 and 5 over the whole run).
 //! - for the dartboard, `board` (Fig. 10), and for the throwing problems `throw`, a side view of
 //!   the initial throw.
+//! - `bench`, from `acps bench`: rollouts/s of every mode per environment, ratio above each bar.
 
 use crate::experiment::Summary;
 use acps_models::robot::Robot;
@@ -18,6 +19,7 @@ use acps_models::targets::Field;
 use acps_models::trajectory::JointTrajectory;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -108,6 +110,12 @@ pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
         _ => {}
     }
     Ok(())
+}
+
+/// Write `acps bench`'s rows to `dir/bench.svg` and `dir/bench.png`: one panel per
+/// environment, a bar of rollouts/s per mode with its ratio written above it.
+pub fn save_bench(rows: &[crate::bench::Row], dir: &Path) -> PlotResult {
+    save(&BenchBars(rows), dir, "bench")
 }
 
 /// Write the side view of one throw to `path` (.svg or .png), titled `title`.
@@ -655,6 +663,85 @@ impl Picture for ThrowSideView<'_> {
             5,
             COLORS[3].filled(),
         )))?;
+        Ok(())
+    }
+}
+
+/// `acps bench`'s rows as bars.
+struct BenchBars<'a>(&'a [crate::bench::Row]);
+
+impl BenchBars<'_> {
+    fn environments(&self) -> Vec<&'static str> {
+        let mut environments: Vec<&'static str> = Vec::new();
+        for row in self.0 {
+            if !environments.contains(&row.env) {
+                environments.push(row.env);
+            }
+        }
+        environments
+    }
+}
+
+impl Picture for BenchBars<'_> {
+    fn size(&self) -> (u32, u32) {
+        (900, 260 * self.environments().len().max(1) as u32)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let environments = self.environments();
+        for (env, area) in environments.iter().zip(root.split_evenly((environments.len(), 1))) {
+            let bars: Vec<_> = self.0.iter().filter(|row| row.env == *env).collect();
+            let labels: Vec<String> = bars
+                .iter()
+                .map(|row| match row.mode {
+                    "inprocess-1" => "in-process, 1 thread".to_string(),
+                    "inprocess-rayon" => format!("in-process, rayon {}", row.workers),
+                    mode => format!("{mode}, {} worker(s)", row.workers),
+                })
+                .collect();
+            let top = 1.2 * bars.iter().map(|row| row.rollouts_per_s).fold(0.0, f64::max).max(1.0);
+            let mut chart = ChartBuilder::on(&area)
+                .caption(
+                    format!("{env}: rollouts/s (ratio to W x one thread above each bar)"),
+                    ("sans-serif", 16),
+                )
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(70)
+                .build_cartesian_2d((0..bars.len().saturating_sub(1)).into_segmented(), 0.0..top)?;
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .y_max_light_lines(0)
+                .x_label_formatter(&|x| match x {
+                    SegmentValue::CenterOf(i) => labels.get(*i).cloned().unwrap_or_default(),
+                    _ => String::new(),
+                })
+                .y_label_formatter(&|y| format!("{y:.0}"))
+                .draw()?;
+            chart.draw_series(bars.iter().enumerate().map(|(i, row)| {
+                let color = if row.mode == "fleet" { COLORS[1] } else { COLORS[0] };
+                let mut bar = Rectangle::new(
+                    [
+                        (SegmentValue::Exact(i), 0.0),
+                        (SegmentValue::Exact(i + 1), row.rollouts_per_s),
+                    ],
+                    color.filled(),
+                );
+                bar.set_margin(0, 0, 20, 20);
+                bar
+            }))?;
+            chart.draw_series(bars.iter().enumerate().map(|(i, row)| {
+                Text::new(
+                    format!("{:.2}", row.ratio),
+                    (SegmentValue::CenterOf(i), row.rollouts_per_s + 0.02 * top),
+                    TextStyle::from(("sans-serif", 13).into_font()).pos(Pos::new(HPos::Center, VPos::Bottom)),
+                )
+            }))?;
+        }
         Ok(())
     }
 }

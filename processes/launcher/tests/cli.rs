@@ -265,6 +265,12 @@ fn bench_writes_its_table_and_json() {
         assert!(["inprocess-1", "inprocess-rayon", "fleet"].contains(&row["mode"].as_str().unwrap()));
         assert!(row["rollouts_per_s"].as_f64().unwrap() > 0.0 && row["ratio"].as_f64().unwrap() > 0.0);
     }
+    for picture in ["bench.svg", "bench.png"] {
+        assert!(
+            std::fs::metadata(dir.join(picture)).is_ok_and(|m| m.len() > 0),
+            "{picture}"
+        );
+    }
     let error = acps(&["bench", "--scale", "0"]);
     assert!(String::from_utf8_lossy(&error.stderr).contains("--scale must be finite and > 0"));
     let _ = std::fs::remove_dir_all(dir);
