@@ -62,6 +62,9 @@ pub struct Experiment {
     pub settings: serde_json::Value,
     /// Problem-specific results per method, if any.
     pub detail: Option<MethodDetail>,
+    /// Whether the summary names the best policy of all runs (Fig. 8's "Best Policy" line); only
+    /// for scores where lower is better.
+    pub best_policy: bool,
 }
 
 /// The result of one learner run.
@@ -102,6 +105,12 @@ pub struct MethodSummary {
     pub final_mean: Option<f64>,
     /// Its standard error.
     pub final_sem: Option<f64>,
+    /// The last evaluation of every run (run r has seed base_seed + r), to see what the SEM is
+    /// made of.
+    pub final_scores: Vec<Option<f64>>,
+    /// Per run, the most consecutive episodes spent on one training context: a bandit locked on
+    /// one context shows as a long stay (round robin: 1; continuous contexts do not count).
+    pub longest_stay: Vec<usize>,
     /// The selected training context (index) of every episode of run 0 (null: continuous).
     pub selections_run0: Vec<Option<usize>>,
     /// Fraction of the first `selection_window` episodes spent in each training context,
@@ -143,12 +152,58 @@ pub struct Summary {
     pub j_opt_mean: Option<f64>,
     /// Recorded settings.
     pub settings: serde_json::Value,
+    /// The lowest score of any evaluated policy, when the experiment asks for it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub best_policy: Option<BestPolicy>,
     /// Results per method.
     pub methods: BTreeMap<String, MethodSummary>,
     /// Every run of every method (keyed like `methods`), for the run directory's tables and
     /// policies; not part of summary.json.
     #[serde(skip)]
     pub run_results: BTreeMap<String, Vec<RunResult>>,
+}
+
+/// The best policy generated in all runs of all methods, as the paper's Fig. 8 reference: the
+/// lowest score over every evaluation (not only the final ones) of every run, so it is the
+/// minimum of `runs.csv`'s scores. Ties go to the first method, run and episode.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BestPolicy {
+    /// Its evaluation score.
+    pub score: f64,
+    /// The method whose run generated it.
+    pub method: String,
+    /// The run (index from 0) ...
+    pub run: usize,
+    /// ... and its seed.
+    pub seed: u64,
+    /// The training episode after which it was evaluated; the run's final policy, saved in
+    /// `policies/`, when this is the last evaluation.
+    pub episode: u64,
+}
+
+impl BestPolicy {
+    /// The lowest evaluation score in `runs` (method name, that method's runs); `None` when no
+    /// evaluation has a score.
+    fn find<'a>(runs: impl IntoIterator<Item = (&'a str, &'a [RunResult])>) -> Option<Self> {
+        let mut best: Option<Self> = None;
+        for (method, results) in runs {
+            for (run, result) in results.iter().enumerate() {
+                for (&episode, score) in result.eval_episodes.iter().zip(&result.scores) {
+                    let Some(score) = *score else { continue };
+                    if best.as_ref().is_none_or(|b| score < b.score) {
+                        best = Some(Self {
+                            score,
+                            method: method.to_string(),
+                            run,
+                            seed: result.seed,
+                            episode,
+                        });
+                    }
+                }
+            }
+        }
+        best
+    }
 }
 
 /// What the progress line of an in-process run last showed: each job's progress and the
@@ -450,6 +505,15 @@ impl Experiment {
             methods.insert(name.clone(), self.summarise(&runs, problem.training_contexts.len()));
             run_results.insert(name, runs);
         }
+        let best_policy = if self.best_policy {
+            // In the methods' order, so ties do not depend on the map's.
+            BestPolicy::find(self.methods.iter().map(|selector| {
+                let name = selector.method.name();
+                (name, run_results[name].as_slice())
+            }))
+        } else {
+            None
+        };
         Summary {
             experiment: self.name.clone(),
             metric: problem.metric.clone(),
@@ -461,6 +525,7 @@ impl Experiment {
             training_contexts: problem.training_contexts.clone(),
             j_opt_mean: (!optimal.is_empty()).then(|| mean(&optimal)),
             settings: self.settings.clone(),
+            best_policy,
             methods,
             run_results,
         }
@@ -489,6 +554,8 @@ impl Experiment {
             episodes: runs[0].eval_episodes.clone(),
             final_mean: mean.last().copied().flatten(),
             final_sem: sem.last().copied().flatten(),
+            final_scores: runs.iter().map(|r| r.scores.last().copied().flatten()).collect(),
+            longest_stay: runs.iter().map(|r| longest_stay(&r.episodes)).collect(),
             mean,
             sem,
             selections_run0: runs[0].episodes.iter().map(|e| e.arm).collect(),
@@ -508,6 +575,22 @@ impl Summary {
         let json = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
         std::fs::write(dir.join("summary.json"), json)
     }
+}
+
+/// The most consecutive episodes with the same training context (episodes without one end a
+/// stay).
+fn longest_stay(episodes: &[Episode]) -> usize {
+    let (mut longest, mut current, mut previous) = (0, 0, None);
+    for arm in episodes.iter().map(|e| e.arm) {
+        current = if arm.is_some() && arm == previous {
+            current + 1
+        } else {
+            usize::from(arm.is_some())
+        };
+        longest = longest.max(current);
+        previous = arm;
+    }
+    longest
 }
 
 /// Arithmetic mean.
@@ -534,5 +617,23 @@ mod tests {
         // Sample std of [1, 2, 3, 4] is sqrt(5/3); SEM = that / 2.
         assert!((standard_error(&[1.0, 2.0, 3.0, 4.0]) - (5.0f64 / 3.0).sqrt() / 2.0).abs() < 1e-15);
         assert_eq!(standard_error(&[3.0]), 0.0);
+    }
+
+    #[test]
+    fn the_longest_stay_counts_consecutive_episodes_on_one_context() {
+        let episodes = |arms: &[Option<usize>]| -> Vec<Episode> {
+            arms.iter()
+                .map(|&arm| Episode {
+                    arm,
+                    context: vec![],
+                    reward: 0.0,
+                })
+                .collect()
+        };
+        assert_eq!(longest_stay(&episodes(&[])), 0);
+        assert_eq!(longest_stay(&episodes(&[None, None, None])), 0);
+        assert_eq!(longest_stay(&episodes(&[Some(0), Some(1), Some(0)])), 1);
+        let arms = [Some(2), Some(2), Some(1), Some(1), Some(1), None, Some(1), Some(1)];
+        assert_eq!(longest_stay(&episodes(&arms)), 3);
     }
 }

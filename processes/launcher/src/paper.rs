@@ -166,6 +166,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
             "eval_every": 10,
         }),
         detail: None,
+        best_policy: false,
     }
 }
 
@@ -282,6 +283,7 @@ fn function_experiment(
         selection_window: 250,
         settings,
         detail: None,
+        best_policy: false,
     }
 }
 
@@ -357,7 +359,7 @@ fn throwing_ducb(options: &Options) -> DUcbConfig {
 }
 
 /// Section 5.2.3, the grid problem (Fig. 8): 25 training targets, 16 test targets, 10,000
-/// episodes, D-UCB gamma 0.99, B 10,000, xi 1e-9.
+/// episodes, D-UCB gamma 0.99, B 10,000, xi 1e-9; the summary names the best policy of all runs.
 pub fn grid(sim: Sim, options: &Options) -> Experiment {
     let defaults = [
         Method::BestReward,
@@ -386,6 +388,7 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
         instance: Box::new(move |_| from_spec(grid_problem(), environment::throwing(Model::Grid, sim))),
         selection_window: 250,
         detail: None,
+        best_policy: true,
     }
 }
 
@@ -418,6 +421,7 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
         }),
         selection_window: 10_000,
         detail: Some(Box::new(move |runs| dartboard_detail(&fields, runs))),
+        best_policy: false,
     }
 }
 

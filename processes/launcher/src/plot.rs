@@ -3,7 +3,8 @@
 //! are needed):
 //! - `curves`: mean learning curve of every method with a +-1 SEM band (paper Fig. 4, 6, 8);
 //!   when the problem knows its optimum and round robin ran, curves are drawn relative to round
-//!   robin with the optimum as a dashed line (Fig. 2).
+//!   robin with the optimum as a dashed line (Fig. 2); the best policy of all runs, when the
+//!   summary names one, is a dashed line too (Fig. 8).
 //! - `selections`: for 1-D contexts, the context chosen in every episode of run 0 (Fig. 3);
 //!   for 2-D contexts, the log selection ratio of every training context over the first
 //!   episodes (Fig. 5).
@@ -179,11 +180,16 @@ where
     DB::ErrorType: 'static,
 {
     let (curves, optimum, y_label) = curves(summary);
+    let best = summary.best_policy.as_ref().map(|b| b.score);
     let all = curves.iter().flat_map(|c| c.points.iter());
-    // The range fits the curves; the optimum line may leave it early on, as in the paper's Fig. 2.
+    // The range fits the curves and the best policy; the optimum line may leave it early on, as
+    // in the paper's Fig. 2.
     let (mut y_min, mut y_max) = all.clone().fold((f64::MAX, f64::MIN), |(lo, hi), &(_, m, s)| {
         (lo.min(m - s), hi.max(m + s))
     });
+    if let Some(best) = best {
+        (y_min, y_max) = (y_min.min(best), y_max.max(best));
+    }
     let x_max = all.map(|p| p.0).fold(1.0, f64::max);
     if y_min >= y_max {
         (y_min, y_max) = (y_min - 1.0, y_max + 1.0);
@@ -229,6 +235,17 @@ where
         chart
             .draw_series(DashedLineSeries::new(line, 6, 4, BLACK.stroke_width(1)))?
             .label("J_opt")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    }
+    if let Some(best) = best {
+        chart
+            .draw_series(DashedLineSeries::new(
+                [(0.0, best), (x_max, best)],
+                6,
+                4,
+                BLACK.stroke_width(1),
+            ))?
+            .label(format!("best policy ({best:.2})"))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     }
     chart

@@ -156,6 +156,69 @@ fn the_policy_file_describes_the_final_policy() {
     assert_eq!(policy["policy"]["covariance"].as_array().unwrap().len(), 21);
 }
 
+#[test]
+fn the_grid_summary_names_the_best_policy_of_all_runs() {
+    let dir = temp_dir("best-policy");
+    #[rustfmt::skip]
+    let args = ["experiment", "grid", "--runs", "2", "--episodes", "300", "--seed", "5",
+        "--method", "round-robin", "--method", "best-reward", "-q", "--out", dir.to_str().unwrap()];
+    stdout(&acps(&args));
+    let s = summary(&dir);
+    let best = &s["best_policy"];
+    let score = best["score"].as_f64().expect("the grid summary names its best policy");
+
+    // It is the lowest score any evaluation of any run reached, and runs.csv shows where.
+    let runs = csv(&dir.join("runs.csv"), "method,run,seed,episode,score");
+    assert_eq!(runs.len(), 2 * 2 * 4, "2 methods x 2 runs x evaluations at 0..=300");
+    let lowest = runs.iter().map(|r| number(&r[4])).fold(f64::INFINITY, f64::min);
+    assert_eq!(score, lowest);
+    let row = runs
+        .iter()
+        .find(|r| number(&r[4]) == score)
+        .expect("a row holds the best score");
+    assert_eq!(best["method"].as_str(), Some(row[0].as_str()));
+    assert_eq!(best["run"].as_u64().unwrap().to_string(), row[1]);
+    assert_eq!(best["seed"].as_u64().unwrap().to_string(), row[2]);
+    assert_eq!(best["episode"].as_u64().unwrap().to_string(), row[3]);
+    assert_eq!(best["seed"].as_u64(), Some(5 + best["run"].as_u64().unwrap()));
+    for (method, m) in s["methods"].as_object().unwrap() {
+        assert!(score <= m["final_mean"].as_f64().unwrap(), "{method}");
+    }
+    assert!(score < 92.0, "300 episodes improve on the initial throw's 92 cm");
+
+    // Per run: the final score, as in runs.csv, and the longest stay on one context.
+    for (method, m) in s["methods"].as_object().unwrap() {
+        let finals: Vec<f64> = runs
+            .iter()
+            .filter(|r| &r[0] == method && r[3] == "300")
+            .map(|r| number(&r[4]))
+            .collect();
+        let summarised: Vec<f64> = m["final_scores"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(summarised, finals, "{method}");
+    }
+    assert_eq!(s["methods"]["round-robin"]["longest_stay"], serde_json::json!([1, 1]));
+
+    // The curves draw it as Fig. 8's reference line.
+    let svg = std::fs::read_to_string(dir.join("curves.svg")).unwrap();
+    assert!(
+        svg.contains(&format!("best policy ({score:.2})")),
+        "no reference line in curves.svg"
+    );
+
+    // Problems without that reference have none.
+    let function = temp_dir("no-best-policy");
+    #[rustfmt::skip]
+    let args = ["experiment", "function", "--runs", "1", "--episodes", "50", "--method", "random", "-q",
+        "--out", function.to_str().unwrap()];
+    stdout(&acps(&args));
+    assert!(summary(&function).get("best_policy").is_none());
+}
+
 /// The value after `label` on the line that starts with it.
 fn value_after<'a>(text: &'a str, label: &str) -> &'a str {
     let line = text
