@@ -404,7 +404,8 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             let mut workers_lost = false;
             let checkpoints = checkpoints(&args.experiment, dir);
             let outcome = experiment.run_fleet(&run, acps::workers::LEARNER_SPIN, &stop, checkpoints.as_ref(), |p| {
-                if acps::workers::all_exited(&mut children) {
+                // Ctrl-C stops the workers too; only workers gone on their own are lost.
+                if !stop.load(Ordering::Relaxed) && acps::workers::all_exited(&mut children) {
                     workers_lost = true;
                     stop.store(true, Ordering::Relaxed);
                 }

@@ -4,6 +4,7 @@ use acps_shared::ipc::{self, RunName};
 use acps_shared::wire::{Response, TaskBatch, WorkerMessage};
 use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::AtomicBool;
@@ -202,6 +203,93 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
         .and_then(|n| n.parse().ok())
         .unwrap_or(0);
     assert!(reissued >= 1, "{stdout}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Send `signal` to the process group `group`.
+fn signal_group(signal: &str, group: u32) {
+    let status = Command::new("kill")
+        .args([signal, "--", &format!("-{group}")])
+        .status()
+        .unwrap();
+    assert!(status.success(), "kill {signal} -{group}");
+}
+
+#[test]
+fn a_paused_and_resumed_fleet_finishes_with_the_same_result() {
+    let dir = temp_dir("pause");
+    let mut args = SLOW.to_vec();
+    args.extend(["--method", "monotonic-progress"]);
+    let reference = in_process(&args, &dir.join("in-process"));
+    let run = run_name("pause");
+    let out = dir.join("fleet");
+    // Its own process group: the learner and the workers it starts are paused together, as
+    // Ctrl-Z in a shell pauses them.
+    let mut learner = watched()
+        .arg("run")
+        .args(&args)
+        .args(["--workers", "2", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&out)
+        .process_group(0)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let group = learner.id();
+    let mut pauses = 0;
+    while learner.try_wait().unwrap().is_none() {
+        std::thread::sleep(Duration::from_millis(60));
+        signal_group("-STOP", group);
+        std::thread::sleep(Duration::from_millis(20));
+        signal_group("-CONT", group);
+        pauses += 1;
+    }
+    let output = learner.wait_with_output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(pauses >= 3, "the run ended before it could be paused ({pauses} pauses)");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn ctrl_c_stops_a_fleet_run_and_resume_finishes_it() {
+    let dir = temp_dir("ctrl-c");
+    let mut args = SLOW.to_vec();
+    args.extend(["--method", "monotonic-progress"]);
+    let reference = in_process(&args, &dir.join("in-process"));
+    let run = run_name("ctrl-c");
+    let out = dir.join("fleet");
+    let fleet = |extra: &[&str]| {
+        watched()
+            .arg("run")
+            .args(&args)
+            .args(["--workers", "2", "--run", run.as_str(), "--checkpoint-every", "1"])
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .process_group(0)
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let learner = fleet(&[]);
+    std::thread::sleep(Duration::from_millis(400));
+    // Ctrl-C in a shell signals the whole foreground group.
+    signal_group("-INT", learner.id());
+    let output = learner.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    assert!(
+        !out.join("summary.json").exists(),
+        "an interrupted run writes no summary"
+    );
+    assert_clean(&run);
+    let resumed = fleet(&["--resume", out.to_str().unwrap()]).wait_with_output().unwrap();
+    assert!(resumed.status.success(), "{}", String::from_utf8_lossy(&resumed.stderr));
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
     let _ = std::fs::remove_dir_all(dir);

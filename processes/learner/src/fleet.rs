@@ -220,10 +220,10 @@ pub fn serve(
         } else {
             idle_since = None;
             match listener.timed_wait(|_| {}, TICK) {
-                Ok(_) => {}
-                // A signal (Ctrl-C) interrupts the wait; the host's handler sets `stop` on its own
-                // thread, possibly a moment later.
-                Err(ListenerWaitError::InterruptSignal) => return Err(FleetError::Interrupted),
+                // Any signal interrupts the wait, also SIGSTOP and SIGCONT (a paused and resumed
+                // run): the loop goes on, and only `stop`, which the host's Ctrl-C handler sets,
+                // ends it.
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
                 Err(error) => return Err(IpcError::new("waiting for workers", error).into()),
             }
         }

@@ -14,6 +14,7 @@ use acps_shared::wire::{
     EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, TaskBatch, WireOutcome, WireTask, WorkerMessage,
 };
 use acps_shared::{Environment, Outcome};
+use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -333,9 +334,12 @@ pub fn serve(
             continue;
         }
         idle_since = None;
-        let woken = listener
-            .timed_wait(|_| {}, TICK)
-            .map_err(|e| IpcError::new("waiting for the learner", e))?;
+        let woken = match listener.timed_wait(|_| {}, TICK) {
+            Ok(woken) => woken,
+            // A signal, also a pause and resume (SIGSTOP, SIGCONT): only `stop` ends the worker.
+            Err(ListenerWaitError::InterruptSignal) => 0,
+            Err(error) => return Err(IpcError::new("waiting for the learner", error).into()),
+        };
         if woken == 0 && !learner_alive(run, &services)? {
             return Ok(WorkerReport {
                 exit: WorkerExit::LearnerGone,
