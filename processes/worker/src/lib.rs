@@ -232,7 +232,9 @@ pub fn serve(
         let mut sent = false;
         loop {
             let asked: usize = slots.iter().flatten().map(|(_, want)| want).sum();
-            let room = options.in_flight - queue.len() - asked;
+            // Saturating: a learner that answered with more tasks than asked for cannot make
+            // the budget underflow.
+            let room = options.in_flight.saturating_sub(queue.len() + asked);
             let batch = batching.size();
             let flush = outbox.count > 0 && (outbox.count as usize >= batch || queue.is_empty());
             let top_up = outbox.count == 0 && (room >= batch || (asked == 0 && queue.is_empty()));
