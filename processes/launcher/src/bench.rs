@@ -215,7 +215,7 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Resu
                 &mut fleet_jobs,
                 &run,
                 0x0bec_4000 + workers as u64,
-                workers::LEARNER_SPIN,
+                workers::spin(workers),
                 &stop,
                 |_| {
                     if workers::all_exited(&mut children) {

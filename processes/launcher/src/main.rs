@@ -403,7 +403,8 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
             let checkpoints = checkpoints(&args.experiment, dir);
-            let outcome = experiment.run_fleet(&run, acps::workers::LEARNER_SPIN, &stop, checkpoints.as_ref(), |p| {
+            let spin = acps::workers::spin(workers);
+            let outcome = experiment.run_fleet(&run, spin, &stop, checkpoints.as_ref(), |p| {
                 // Ctrl-C stops the workers too; only workers gone on their own are lost.
                 if !stop.load(Ordering::Relaxed) && acps::workers::all_exited(&mut children) {
                     workers_lost = true;

@@ -5,23 +5,21 @@ use anyhow::Context;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// How long the workers of a fleet of `workers` poll before blocking: only when every process
-/// (the learner included) has a core of its own, since polling workers that share cores slow
-/// each other down.
-pub fn worker_spin(workers: usize) -> Duration {
+/// How long the learner and the workers of a fleet of `workers` poll before blocking: only
+/// when every process (the learner included) has a core of its own, since polling processes
+/// that share cores slow each other down.
+pub fn spin(workers: usize) -> Duration {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if workers < cores { LEARNER_SPIN } else { Duration::ZERO }
+    if workers < cores {
+        Duration::from_micros(50)
+    } else {
+        Duration::ZERO
+    }
 }
-
-/// How long the learner polls before blocking, whatever the fleet's size: every worker waits on
-/// it, and a blocked learner pays a wake-up of tens of microseconds on every answer it owes. Its
-/// polling yields the CPU, so workers that share its core lose little (measured: a 2-core grid
-/// run with 2 workers takes 1.8 s with a polling learner, 2.2 s with a blocking one).
-pub const LEARNER_SPIN: Duration = Duration::from_micros(50);
 
 /// Start `workers` worker processes for `run`, each keeping `in_flight` tasks in flight.
 pub fn spawn(run: &RunName, workers: usize, in_flight: usize) -> anyhow::Result<Vec<Child>> {
-    let spin = worker_spin(workers).as_micros().to_string();
+    let spin = spin(workers).as_micros().to_string();
     let exe = std::env::current_exe().context("locating the acps executable")?;
     (0..workers)
         .map(|i| {
