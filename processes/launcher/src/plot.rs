@@ -4,7 +4,7 @@
 //! - `curves`: mean learning curve of every method with a +-1 SEM band (paper Fig. 4, 6, 8);
 //!   when the problem knows its optimum and round robin ran, curves are drawn relative to round
 //!   robin with the optimum as a dashed line (Fig. 2); the best policy of all runs, when the
-//!   summary names one, is a dashed line too (Fig. 8).
+//!   summary names one, is a dashed line too, beside a zoom on the second half (Fig. 8).
 //! - `selections`: for 1-D contexts, the context chosen in every episode of run 0 (Fig. 3);
 //!   for 2-D contexts, the log selection ratio of every training context over the first
 //!   episodes (Fig. 5).
@@ -159,49 +159,77 @@ fn curves(summary: &Summary) -> (Vec<Curve>, Option<f64>, String) {
     (curves, optimum, label)
 }
 
-/// Mean learning curves with SEM bands.
+/// Mean learning curves with SEM bands. With a best-policy line (the grid, Fig. 8) a second
+/// panel, as in the paper, zooms on the second half of training, where the curves are within a
+/// few cm of each other.
 struct LearningCurves<'a>(&'a Summary);
+
+impl LearningCurves<'_> {
+    fn zoomed(&self) -> bool {
+        self.0.best_policy.is_some()
+    }
+}
 
 impl Picture for LearningCurves<'_> {
     fn size(&self) -> (u32, u32) {
-        (900, 560)
+        if self.zoomed() { (1400, 560) } else { (900, 560) }
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
     where
         DB::ErrorType: 'static,
     {
-        learning_curves(self.0, root)
+        let summary = self.0;
+        let caption = format!("{}: {} runs per method", summary.experiment, summary.runs);
+        if !self.zoomed() {
+            return learning_curves(summary, root, 0.0, caption);
+        }
+        let (full, zoom) = root.split_horizontally(800);
+        learning_curves(summary, &full, 0.0, caption)?;
+        learning_curves(summary, &zoom, 0.5, "the second half, zoomed".to_string())
     }
 }
 
-fn learning_curves<DB: DrawingBackend>(summary: &Summary, root: &DrawingArea<DB, Shift>) -> PlotResult
+/// Draw the curves from `from` (a fraction of the episodes) on; the y range fits what is drawn.
+fn learning_curves<DB: DrawingBackend>(
+    summary: &Summary,
+    root: &DrawingArea<DB, Shift>,
+    from: f64,
+    caption: String,
+) -> PlotResult
 where
     DB::ErrorType: 'static,
 {
-    let (curves, optimum, y_label) = curves(summary);
+    let (mut curves, optimum, y_label) = curves(summary);
     let best = summary.best_policy.as_ref().map(|b| b.score);
+    let x_max = curves
+        .iter()
+        .flat_map(|c| c.points.iter())
+        .map(|p| p.0)
+        .fold(1.0, f64::max);
+    let x_min = from * x_max;
+    for curve in &mut curves {
+        curve.points.retain(|p| p.0 >= x_min);
+    }
     let all = curves.iter().flat_map(|c| c.points.iter());
     // The range fits the curves and the best policy; the optimum line may leave it early on, as
     // in the paper's Fig. 2.
-    let (mut y_min, mut y_max) = all.clone().fold((f64::MAX, f64::MIN), |(lo, hi), &(_, m, s)| {
+    let (mut y_min, mut y_max) = all.fold((f64::MAX, f64::MIN), |(lo, hi), &(_, m, s)| {
         (lo.min(m - s), hi.max(m + s))
     });
     if let Some(best) = best {
         (y_min, y_max) = (y_min.min(best), y_max.max(best));
     }
-    let x_max = all.map(|p| p.0).fold(1.0, f64::max);
     if y_min >= y_max {
         (y_min, y_max) = (y_min - 1.0, y_max + 1.0);
     }
     let pad = 0.05 * (y_max - y_min);
-    let caption = format!("{}: {} runs per method", summary.experiment, summary.runs);
     let mut chart = ChartBuilder::on(root)
         .caption(caption, ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60)
-        .build_cartesian_2d(0.0..x_max, (y_min - pad)..(y_max + pad))?;
+        .build_cartesian_2d(x_min..x_max, (y_min - pad)..(y_max + pad))?;
     chart
         .configure_mesh()
         .x_desc("training episodes")
@@ -240,7 +268,7 @@ where
     if let Some(best) = best {
         chart
             .draw_series(DashedLineSeries::new(
-                [(0.0, best), (x_max, best)],
+                [(x_min, best), (x_max, best)],
                 6,
                 4,
                 BLACK.stroke_width(1),
@@ -248,11 +276,14 @@ where
             .label(format!("best policy ({best:.2})"))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
+    // A zoomed panel shares the full panel's legend.
+    if from == 0.0 {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+    }
     Ok(())
 }
 

@@ -209,14 +209,18 @@ fn the_grid_summary_names_the_best_policy_of_all_runs() {
         svg.contains(&format!("best policy ({score:.2})")),
         "no reference line in curves.svg"
     );
+    // ... and, as the paper's Fig. 8, beside a zoom on the second half of training.
+    assert!(svg.contains("the second half, zoomed"), "no zoomed panel in curves.svg");
 
-    // Problems without that reference have none.
+    // Problems without that reference have none, and no zoomed panel.
     let function = temp_dir("no-best-policy");
     #[rustfmt::skip]
     let args = ["experiment", "function", "--runs", "1", "--episodes", "50", "--method", "random", "-q",
         "--out", function.to_str().unwrap()];
     stdout(&acps(&args));
     assert!(summary(&function).get("best_policy").is_none());
+    let svg = std::fs::read_to_string(function.join("curves.svg")).unwrap();
+    assert!(!svg.contains("zoomed"));
 }
 
 /// The value after `label` on the line that starts with it.
