@@ -162,18 +162,48 @@ fn kill(child: &mut Child) {
 }
 
 /// The rapier backend makes the run last long enough to kill a worker in the middle.
-const SLOW: [&str; 8] = ["grid", "--sim", "rapier", "--runs", "2", "--episodes", "400", "-q"];
+const SLOW: [&str; 10] = [
+    "grid",
+    "--sim",
+    "rapier",
+    "--runs",
+    "2",
+    "--episodes",
+    "400",
+    "--method",
+    "monotonic-progress",
+    "-q",
+];
+
+/// A slow run named `name`: its directory, the in-process result, its run name and the fleet's
+/// output directory.
+struct SlowRun {
+    dir: PathBuf,
+    reference: Vec<u8>,
+    run: RunName,
+    out: PathBuf,
+}
+
+fn slow_run(name: &str) -> SlowRun {
+    let dir = temp_dir(name);
+    SlowRun {
+        reference: in_process(&SLOW, &dir.join("in-process")),
+        run: run_name(name),
+        out: dir.join("fleet"),
+        dir,
+    }
+}
 
 #[test]
 fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
-    let dir = temp_dir("kill-worker");
-    let mut args = SLOW.to_vec();
-    args.extend(["--method", "monotonic-progress"]);
-    let reference = in_process(&args, &dir.join("in-process"));
-    let run = run_name("kill-worker");
-    let out = dir.join("fleet");
+    let SlowRun {
+        dir,
+        reference,
+        run,
+        out,
+    } = slow_run("kill-worker");
     // Not quiet: the learner reports how many tasks it re-issued.
-    let loud: Vec<&str> = args.iter().copied().filter(|a| *a != "-q").collect();
+    let loud: Vec<&str> = SLOW.iter().copied().filter(|a| *a != "-q").collect();
     let learner = watched()
         .arg("run")
         .args(&loud)
@@ -219,17 +249,17 @@ fn signal_group(signal: &str, group: u32) {
 
 #[test]
 fn a_paused_and_resumed_fleet_finishes_with_the_same_result() {
-    let dir = temp_dir("pause");
-    let mut args = SLOW.to_vec();
-    args.extend(["--method", "monotonic-progress"]);
-    let reference = in_process(&args, &dir.join("in-process"));
-    let run = run_name("pause");
-    let out = dir.join("fleet");
+    let SlowRun {
+        dir,
+        reference,
+        run,
+        out,
+    } = slow_run("pause");
     // Its own process group: the learner and the workers it starts are paused together, as
     // Ctrl-Z in a shell pauses them.
     let mut learner = watched()
         .arg("run")
-        .args(&args)
+        .args(SLOW)
         .args(["--workers", "2", "--run", run.as_str()])
         .arg("--out")
         .arg(&out)
@@ -256,16 +286,16 @@ fn a_paused_and_resumed_fleet_finishes_with_the_same_result() {
 
 #[test]
 fn ctrl_c_stops_a_fleet_run_and_resume_finishes_it() {
-    let dir = temp_dir("ctrl-c");
-    let mut args = SLOW.to_vec();
-    args.extend(["--method", "monotonic-progress"]);
-    let reference = in_process(&args, &dir.join("in-process"));
-    let run = run_name("ctrl-c");
-    let out = dir.join("fleet");
+    let SlowRun {
+        dir,
+        reference,
+        run,
+        out,
+    } = slow_run("ctrl-c");
     let fleet = |extra: &[&str]| {
         watched()
             .arg("run")
-            .args(&args)
+            .args(SLOW)
             .args(["--workers", "2", "--run", run.as_str(), "--checkpoint-every", "1"])
             .args(extra)
             .arg("--out")
