@@ -355,9 +355,11 @@ pub fn serve(
 type PendingTasks =
     iceoryx2::pending_response::PendingResponse<iceoryx2::prelude::ipc::Service, WorkerMessage, (), TaskBatch, ()>;
 
-/// How much simulation one request should carry: enough to pay for the message, little enough
-/// that outcomes return promptly, since the learner creates new tasks only from outcomes.
-const BATCH_TIME: Duration = Duration::from_micros(200);
+/// How much simulation one request should carry: enough to pay for the message and the two
+/// wake-ups it costs, little enough that outcomes return promptly, since the learner creates
+/// new tasks only from outcomes. 400 us beat 200 us (and 800 us) for the analytic PA-10 at
+/// W = cores (docs/FLEET.md#throughput).
+const BATCH_TIME: Duration = Duration::from_micros(400);
 
 /// Tasks per request, from the measured rollout time: 1 until a rollout has been timed (and
 /// for rollouts longer than [`BATCH_TIME`]), at most half the budget so that a second request
@@ -410,9 +412,14 @@ mod tests {
         assert_eq!(
             batch(16, Some(Duration::from_micros(25))),
             8,
-            "200 us of 25 us rollouts"
+            "half the budget of 25 us rollouts"
         );
-        assert_eq!(batch(16, Some(Duration::from_micros(40))), 5);
+        assert_eq!(
+            batch(32, Some(Duration::from_micros(25))),
+            16,
+            "400 us of 25 us rollouts"
+        );
+        assert_eq!(batch(32, Some(Duration::from_micros(40))), 10);
         assert_eq!(batch(64, Some(Duration::from_nanos(100))), MAX_BATCH);
         assert_eq!(batch(3, Some(Duration::from_nanos(100))), 1, "half of 3 is 1");
         let mut batching = Batching::new(16);
