@@ -28,16 +28,28 @@ pub struct Row {
     pub mode: &'static str,
     /// Worker processes (fleet), threads (rayon) or 1.
     pub workers: usize,
-    /// Rollouts (training and evaluation) per second of wall time.
+    /// Rollouts (training and evaluation) per second of wall time; a fleet's from its first
+    /// request on.
     pub rollouts_per_s: f64,
     /// rollouts_per_s / (workers x the single-thread rate).
     pub ratio: f64,
-    /// Share of the fleet's wall time spent inside the learner cores.
+    /// Share of the fleet's serving time spent inside the learner cores.
     pub learner_share: Option<f64>,
+    /// Fleet only: seconds from starting the worker processes to the first worker's first
+    /// request, which the rate leaves out (in-process rows build their environments before
+    /// the clock starts, too).
+    pub startup_seconds: Option<f64>,
     /// Rollouts performed.
     pub rollouts: u64,
-    /// Wall time in seconds.
+    /// Wall time in seconds (a fleet's from its first request on).
     pub seconds: f64,
+}
+
+/// What a fleet row measures beyond the rate.
+#[derive(Clone, Copy)]
+struct Fleet {
+    learner_seconds: f64,
+    startup_seconds: f64,
 }
 
 /// What to measure.
@@ -47,6 +59,8 @@ pub struct BenchOptions {
     pub max_workers: usize,
     /// Tasks each worker keeps in flight.
     pub worker_in_flight: usize,
+    /// Niceness of the workers (default: [`workers::default_nice`]).
+    pub worker_nice: Option<u8>,
     /// Multiplies the amount of work per row (1 = a few seconds per row).
     pub scale: f64,
 }
@@ -156,7 +170,7 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Resu
         Workload::Throw(Sim::Rapier),
     ] {
         let mut measure =
-            |mode: &'static str, workers: usize, rollouts: u64, seconds: f64, learner: Option<f64>, single: f64| {
+            |mode: &'static str, workers: usize, rollouts: u64, seconds: f64, fleet: Option<Fleet>, single: f64| {
                 let rate = rollouts as f64 / seconds;
                 let row = Row {
                     env: workload.name(),
@@ -168,7 +182,8 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Resu
                     } else {
                         1.0
                     },
-                    learner_share: learner.map(|l| l / seconds),
+                    learner_share: fleet.map(|f| f.learner_seconds / seconds),
+                    startup_seconds: fleet.map(|f| f.startup_seconds),
                     rollouts,
                     seconds,
                 };
@@ -208,7 +223,8 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Resu
                     environment: j.spec,
                 })
                 .collect();
-            let mut children = workers::spawn(&run, workers, options.worker_in_flight)?;
+            let nice = options.worker_nice.unwrap_or_else(|| workers::default_nice(workers));
+            let mut children = workers::spawn(&run, workers, options.worker_in_flight, nice)?;
             let start = Instant::now();
             let stop = AtomicBool::new(false);
             let served = fleet::serve(
@@ -224,18 +240,22 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Resu
                 },
                 |_, _| Ok(()),
             );
-            let seconds = start.elapsed().as_secs_f64();
+            let total_seconds = start.elapsed().as_secs_f64();
             let reaped = workers::reap(&mut children);
             let cleaned = ipc::remove_run_files(&run);
             let progress = served.with_context(|| format!("fleet of {workers} on {}", workload.name()))?;
             reaped?;
             cleaned?;
+            let fleet = Fleet {
+                learner_seconds: progress.learner_seconds,
+                startup_seconds: total_seconds - progress.serving_seconds,
+            };
             measure(
                 "fleet",
                 workers,
                 progress.outcomes,
-                seconds,
-                Some(progress.learner_seconds),
+                progress.serving_seconds,
+                Some(fleet),
                 single,
             );
         }
@@ -246,16 +266,19 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Resu
 /// The rows as an aligned table.
 pub fn table(rows: &[Row]) -> String {
     let mut text = format!(
-        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>14}\n",
-        "env", "mode", "workers", "rollouts/s", "ratio", "learner share"
+        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>14} {:>11}\n",
+        "env", "mode", "workers", "rollouts/s", "ratio", "learner share", "startup ms"
     );
     for row in rows {
         let share = row
             .learner_share
             .map_or("-".to_string(), |s| format!("{:.1}%", 100.0 * s));
+        let startup = row
+            .startup_seconds
+            .map_or("-".to_string(), |s| format!("{:.0}", 1000.0 * s));
         text += &format!(
-            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>14}\n",
-            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, share
+            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>14} {:>11}\n",
+            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, share, startup
         );
     }
     text

@@ -172,11 +172,16 @@ struct BenchArgs {
     #[arg(long)]
     max_workers: Option<usize>,
     /// Tasks each worker keeps in flight, asked for or queued (1..=64).
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 32)]
     worker_in_flight: usize,
     /// Multiplies the work per row (1: a few seconds per row).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
+    /// Niceness of the started workers (0..=19; default: 10 when the workers and the learner
+    /// outnumber the cores, else 0). The learner gates every worker, so it should get a core as
+    /// soon as it wakes; 0 keeps the workers at full priority next to other programs.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=acps::workers::MAX_NICE as i64))]
+    worker_nice: Option<u8>,
 }
 
 #[derive(clap::Args)]
@@ -189,6 +194,11 @@ struct RunArgs {
     /// Tasks each started worker keeps in flight, asked for or queued (1..=64).
     #[arg(long, default_value_t = 4)]
     worker_in_flight: usize,
+    /// Niceness of the started workers (0..=19; default: 10 when the workers and the learner
+    /// outnumber the cores, else 0). The learner gates every worker, so it should get a core as
+    /// soon as it wakes; 0 keeps the workers at full priority next to other programs.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=acps::workers::MAX_NICE as i64))]
+    worker_nice: Option<u8>,
     /// The run's name: its shared-memory prefix, and how workers started by hand join it
     /// (default: EXPERIMENT-PID).
     #[arg(long)]
@@ -213,6 +223,10 @@ struct WorkerArgs {
     /// Microseconds to poll for an answer before blocking (0 when processes outnumber cores).
     #[arg(long, default_value_t = 0)]
     spin_us: u64,
+    /// Lower this worker's priority to niceness N (0..=19), so that a learner sharing its
+    /// cores gets the CPU first.
+    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=acps::workers::MAX_NICE as i64))]
+    nice: u8,
     /// Print nothing unless something goes wrong.
     #[arg(long, short)]
     quiet: bool,
@@ -399,7 +413,8 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             config,
         } in &jobs
         {
-            let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight)?;
+            let nice = args.worker_nice.unwrap_or_else(|| acps::workers::default_nice(workers));
+            let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight, nice)?;
             let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
             let checkpoints = checkpoints(&args.experiment, dir);
@@ -457,12 +472,10 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let options = acps::bench::BenchOptions {
         max_workers: args.max_workers.unwrap_or(cores),
         worker_in_flight: args.worker_in_flight,
+        worker_nice: args.worker_nice,
         scale: args.scale,
     };
-    println!(
-        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>14}",
-        "env", "mode", "workers", "rollouts/s", "ratio", "learner share"
-    );
+    print!("{}", acps::bench::table(&[]));
     let rows = acps::bench::run(&options, |row| {
         let table = acps::bench::table(std::slice::from_ref(row));
         print!("{}", table.lines().nth(1).map(|l| format!("{l}\n")).unwrap_or_default());
@@ -478,6 +491,8 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
 }
 
 fn worker(args: WorkerArgs) -> anyhow::Result<()> {
+    // Before the Ctrl-C handler's thread exists: Linux sets a niceness per thread.
+    acps::workers::lower_priority(args.nice)?;
     let run = RunName::new(&args.run)?;
     check_worker_in_flight("--in-flight", args.in_flight)?;
     if !(args.startup_timeout.is_finite() && args.startup_timeout >= 0.0) {

@@ -5,20 +5,50 @@ use anyhow::Context;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// True when every process of a fleet of `workers` (the learner included) has a core of its own.
+fn cores_to_spare(workers: usize) -> bool {
+    workers < std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
 /// How long the learner and the workers of a fleet of `workers` poll before blocking: only
-/// when every process (the learner included) has a core of its own, since polling processes
-/// that share cores slow each other down.
+/// when every process has a core of its own, since polling processes that share cores slow
+/// each other down.
 pub fn spin(workers: usize) -> Duration {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if workers < cores {
+    if cores_to_spare(workers) {
         Duration::from_micros(50)
     } else {
         Duration::ZERO
     }
 }
 
-/// Start `workers` worker processes for `run`, each keeping `in_flight` tasks in flight.
-pub fn spawn(run: &RunName, workers: usize, in_flight: usize) -> anyhow::Result<Vec<Child>> {
+/// The niceness of started workers unless the user chooses: 10 when the fleet shares cores with
+/// the learner, else 0. Every worker waits for the learner's answers, so the learner must get a
+/// core as soon as it wakes; at equal priority the scheduler lets a worker finish its time
+/// slice first (measured in docs/FLEET.md#throughput).
+pub fn default_nice(workers: usize) -> u8 {
+    if cores_to_spare(workers) { 0 } else { 10 }
+}
+
+/// The largest niceness (the lowest priority) of Linux.
+pub const MAX_NICE: u8 = 19;
+
+/// Lower this process's scheduling priority to niceness `nice` (0..=[`MAX_NICE`]); call it
+/// before starting threads, which inherit it.
+pub fn lower_priority(nice: u8) -> anyhow::Result<()> {
+    if nice > MAX_NICE {
+        anyhow::bail!("niceness must be in 0..={MAX_NICE}, got {nice}");
+    }
+    // SAFETY: setpriority only reads its integer arguments.
+    let result = unsafe { libc::setpriority(libc::PRIO_PROCESS as _, 0, nice.into()) };
+    if result != 0 {
+        return Err(std::io::Error::last_os_error()).with_context(|| format!("setting the niceness to {nice}"));
+    }
+    Ok(())
+}
+
+/// Start `workers` worker processes for `run`, each keeping `in_flight` tasks in flight, at
+/// niceness `nice`.
+pub fn spawn(run: &RunName, workers: usize, in_flight: usize, nice: u8) -> anyhow::Result<Vec<Child>> {
     let spin = spin(workers).as_micros().to_string();
     let exe = std::env::current_exe().context("locating the acps executable")?;
     (0..workers)
@@ -32,6 +62,8 @@ pub fn spawn(run: &RunName, workers: usize, in_flight: usize) -> anyhow::Result<
                     &in_flight.to_string(),
                     "--spin-us",
                     &spin,
+                    "--nice",
+                    &nice.to_string(),
                     "--name",
                     &format!("worker-{i}"),
                     "-q",
@@ -66,4 +98,26 @@ pub fn reap(children: &mut [Child]) -> anyhow::Result<()> {
 /// True when every child has exited (a fleet without workers would wait forever).
 pub fn all_exited(children: &mut [Child]) -> bool {
     !children.is_empty() && children.iter_mut().all(|child| matches!(child.try_wait(), Ok(Some(_))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn workers_yield_to_the_learner_only_when_they_share_its_cores() {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        assert_eq!(default_nice(cores), 10, "W = cores: the learner shares a core");
+        assert_eq!(spin(cores), Duration::ZERO);
+        if cores > 1 {
+            assert_eq!(default_nice(cores - 1), 0, "a core to spare for the learner");
+            assert!(spin(cores - 1) > Duration::ZERO);
+        }
+    }
+
+    #[test]
+    fn a_niceness_beyond_linux_range_is_refused() {
+        let error = lower_priority(MAX_NICE + 1).unwrap_err().to_string();
+        assert_eq!(error, "niceness must be in 0..=19, got 20");
+    }
 }

@@ -262,8 +262,16 @@ fn bench_writes_its_table_and_json() {
     assert_eq!(rows.len(), 9);
     for row in rows {
         assert!(["trivial", "analytic", "rapier"].contains(&row["env"].as_str().unwrap()));
-        assert!(["inprocess-1", "inprocess-rayon", "fleet"].contains(&row["mode"].as_str().unwrap()));
-        assert!(row["rollouts_per_s"].as_f64().unwrap() > 0.0 && row["ratio"].as_f64().unwrap() > 0.0);
+        let mode = row["mode"].as_str().unwrap();
+        assert!(["inprocess-1", "inprocess-rayon", "fleet"].contains(&mode));
+        let rate = row["rollouts_per_s"].as_f64().unwrap();
+        assert!(rate > 0.0 && row["ratio"].as_f64().unwrap() > 0.0);
+        let (rollouts, seconds) = (row["rollouts"].as_f64().unwrap(), row["seconds"].as_f64().unwrap());
+        assert!((rate - rollouts / seconds).abs() <= 1e-9 * rate, "{row}");
+        // A fleet's rate leaves out the workers' start-up, which its row reports instead.
+        let startup = row["startup_seconds"].as_f64();
+        assert_eq!(startup.is_some(), mode == "fleet", "{row}");
+        assert!(startup.is_none_or(|s| s > 0.0), "{row}");
     }
     for picture in ["bench.svg", "bench.png"] {
         assert!(
@@ -278,7 +286,7 @@ fn bench_writes_its_table_and_json() {
 
 #[test]
 fn fleet_options_are_checked_before_anything_starts() {
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 6] = [
         (
             &["run", "grid", "--worker-in-flight", "0"],
             "--worker-in-flight must be in 1..=64, got 0",
@@ -292,6 +300,14 @@ fn fleet_options_are_checked_before_anything_starts() {
             "--startup-timeout must be finite and >= 0",
         ),
         (&["worker", "--run", "bad/name"], "must be 1 to 40 characters"),
+        (
+            &["worker", "--run", "x", "--nice", "20"],
+            "'--nice <N>': 20 is not in 0..=19",
+        ),
+        (
+            &["run", "grid", "--worker-nice", "25"],
+            "'--worker-nice <WORKER_NICE>': 25 is not in 0..=19",
+        ),
     ];
     for (args, expected) in cases {
         let out = acps(args);

@@ -548,3 +548,52 @@ fn a_killed_fleet_learner_resumes_from_its_checkpoints_to_the_in_process_result(
     assert_clean(&run);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The niceness of process `pid`: field 19 of /proc/PID/stat, the 17th after the parenthesised
+/// command name.
+fn niceness(pid: u32) -> Option<i32> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    stat.rsplit_once(") ")?.1.split(' ').nth(16)?.parse().ok()
+}
+
+#[test]
+fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
+    let dir = temp_dir("nice");
+    let run = run_name("nice");
+    let mut learner = acps()
+        .args([
+            "run",
+            "grid",
+            "--runs",
+            "2",
+            "--episodes",
+            "3000",
+            "--method",
+            "monotonic-progress",
+            "-q",
+        ])
+        .args(["--workers", "1", "--worker-nice", "7", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&dir)
+        .spawn()
+        .unwrap();
+    let children = format!("/proc/{0}/task/{0}/children", learner.id());
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut seen = None;
+    while seen.is_none() && learner.try_wait().unwrap().is_none() && Instant::now() < deadline {
+        let pids = std::fs::read_to_string(&children).unwrap_or_default();
+        // A worker lowers its priority first thing after it starts.
+        if pids
+            .split_whitespace()
+            .filter_map(|p| niceness(p.parse().ok()?))
+            .any(|n| n == 7)
+        {
+            seen = niceness(learner.id());
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(learner.wait().unwrap().success());
+    assert_eq!(seen, Some(0), "a worker at niceness 7 beside a learner at 0");
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -47,6 +47,9 @@ pub struct FleetProgress {
     pub refused: u64,
     /// Time spent inside the learner cores (`tell` and `ask`), in seconds.
     pub learner_seconds: f64,
+    /// Seconds since the first worker's first request: the run's time without the workers'
+    /// start-up.
+    pub serving_seconds: f64,
     /// Training episodes and latest test scores of all jobs together.
     pub learning: LearningProgress,
 }
@@ -115,6 +118,7 @@ pub fn serve(
     let mut idle_since: Option<Instant> = None;
     let mut outcomes = VecDeque::new();
     let mut unannounced = 0;
+    let mut first_request = None;
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
@@ -132,6 +136,7 @@ pub fn serve(
                 let _ = request.send_copy(TaskBatch::control(Response::Refused, identity));
                 continue;
             }
+            first_request.get_or_insert_with(Instant::now);
             for (job, outcome) in message.outcomes() {
                 holders.remove(&(job, outcome.task_id));
                 outcomes.push_back((job, outcome));
@@ -167,17 +172,20 @@ pub fn serve(
             false
         };
         progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
+        let serving = || first_request.map_or(0.0, |first: Instant| first.elapsed().as_secs_f64());
         if progress.jobs_done == jobs.len() {
             for (request, _) in parked.drain(..) {
                 let _ = request.send_copy(TaskBatch::control(Response::Stop, identity));
             }
             let _ = notifier.notify();
+            progress.serving_seconds = serving();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
             observe(&progress);
             return Ok(progress);
         }
         if last_tick.elapsed() >= TICK {
             last_tick = Instant::now();
+            progress.serving_seconds = serving();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
             services.tasks.try_cleanup_dead_nodes();
             // A node being created or removed at this moment can make the listing fail; the
