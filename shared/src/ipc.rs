@@ -11,6 +11,7 @@
 
 use crate::wire::{TaskBatch, WorkerMessage};
 use iceoryx2::prelude::*;
+use std::path::Path;
 use std::time::Duration;
 
 /// Most workers one run serves.
@@ -170,7 +171,33 @@ pub fn clean_stale(run: &RunName) -> Result<usize, IpcError> {
         CallbackProgression::Continue
     })
     .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
+    remove_orphaned_node_dirs(Path::new(NODES_DIR), ORPHAN_AGE);
     Ok(cleaned)
+}
+
+/// Where iceoryx2 keeps a directory per node, `<id>/`, holding files named by the run's prefix.
+const NODES_DIR: &str = "/tmp/iceoryx2/nodes";
+
+/// An empty node directory older than this is an orphan: iceoryx2 fills a node's directory as
+/// it creates the node, within microseconds.
+const ORPHAN_AGE: Duration = Duration::from_secs(1);
+
+/// Remove the empty node directories in `nodes` that are older than `age`. Concurrent runs that
+/// create and remove nodes at the same moment occasionally leave a node's directory behind
+/// empty; it names no run, so whichever run starts next removes it.
+fn remove_orphaned_node_dirs(nodes: &Path, age: Duration) {
+    let Ok(entries) = std::fs::read_dir(nodes) else { return };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let old = entry
+            .metadata()
+            .and_then(|m| m.modified())
+            .is_ok_and(|modified| modified.elapsed().is_ok_and(|elapsed| elapsed > age));
+        if old && path.is_dir() {
+            // Fails, and leaves it, unless the directory is empty.
+            let _ = std::fs::remove_dir(&path);
+        }
+    }
 }
 
 /// Ids of the live nodes of `run`. A port whose node is not among them belongs to a dead
@@ -245,6 +272,13 @@ pub fn remove_run_files(run: &RunName) -> Result<usize, IpcError> {
         } else {
             std::fs::remove_file(&path)
         };
+        // A node's directory holds only its run's files; the emptied one goes too.
+        if let Some(parent) = path
+            .parent()
+            .filter(|parent| parent.parent() == Some(Path::new(NODES_DIR)))
+        {
+            let _ = std::fs::remove_dir(parent);
+        }
     }
     Ok(count)
 }
@@ -279,5 +313,26 @@ mod tests {
         }
         remove_run_files(&run).unwrap();
         assert!(leftover_files(&run).is_empty(), "{:?}", leftover_files(&run));
+    }
+
+    #[test]
+    fn only_old_empty_node_directories_are_removed() {
+        let nodes = std::env::temp_dir().join(format!("acps-orphans-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&nodes);
+        for dir in ["old-empty", "old-full"] {
+            std::fs::create_dir_all(nodes.join(dir)).unwrap();
+        }
+        std::fs::write(nodes.join("old-full/acps_x_node.details"), b"").unwrap();
+        std::fs::write(nodes.join("acps_x_1.node_monitor"), b"").unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+        std::fs::create_dir(nodes.join("new-empty")).unwrap();
+        remove_orphaned_node_dirs(&nodes, Duration::from_millis(200));
+        let mut left: Vec<String> = std::fs::read_dir(&nodes)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["acps_x_1.node_monitor", "new-empty", "old-full"]);
+        std::fs::remove_dir_all(&nodes).unwrap();
     }
 }
