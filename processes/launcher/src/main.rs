@@ -224,7 +224,7 @@ struct WorkerArgs {
     #[arg(long, default_value_t = 0)]
     spin_us: u64,
     /// Lower this worker's priority to niceness N (0..=19), so that a learner sharing its
-    /// cores gets the CPU first.
+    /// cores gets the CPU first; a worker already at N or above keeps its niceness.
     #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=acps::workers::MAX_NICE as i64))]
     nice: u8,
     /// Print nothing unless something goes wrong.

@@ -32,11 +32,15 @@ pub fn default_nice(workers: usize) -> u8 {
 /// The largest niceness (the lowest priority) of Linux.
 pub const MAX_NICE: u8 = 19;
 
-/// Lower this process's scheduling priority to niceness `nice` (0..=[`MAX_NICE`]); call it
-/// before starting threads, which inherit it.
+/// Lower this process's scheduling priority to niceness `nice` (0..=[`MAX_NICE`]) unless it
+/// already runs at that niceness or above (started under `nice`, say): raising a priority
+/// needs privileges. Call it before starting threads, which inherit it.
 pub fn lower_priority(nice: u8) -> anyhow::Result<()> {
     if nice > MAX_NICE {
         anyhow::bail!("niceness must be in 0..={MAX_NICE}, got {nice}");
+    }
+    if niceness()? >= i32::from(nice) {
+        return Ok(());
     }
     // SAFETY: setpriority only reads its integer arguments.
     let result = unsafe { libc::setpriority(libc::PRIO_PROCESS as _, 0, nice.into()) };
@@ -44,6 +48,21 @@ pub fn lower_priority(nice: u8) -> anyhow::Result<()> {
         return Err(std::io::Error::last_os_error()).with_context(|| format!("setting the niceness to {nice}"));
     }
     Ok(())
+}
+
+/// The calling thread's niceness.
+fn niceness() -> anyhow::Result<i32> {
+    // getpriority returns -1 both for niceness -1 and for an error; errno tells them apart.
+    // SAFETY: errno is this thread's; getpriority only reads its integer arguments.
+    let nice = unsafe {
+        *libc::__errno_location() = 0;
+        libc::getpriority(libc::PRIO_PROCESS as _, 0)
+    };
+    let error = std::io::Error::last_os_error();
+    if nice == -1 && error.raw_os_error() != Some(0) {
+        return Err(error).context("reading the niceness");
+    }
+    Ok(nice)
 }
 
 /// Start `workers` worker processes for `run`, each keeping `in_flight` tasks in flight, at
@@ -113,6 +132,17 @@ mod tests {
             assert_eq!(default_nice(cores - 1), 0, "a core to spare for the learner");
             assert!(spin(cores - 1) > Duration::ZERO);
         }
+    }
+
+    #[test]
+    fn priority_is_only_ever_lowered() {
+        // Linux keeps a niceness per thread, and each test runs on a thread of its own.
+        lower_priority(5).unwrap();
+        assert_eq!(niceness().unwrap(), 5);
+        lower_priority(3).expect("a nicer thread keeps its niceness instead of failing");
+        assert_eq!(niceness().unwrap(), 5);
+        lower_priority(7).unwrap();
+        assert_eq!(niceness().unwrap(), 7);
     }
 
     #[test]
