@@ -177,6 +177,13 @@ struct BenchArgs {
     /// Multiplies the work per row (1: a few seconds per row).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
+    #[command(flatten)]
+    worker_nice: WorkerNiceArg,
+}
+
+/// `--worker-nice` of `acps run` and `acps bench`.
+#[derive(clap::Args)]
+struct WorkerNiceArg {
     /// Niceness of the started workers (0..=19; default: 10 when the workers and the learner
     /// outnumber the cores, else 0). The learner gates every worker, so it should get a core as
     /// soon as it wakes; 0 keeps the workers at full priority next to other programs.
@@ -194,11 +201,8 @@ struct RunArgs {
     /// Tasks each started worker keeps in flight, asked for or queued (1..=64).
     #[arg(long, default_value_t = 4)]
     worker_in_flight: usize,
-    /// Niceness of the started workers (0..=19; default: 10 when the workers and the learner
-    /// outnumber the cores, else 0). The learner gates every worker, so it should get a core as
-    /// soon as it wakes; 0 keeps the workers at full priority next to other programs.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=acps::workers::MAX_NICE as i64))]
-    worker_nice: Option<u8>,
+    #[command(flatten)]
+    worker_nice: WorkerNiceArg,
     /// The run's name: its shared-memory prefix, and how workers started by hand join it
     /// (default: EXPERIMENT-PID).
     #[arg(long)]
@@ -413,7 +417,10 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             config,
         } in &jobs
         {
-            let nice = args.worker_nice.unwrap_or_else(|| acps::workers::default_nice(workers));
+            let nice = args
+                .worker_nice
+                .worker_nice
+                .unwrap_or_else(|| acps::workers::default_nice(workers));
             let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight, nice)?;
             let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
@@ -472,7 +479,7 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let options = acps::bench::BenchOptions {
         max_workers: args.max_workers.unwrap_or(cores),
         worker_in_flight: args.worker_in_flight,
-        worker_nice: args.worker_nice,
+        worker_nice: args.worker_nice.worker_nice,
         scale: args.scale,
     };
     print!("{}", acps::bench::table(&[]));

@@ -286,7 +286,7 @@ fn bench_writes_its_table_and_json() {
 
 #[test]
 fn fleet_options_are_checked_before_anything_starts() {
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 7] = [
         (
             &["run", "grid", "--worker-in-flight", "0"],
             "--worker-in-flight must be in 1..=64, got 0",
@@ -307,6 +307,10 @@ fn fleet_options_are_checked_before_anything_starts() {
         (
             &["run", "grid", "--worker-nice", "25"],
             "'--worker-nice <WORKER_NICE>': 25 is not in 0..=19",
+        ),
+        (
+            &["bench", "--worker-nice", "20"],
+            "'--worker-nice <WORKER_NICE>': 20 is not in 0..=19",
         ),
     ];
     for (args, expected) in cases {
