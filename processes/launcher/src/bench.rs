@@ -52,9 +52,22 @@ struct Fleet {
     startup_seconds: f64,
 }
 
+/// An environment the bench measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchEnv {
+    /// Rollouts that cost nothing: the rows measure the transport.
+    Trivial,
+    /// The analytic PA-10 throw (tens of microseconds).
+    Analytic,
+    /// The rapier3d PA-10 throw (milliseconds).
+    Rapier,
+}
+
 /// What to measure.
 #[derive(Debug, Clone)]
 pub struct BenchOptions {
+    /// Environments to measure, in this order.
+    pub envs: Vec<BenchEnv>,
     /// Largest fleet.
     pub max_workers: usize,
     /// Tasks each worker keeps in flight.
@@ -164,11 +177,11 @@ fn consumed(learner: &Learner) -> u64 {
 pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Result<Vec<Row>> {
     let mut rows = Vec::new();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    for workload in [
-        Workload::Trivial,
-        Workload::Throw(Sim::Analytic),
-        Workload::Throw(Sim::Rapier),
-    ] {
+    for workload in options.envs.iter().map(|env| match env {
+        BenchEnv::Trivial => Workload::Trivial,
+        BenchEnv::Analytic => Workload::Throw(Sim::Analytic),
+        BenchEnv::Rapier => Workload::Throw(Sim::Rapier),
+    }) {
         let mut measure =
             |mode: &'static str, workers: usize, rollouts: u64, seconds: f64, fleet: Option<Fleet>, single: f64| {
                 let rate = rollouts as f64 / seconds;

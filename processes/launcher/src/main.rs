@@ -177,6 +177,9 @@ struct BenchArgs {
     /// Multiplies the work per row (1: a few seconds per row).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
+    /// Environments to measure, comma separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "trivial,analytic,rapier")]
+    env: Vec<acps::bench::BenchEnv>,
     #[command(flatten)]
     worker_nice: WorkerNiceArg,
 }
@@ -477,6 +480,7 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
     check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let options = acps::bench::BenchOptions {
+        envs: args.env,
         max_workers: args.max_workers.unwrap_or(cores),
         worker_in_flight: args.worker_in_flight,
         worker_nice: args.worker_nice.worker_nice,

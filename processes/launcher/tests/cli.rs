@@ -279,8 +279,34 @@ fn bench_writes_its_table_and_json() {
             "{picture}"
         );
     }
+    // --env picks environments, in its order.
+    let only = acps(&[
+        "bench",
+        "--scale",
+        "0.01",
+        "--max-workers",
+        "1",
+        "--env",
+        "rapier,trivial",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(only.status.success(), "{}", String::from_utf8_lossy(&only.stderr));
+    let envs: Vec<String> = summary(&dir.join("bench.json"))["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|row| row["env"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(envs, ["rapier", "rapier", "rapier", "trivial", "trivial", "trivial"]);
     let error = acps(&["bench", "--scale", "0"]);
     assert!(String::from_utf8_lossy(&error.stderr).contains("--scale must be finite and > 0"));
+    let error = acps(&["bench", "--env", "mujoco"]);
+    assert!(
+        String::from_utf8_lossy(&error.stderr).contains("invalid value 'mujoco' for '--env <ENV>'"),
+        "{}",
+        String::from_utf8_lossy(&error.stderr)
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
