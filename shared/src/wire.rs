@@ -13,7 +13,7 @@ use crate::{Outcome, OutcomeStatus, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 /// Largest context a task can carry.
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -21,7 +21,7 @@ pub const MAX_THETA: usize = 64;
 /// Largest diagnostics vector an outcome can carry.
 pub const MAX_DIAGNOSTICS: usize = 4;
 /// Most tasks one answer carries, and most outcomes one request carries.
-pub const MAX_BATCH: usize = 16;
+pub const MAX_BATCH: usize = 32;
 
 /// Which environment a task needs: workers build environments from this and cache them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, ZeroCopySend, serde::Serialize, serde::Deserialize)]

@@ -93,9 +93,11 @@ impl Workload {
     }
 }
 
-/// Learners kept busy at once: many jobs with a wide window keep every worker fed.
+/// Learners kept busy at once: many jobs with a wide window keep every worker fed. 8 x 32 tasks
+/// leave ready ones in the learner while two workers hold 64 each (the default
+/// `--worker-in-flight`), enough for batches of 32 analytic throws.
 const JOBS: usize = 8;
-const IN_FLIGHT: usize = 16;
+const IN_FLIGHT: usize = 32;
 
 struct Job {
     learner: Learner,

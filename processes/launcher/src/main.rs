@@ -172,7 +172,7 @@ struct BenchArgs {
     #[arg(long)]
     max_workers: Option<usize>,
     /// Tasks each worker keeps in flight, asked for or queued (1..=64).
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = 64)]
     worker_in_flight: usize,
     /// Multiplies the work per row (1: a few seconds per row).
     #[arg(long, default_value_t = 1.0)]

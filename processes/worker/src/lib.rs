@@ -357,9 +357,10 @@ type PendingTasks =
 
 /// How much simulation one request should carry: enough to pay for the message and the two
 /// wake-ups it costs, little enough that outcomes return promptly, since the learner creates
-/// new tasks only from outcomes. 400 us beat 200 us (and 800 us) for the analytic PA-10 at
-/// W = cores (docs/FLEET.md#throughput).
-const BATCH_TIME: Duration = Duration::from_micros(400);
+/// new tasks only from outcomes. At W = cores every request wakes the learner, which preempts a
+/// worker: 800 us (32 analytic PA-10 throws) halved those switches and beat 400 us, given the
+/// tasks in flight to fill such batches (docs/FLEET.md#throughput).
+const BATCH_TIME: Duration = Duration::from_micros(800);
 
 /// Tasks per request, from the measured rollout time: 1 until a rollout has been timed (and
 /// for rollouts longer than [`BATCH_TIME`]), at most half the budget so that a second request
@@ -415,11 +416,11 @@ mod tests {
             "half the budget of 25 us rollouts"
         );
         assert_eq!(
-            batch(32, Some(Duration::from_micros(25))),
-            16,
-            "400 us of 25 us rollouts"
+            batch(64, Some(Duration::from_micros(25))),
+            32,
+            "800 us of 25 us rollouts"
         );
-        assert_eq!(batch(32, Some(Duration::from_micros(40))), 10);
+        assert_eq!(batch(64, Some(Duration::from_micros(40))), 20);
         assert_eq!(batch(64, Some(Duration::from_nanos(100))), MAX_BATCH);
         assert_eq!(batch(3, Some(Duration::from_nanos(100))), 1, "half of 3 is 1");
         let mut batching = Batching::new(16);
