@@ -9,7 +9,7 @@
 //! - `to-learner`: event; workers wake the learner after sending requests.
 //! - `to-workers`: event; the learner wakes workers after answering.
 
-use crate::wire::{TaskBatch, WorkerMessage};
+use crate::wire::{Answer, MAX_BATCH, WireTask, WorkerMessage};
 use iceoryx2::prelude::*;
 use std::path::Path;
 use std::time::Duration;
@@ -21,7 +21,14 @@ pub const MAX_IN_FLIGHT_PER_WORKER: usize = 64;
 
 /// The task service.
 pub type TaskService =
-    iceoryx2::service::port_factory::request_response::PortFactory<ipc::Service, WorkerMessage, (), TaskBatch, ()>;
+    iceoryx2::service::port_factory::request_response::PortFactory<ipc::Service, WorkerMessage, (), [WireTask], Answer>;
+/// The learner's end of the task service.
+pub type TaskServer = iceoryx2::port::server::Server<ipc::Service, WorkerMessage, (), [WireTask], Answer>;
+/// A worker's request as the learner holds it until it answers.
+pub type TaskRequest = iceoryx2::active_request::ActiveRequest<ipc::Service, WorkerMessage, (), [WireTask], Answer>;
+/// A worker's request waiting for its answer.
+pub type PendingTasks =
+    iceoryx2::pending_response::PendingResponse<ipc::Service, WorkerMessage, (), [WireTask], Answer>;
 /// An event service.
 pub type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
 
@@ -127,7 +134,8 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         |name: &str| ServiceName::new(name).map_err(|e| IpcError::new(format!("service name '{name}'"), e));
     let tasks = node
         .service_builder(&service_name("tasks")?)
-        .request_response::<WorkerMessage, TaskBatch>()
+        .request_response::<WorkerMessage, [WireTask]>()
+        .response_user_header::<Answer>()
         .max_servers(1)
         .max_clients(MAX_WORKERS)
         .max_nodes(nodes)
@@ -155,6 +163,27 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         to_learner: event("to-learner")?,
         to_workers: event("to-workers")?,
     })
+}
+
+/// The server of `run`'s task service: its learner. Answers are sized to their tasks, up to
+/// [`MAX_BATCH`].
+pub fn task_server(run: &RunName, tasks: &TaskService) -> Result<TaskServer, IpcError> {
+    tasks
+        .server_builder()
+        .initial_max_slice_len(MAX_BATCH)
+        .create()
+        .map_err(|e| IpcError::new(format!("serving run '{run}' (is another learner serving it?)"), e))
+}
+
+/// Answer `request` with `tasks` (none for `Stop` and `Refused`), written straight into shared
+/// memory.
+pub fn reply(request: &TaskRequest, answer: Answer, tasks: &[WireTask]) -> Result<(), IpcError> {
+    let mut response = request
+        .loan_slice_uninit(tasks.len())
+        .map_err(|e| IpcError::new("loaning an answer", e))?
+        .write_from_slice(tasks);
+    *response.user_header_mut() = answer;
+    response.send().map_err(|e| IpcError::new("answering a request", e))
 }
 
 /// Remove what dead processes of `run` left behind (crashed learners or workers). Returns the
@@ -313,6 +342,56 @@ mod tests {
         }
         remove_run_files(&run).unwrap();
         assert!(leftover_files(&run).is_empty(), "{:?}", leftover_files(&run));
+    }
+
+    #[test]
+    fn answers_carry_exactly_their_tasks() {
+        use crate::wire::Response;
+        use crate::{Task, TaskKind};
+        let run = RunName::new(&format!("test-answers-{}", std::process::id())).unwrap();
+        {
+            let node = node(&run, "test").unwrap();
+            let services = open_services(&node).unwrap();
+            let server = task_server(&run, &services.tasks).unwrap();
+            let client = services.tasks.client_builder().create().unwrap();
+            let spec = crate::wire::EnvironmentSpec {
+                model: 1,
+                options: [0; 3],
+                problem_seed: 0,
+            };
+            let task = |id: u64| {
+                let task = Task {
+                    id,
+                    kind: TaskKind::Train,
+                    seed: id,
+                    context: vec![id as f64],
+                    theta: vec![0.5; 3],
+                };
+                WireTask::new(2, &task, spec).unwrap()
+            };
+            let answered = |tasks: &[WireTask]| {
+                let pending = client.send_copy(WorkerMessage::request(0, tasks.len())).unwrap();
+                let request = server.receive().unwrap().expect("the request arrived");
+                let sent = reply(&request, Answer::new(Response::Task, 5), tasks);
+                drop(request);
+                sent.map(|()| {
+                    let response = pending.receive().unwrap().expect("the answer arrived");
+                    let ids: Vec<u64> = response.payload().iter().map(|t| t.task_id).collect();
+                    (*response.user_header(), ids)
+                })
+            };
+            let three: Vec<WireTask> = (0..3).map(task).collect();
+            assert_eq!(
+                answered(&three).unwrap(),
+                (Answer::new(Response::Task, 5), vec![0, 1, 2])
+            );
+            let full: Vec<WireTask> = (0..MAX_BATCH as u64).map(task).collect();
+            assert_eq!(answered(&full).unwrap().1.len(), MAX_BATCH);
+            let error = answered(&[full.as_slice(), &three].concat()).unwrap_err();
+            assert!(error.to_string().starts_with("loaning an answer"), "{error}");
+        }
+        remove_run_files(&run).unwrap();
+        assert!(leftover_files(&run).is_empty());
     }
 
     #[test]

@@ -7,13 +7,14 @@
 //! Messages are batches: a worker's request carries the outcomes of up to [`MAX_BATCH`] tasks
 //! and asks for up to as many new ones, and the learner answers with every ready task it may
 //! give, so cheap rollouts pay the per-message cost (a shared-memory hand-over, a wake-up) once
-//! per batch instead of once per task.
+//! per batch instead of once per task. An answer is an [`Answer`] header over a slice of exactly
+//! the tasks it carries, written in place in shared memory.
 
 use crate::{Outcome, OutcomeStatus, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 /// Largest context a task can carry.
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -47,7 +48,7 @@ pub enum Response {
     Refused = 3,
 }
 
-/// One task of a [`TaskBatch`].
+/// One task of an answer.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
 pub struct WireTask {
@@ -71,23 +72,19 @@ pub struct WireTask {
     pub theta: [f64; MAX_THETA],
 }
 
-/// The learner's answer to a worker's request.
-#[derive(Debug, Clone, Copy, ZeroCopySend)]
+/// The header of the learner's answer to a worker's request; the answer's payload is the slice of
+/// tasks it hands out (none for `Stop` and `Refused`). iceoryx2 starts a header from `Default`
+/// (an unknown response) before the learner writes it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("acps::TaskBatch")]
-pub struct TaskBatch {
+#[type_name("acps::Answer")]
+pub struct Answer {
     /// A [`Response`].
     pub response: u32,
-    /// Number of valid entries of `tasks`.
-    pub count: u32,
     /// The learner's protocol version.
     pub protocol: u32,
-    /// Padding, always 0.
-    pub reserved: u32,
     /// The learner's run identity.
     pub run: u64,
-    /// The tasks.
-    pub tasks: [WireTask; MAX_BATCH],
 }
 
 /// One outcome of a [`WorkerMessage`].
@@ -206,41 +203,14 @@ impl WireTask {
     }
 }
 
-impl TaskBatch {
-    /// An answer without tasks: `Task` (to be filled with [`TaskBatch::push`]), `Stop`, or
-    /// `Refused`; it carries the learner's identity.
-    pub fn control(response: Response, run: u64) -> Self {
-        const EMPTY: WireTask = WireTask {
-            kind: 0,
-            job: 0,
-            context_len: 0,
-            theta_len: 0,
-            task_id: 0,
-            seed: 0,
-            environment: EnvironmentSpec {
-                model: 0,
-                options: [0; 3],
-                problem_seed: 0,
-            },
-            context: [0.0; MAX_CONTEXT],
-            theta: [0.0; MAX_THETA],
-        };
+impl Answer {
+    /// A `response` of this build from the learner of run identity `run`.
+    pub fn new(response: Response, run: u64) -> Self {
         Self {
             response: response as u32,
-            count: 0,
             protocol: PROTOCOL_VERSION,
-            reserved: 0,
             run,
-            tasks: [EMPTY; MAX_BATCH],
         }
-    }
-
-    /// Add a task.
-    pub fn push(&mut self, task: WireTask) -> Result<(), BatchFull> {
-        let slot = self.tasks.get_mut(self.count as usize).ok_or(BatchFull)?;
-        *slot = task;
-        self.count += 1;
-        Ok(())
     }
 
     /// The answer's kind, `None` for an unknown code.
@@ -251,11 +221,6 @@ impl TaskBatch {
             3 => Some(Response::Refused),
             _ => None,
         }
-    }
-
-    /// The tasks (the count is clamped to the capacity).
-    pub fn tasks(&self) -> &[WireTask] {
-        &self.tasks[..(self.count as usize).min(MAX_BATCH)]
     }
 }
 
@@ -357,14 +322,9 @@ mod tests {
             context: vec![-3.5, -4.0],
             theta: (0..21).map(f64::from).collect(),
         };
-        let mut batch = TaskBatch::control(Response::Task, 11);
-        batch.push(WireTask::new(5, &task, spec()).unwrap()).unwrap();
-        assert_eq!(
-            (batch.response(), batch.run, batch.tasks().len()),
-            (Some(Response::Task), 11, 1)
-        );
-        assert_eq!((batch.tasks()[0].job, batch.tasks()[0].environment), (5, spec()));
-        assert_eq!(batch.tasks()[0].to_task(), task);
+        let wire = WireTask::new(5, &task, spec()).unwrap();
+        assert_eq!((wire.job, wire.environment), (5, spec()));
+        assert_eq!(wire.to_task(), task);
         let outcome = Outcome::new(42, -1.5, 12.0).with_diagnostics(vec![-3.4, -4.1]);
         let mut message = WorkerMessage::request(11, 4);
         assert_eq!(message.outcomes().count(), 0);
@@ -398,13 +358,18 @@ mod tests {
         // A corrupt count cannot make the learner read beyond the array.
         message.count = u32::MAX;
         assert_eq!(message.outcomes().count(), MAX_BATCH);
-        let mut batch = TaskBatch::control(Response::Stop, 1);
-        batch.count = 1000;
-        assert_eq!(batch.tasks().len(), MAX_BATCH);
-        assert_eq!(
-            TaskBatch::control(Response::Refused, 1).response(),
-            Some(Response::Refused)
-        );
+        for response in [Response::Task, Response::Stop, Response::Refused] {
+            let answer = Answer::new(response, 7);
+            assert_eq!(
+                (answer.response(), answer.protocol, answer.run),
+                (Some(response), PROTOCOL_VERSION, 7)
+            );
+        }
+        let unknown = Answer {
+            response: 9,
+            ..Answer::new(Response::Task, 7)
+        };
+        assert_eq!(unknown.response(), None);
     }
 
     #[test]

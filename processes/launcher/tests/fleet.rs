@@ -1,7 +1,7 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
 use acps_shared::ipc::{self, RunName};
-use acps_shared::wire::{Response, TaskBatch, WorkerMessage};
+use acps_shared::wire::{Answer, Response, WorkerMessage};
 use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
@@ -403,13 +403,14 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         let _node = node;
         let client = services.tasks.client_builder().create().unwrap();
         let notifier = services.to_learner.notifier_builder().create().unwrap();
-        let ask = |message: WorkerMessage| -> TaskBatch {
+        let ask = |message: WorkerMessage| -> Answer {
             let pending = client.send_copy(message).unwrap();
             notifier.notify().unwrap();
             let start = Instant::now();
             loop {
                 if let Some(response) = pending.receive().unwrap() {
-                    return *response.payload();
+                    assert!(response.payload().is_empty(), "a refusal carries no tasks");
+                    return *response.user_header();
                 }
                 assert!(start.elapsed() < Duration::from_secs(10), "no answer");
                 std::thread::sleep(Duration::from_millis(5));

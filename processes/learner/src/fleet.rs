@@ -11,10 +11,8 @@
 //! task is recognised as a duplicate and dropped. Workers of another build or run are refused.
 
 use crate::learner::{Learner, LearningProgress, TellError};
-use acps_shared::ipc::{self, IpcError, RunName, TICK};
-use acps_shared::wire::{
-    CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, TaskBatch, WireTask, WorkerMessage,
-};
+use acps_shared::ipc::{self, IpcError, RunName, TICK, TaskRequest};
+use acps_shared::wire::{Answer, CapacityError, EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, WireTask};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -93,11 +91,7 @@ pub fn serve(
     if services.tasks.dynamic_config().number_of_servers() > 0 {
         return Err(FleetError::RunTaken(run.to_string()));
     }
-    let server = services
-        .tasks
-        .server_builder()
-        .create()
-        .map_err(|e| IpcError::new(format!("serving run '{run}' (is another learner serving it?)"), e))?;
+    let server = ipc::task_server(run, &services.tasks)?;
     let listener = services
         .to_learner
         .listener_builder()
@@ -133,7 +127,7 @@ pub fn serve(
                         message.run
                     );
                 }
-                let _ = request.send_copy(TaskBatch::control(Response::Refused, identity));
+                let _ = ipc::reply(&request, Answer::new(Response::Refused, identity), &[]);
                 continue;
             }
             first_request.get_or_insert_with(Instant::now);
@@ -175,7 +169,7 @@ pub fn serve(
         let serving = || first_request.map_or(0.0, |first: Instant| first.elapsed().as_secs_f64());
         if progress.jobs_done == jobs.len() {
             for (request, _) in parked.drain(..) {
-                let _ = request.send_copy(TaskBatch::control(Response::Stop, identity));
+                let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
             }
             let _ = notifier.notify();
             progress.serving_seconds = serving();
@@ -238,11 +232,6 @@ pub fn serve(
     }
 }
 
-/// A worker's request: it carries the outcomes of tasks it performed, and is answered with up to
-/// the number of tasks it asks for.
-type TaskRequest =
-    iceoryx2::active_request::ActiveRequest<iceoryx2::prelude::ipc::Service, WorkerMessage, (), TaskBatch, ()>;
-
 /// Answer parked requests, each with as many ready tasks as it asks for (round robin over the
 /// jobs), as soon as at least one is ready; returns how many tasks went out.
 fn answer(
@@ -254,30 +243,27 @@ fn answer(
     progress: &mut FleetProgress,
 ) -> Result<usize, FleetError> {
     let mut answered = 0;
+    let mut tasks = Vec::with_capacity(MAX_BATCH);
     while let Some((request, want)) = parked.pop_front() {
         if !request.is_connected() {
             continue;
         }
-        let mut batch = TaskBatch::control(Response::Task, identity);
+        tasks.clear();
         let started = Instant::now();
-        while (batch.count as usize) < want {
+        while tasks.len() < want.min(MAX_BATCH) {
             let Some((job, task)) = next_task(jobs, next_job) else {
                 break;
             };
-            batch
-                .push(WireTask::new(job as u32, &task, jobs[job].environment)?)
-                .expect("want is at most the batch capacity");
+            tasks.push(WireTask::new(job as u32, &task, jobs[job].environment)?);
             holders.insert((job as u32, task.id), request.origin());
         }
         progress.learner_seconds += started.elapsed().as_secs_f64();
-        if batch.count == 0 {
+        if tasks.is_empty() {
             parked.push_front((request, want));
             break;
         }
-        request
-            .send_copy(batch)
-            .map_err(|e| IpcError::new("answering a request", e))?;
-        answered += batch.count as usize;
+        ipc::reply(&request, Answer::new(Response::Task, identity), &tasks)?;
+        answered += tasks.len();
     }
     Ok(answered)
 }

@@ -9,10 +9,8 @@
 //! Embedding: call [`serve`] on any thread of your program with an [`EnvironmentFactory`] (for
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 
-use acps_shared::ipc::{self, IpcError, MAX_IN_FLIGHT_PER_WORKER, RunName, TICK};
-use acps_shared::wire::{
-    EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, TaskBatch, WireOutcome, WireTask, WorkerMessage,
-};
+use acps_shared::ipc::{self, IpcError, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
+use acps_shared::wire::{EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, WireOutcome, WireTask, WorkerMessage};
 use acps_shared::{Environment, Outcome};
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -269,13 +267,13 @@ pub fn serve(
                 else {
                     continue;
                 };
-                let answer: &TaskBatch = response.payload();
+                let answer = *response.user_header();
                 match answer.response() {
                     Some(Response::Task) => {
                         if identity == 0 {
                             identity = answer.run;
                         }
-                        queue.extend(answer.tasks());
+                        queue.extend(response.payload());
                     }
                     Some(Response::Stop) => {
                         return Ok(WorkerReport {
@@ -350,10 +348,6 @@ pub fn serve(
         }
     }
 }
-
-/// A request in flight.
-type PendingTasks =
-    iceoryx2::pending_response::PendingResponse<iceoryx2::prelude::ipc::Service, WorkerMessage, (), TaskBatch, ()>;
 
 /// How much simulation one request should carry: enough to pay for the message and the two
 /// wake-ups it costs, little enough that outcomes return promptly, since the learner creates

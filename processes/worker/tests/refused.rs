@@ -1,7 +1,7 @@
 //! A worker told by the learner that it belongs to another run stops with a message naming both.
 
 use acps_shared::ipc::{self, RunName};
-use acps_shared::wire::{Response, TaskBatch};
+use acps_shared::wire::{Answer, Response};
 use acps_worker::{ModelFactory, WorkerError, WorkerOptions};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -23,11 +23,11 @@ fn a_refused_worker_stops_and_says_why() {
         // A stand-in learner that refuses every request with identity 42.
         let node = ipc::node(&run, "fake-learner").unwrap();
         let services = ipc::open_services(&node).unwrap();
-        let server = services.tasks.server_builder().create().unwrap();
+        let server = ipc::task_server(&run, &services.tasks).unwrap();
         let start = Instant::now();
         while !worker.is_finished() {
             while let Some(request) = server.receive().unwrap() {
-                request.send_copy(TaskBatch::control(Response::Refused, 42)).unwrap();
+                ipc::reply(&request, Answer::new(Response::Refused, 42), &[]).unwrap();
             }
             assert!(start.elapsed() < Duration::from_secs(20), "the worker never asked");
             std::thread::sleep(Duration::from_millis(5));
