@@ -241,16 +241,22 @@ fn throwing_experiments_write_their_results() {
 #[test]
 fn bench_writes_its_table_and_json() {
     let dir = temp_dir("bench");
-    let out = acps(&[
-        "bench",
-        "--scale",
-        "0.01",
-        "--max-workers",
-        "1",
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let run_bench = |more: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "--scale",
+            "0.01",
+            "--max-workers",
+            "1",
+            "--out",
+            dir.to_str().unwrap(),
+        ];
+        args.extend_from_slice(more);
+        let out = acps(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        out
+    };
+    let out = run_bench(&[]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         stdout.contains("rollouts/s") && stdout.contains("inprocess-rayon"),
@@ -280,18 +286,7 @@ fn bench_writes_its_table_and_json() {
         );
     }
     // --env picks environments, in its order.
-    let only = acps(&[
-        "bench",
-        "--scale",
-        "0.01",
-        "--max-workers",
-        "1",
-        "--env",
-        "rapier,trivial",
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(only.status.success(), "{}", String::from_utf8_lossy(&only.stderr));
+    run_bench(&["--env", "rapier,trivial"]);
     let envs: Vec<String> = summary(&dir.join("bench.json"))["rows"]
         .as_array()
         .unwrap()
