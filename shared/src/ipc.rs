@@ -16,8 +16,12 @@ use std::time::Duration;
 
 /// Most workers one run serves.
 pub const MAX_WORKERS: usize = 128;
-/// Most tasks (and so requests) one worker keeps in flight.
+/// Most tasks one worker keeps in flight.
 pub const MAX_IN_FLIGHT_PER_WORKER: usize = 64;
+/// Most requests one worker has waiting for tasks; one more may only deliver outcomes. The
+/// learner pays for every request channel of every worker whenever it loans an answer
+/// (iceoryx2 looks for returned chunks on each), so there are few: batches fill them.
+pub const MAX_ASKING_REQUESTS: usize = 8;
 
 /// The task service.
 pub type TaskService =
@@ -139,7 +143,7 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         .max_servers(1)
         .max_clients(MAX_WORKERS)
         .max_nodes(nodes)
-        .max_active_requests_per_client(MAX_IN_FLIGHT_PER_WORKER)
+        .max_active_requests_per_client(MAX_ASKING_REQUESTS + 1)
         .max_response_buffer_size(2)
         .max_loaned_requests(2)
         .open_or_create()

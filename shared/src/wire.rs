@@ -14,7 +14,7 @@ use crate::{Outcome, OutcomeStatus, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 /// Largest context a task can carry.
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -117,7 +117,8 @@ pub struct WireOutcome {
 pub struct WorkerMessage {
     /// The worker's [`PROTOCOL_VERSION`].
     pub protocol: u32,
-    /// How many tasks the worker asks for, 1..=[`MAX_BATCH`].
+    /// How many tasks the worker asks for, 0..=[`MAX_BATCH`]; 0 only delivers outcomes and is
+    /// answered at once.
     pub want: u32,
     /// The run the worker means to join.
     pub run: u64,
@@ -257,8 +258,8 @@ impl WireOutcome {
 }
 
 impl WorkerMessage {
-    /// A request for `want` tasks (clamped to 1..=[`MAX_BATCH`]) without outcomes, from a worker
-    /// that means to join `run` (0: whatever runs).
+    /// A request for `want` tasks (at most [`MAX_BATCH`]) without outcomes, from a worker that
+    /// means to join `run` (0: whatever runs).
     pub fn request(run: u64, want: usize) -> Self {
         const EMPTY: WireOutcome = WireOutcome {
             job: 0,
@@ -272,7 +273,7 @@ impl WorkerMessage {
         };
         Self {
             protocol: PROTOCOL_VERSION,
-            want: want.clamp(1, MAX_BATCH) as u32,
+            want: want.min(MAX_BATCH) as u32,
             run,
             count: 0,
             reserved: 0,
@@ -295,9 +296,9 @@ impl WorkerMessage {
             .map(WireOutcome::to_outcome)
     }
 
-    /// Tasks asked for, clamped to 1..=[`MAX_BATCH`].
+    /// Tasks asked for, at most [`MAX_BATCH`].
     pub fn wanted(&self) -> usize {
-        (self.want as usize).clamp(1, MAX_BATCH)
+        (self.want as usize).min(MAX_BATCH)
     }
 }
 
@@ -344,7 +345,7 @@ mod tests {
     #[test]
     fn batches_are_bounded_and_clamped() {
         let mut message = WorkerMessage::request(0, 0);
-        assert_eq!(message.wanted(), 1, "a request asks for at least one task");
+        assert_eq!(message.wanted(), 0, "a request may only deliver outcomes");
         assert_eq!(WorkerMessage::request(0, 1000).wanted(), MAX_BATCH);
         for id in 0..MAX_BATCH as u64 {
             message

@@ -1,8 +1,12 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
+use acps::paper::{self, Options, Sim};
+use acps_learner::fleet::{self, FleetJob};
+use acps_learner::{Method, run_in_process};
 use acps_shared::ipc::{self, RunName};
 use acps_shared::wire::{Answer, Response, WorkerMessage};
-use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
+use acps_shared::{Environment, Outcome, Task};
+use acps_worker::{ModelFactory, Single, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -597,4 +601,90 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
     assert_eq!(seen, Some(0), "a worker at niceness 7 beside a learner at 0");
     assert_clean(&run);
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Every rollout of the wrapped environment takes a millisecond, longer than a batch's worth of
+/// simulation, so each travels alone.
+struct Sleepy(Box<dyn Environment>);
+
+impl Environment for Sleepy {
+    fn context_dim(&self) -> usize {
+        self.0.context_dim()
+    }
+
+    fn param_dim(&self) -> usize {
+        self.0.param_dim()
+    }
+
+    fn rollout(&mut self, task: &Task) -> Outcome {
+        std::thread::sleep(Duration::from_millis(1));
+        self.0.rollout(task)
+    }
+}
+
+#[test]
+fn outcomes_go_out_alone_while_every_asking_request_waits() {
+    // P = 1 and two jobs: at most two tasks are ready at a time, so a worker with 64 tasks in
+    // flight keeps all its 8 asking requests waiting, and its outcomes need the delivery slot.
+    let options = Options {
+        runs: 2,
+        episodes: Some(40),
+        in_flight: 1,
+        methods: Some(vec![Method::MonotonicProgress]),
+        ..Options::default()
+    };
+    let experiment = paper::grid(Sim::Analytic, &options);
+    let mut reference = experiment.jobs().unwrap();
+    for job in &mut reference {
+        run_in_process(&mut job.learner, job.environment.as_mut());
+    }
+    let mut jobs: Vec<FleetJob> = experiment
+        .jobs()
+        .unwrap()
+        .into_iter()
+        .map(|job| FleetJob {
+            environment: job.spec.unwrap(),
+            learner: job.learner,
+        })
+        .collect();
+    let run = run_name("deliver");
+    let environment = Sleepy(experiment.jobs().unwrap().remove(0).environment);
+    let progress = std::thread::scope(|scope| {
+        let worker = scope.spawn(|| {
+            let options = WorkerOptions {
+                in_flight: 64,
+                name: "sleepy".into(),
+                ..WorkerOptions::default()
+            };
+            acps_worker::serve(&run, &options, &mut Single(environment), &AtomicBool::new(false))
+        });
+        // A deadlock fails the test instead of hanging it.
+        let stop = AtomicBool::new(false);
+        let started = Instant::now();
+        let progress = fleet::serve(
+            &mut jobs,
+            &run,
+            7,
+            Duration::ZERO,
+            &stop,
+            |_| {
+                if started.elapsed() > Duration::from_secs(60) {
+                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            },
+            |_, _| Ok(()),
+        )
+        .expect("the run finishes within a minute");
+        assert_eq!(worker.join().unwrap().unwrap().exit, WorkerExit::Finished);
+        progress
+    });
+    assert!(progress.delivered > 0, "{progress:?}");
+    for (fleet, alone) in jobs.iter().zip(&reference) {
+        assert_eq!(
+            format!("{:?}", fleet.learner.episodes()),
+            format!("{:?}", alone.learner.episodes())
+        );
+    }
+    ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
 }

@@ -43,6 +43,8 @@ pub struct FleetProgress {
     pub duplicates: u64,
     /// Requests refused (another build or run).
     pub refused: u64,
+    /// Requests that only delivered outcomes, because the worker's asking requests all waited.
+    pub delivered: u64,
     /// Time spent inside the learner cores (`tell` and `ask`), in seconds.
     pub learner_seconds: f64,
     /// Seconds since the first worker's first request: the run's time without the workers'
@@ -112,6 +114,7 @@ pub fn serve(
     let mut idle_since: Option<Instant> = None;
     let mut outcomes = VecDeque::new();
     let mut unannounced = 0;
+    let mut wake_now = false;
     let mut first_request = None;
     loop {
         let mut active_now = false;
@@ -135,18 +138,29 @@ pub fn serve(
                 holders.remove(&(job, outcome.task_id));
                 outcomes.push_back((job, outcome));
             }
-            parked.push_back((request, message.wanted()));
+            match message.wanted() {
+                // Outcomes only: the worker's last free slot, so it is answered at once rather
+                // than parked behind tasks that may need these very outcomes.
+                0 => {
+                    ipc::reply(&request, Answer::new(Response::Task, identity), &[])?;
+                    progress.delivered += 1;
+                    wake_now = true;
+                }
+                want => parked.push_back((request, want)),
+            }
         }
         // Answer before telling, and tell one outcome per pass: tasks are created eagerly, so
         // ready ones wait in the cores, and workers get them without waiting for C-REPS updates
         // (a millisecond each) of the outcomes queued before theirs.
         let answered = answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?;
         // Workers that are simulating need no wake-up; one per 8 tasks answered, or once the
-        // queued outcomes are told, reaches those that wait without a syscall per task.
+        // queued outcomes are told, reaches those that wait without a syscall per task. A worker
+        // whose outcomes waited for a free slot may be asleep: it is woken at once.
         unannounced += answered;
-        if unannounced > 0 && (outcomes.is_empty() || unannounced >= 8) {
+        if wake_now || (unannounced > 0 && (outcomes.is_empty() || unannounced >= 8)) {
             notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
             unannounced = 0;
+            wake_now = false;
         }
         let told_one = if let Some((job, outcome)) = outcomes.pop_front() {
             let started = Instant::now();

@@ -9,7 +9,7 @@
 //! Embedding: call [`serve`] on any thread of your program with an [`EnvironmentFactory`] (for
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 
-use acps_shared::ipc::{self, IpcError, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
+use acps_shared::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
 use acps_shared::wire::{EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, WireOutcome, WireTask, WorkerMessage};
 use acps_shared::{Environment, Outcome};
 use iceoryx2::port::listener::ListenerWaitError;
@@ -56,7 +56,9 @@ impl<E: Environment> EnvironmentFactory for Single<E> {
 #[derive(Debug, Clone)]
 pub struct WorkerOptions {
     /// Tasks kept in flight (asked for, queued or not yet reported), 1..=64: more hides the
-    /// wake-up latency between processes. Cheap rollouts travel in batches of up to half of them.
+    /// wake-up latency between processes. Cheap rollouts travel in batches of up to half of them;
+    /// at most 8 requests ask for tasks at once, so rollouts that travel alone (slower than a
+    /// batch's 800 us) keep at most 8 in flight.
     pub in_flight: usize,
     /// The worker's node name (shown by iceoryx2's tools).
     pub name: String,
@@ -206,8 +208,10 @@ pub fn serve(
         .map_err(|e| IpcError::new("creating the worker's listener", e))?;
     // The learner's identity, learnt from its first answer; 0 asks to join whatever runs.
     let mut identity = 0u64;
-    // Requests in flight, each with the number of tasks it asks for; `None` is a free slot.
-    let mut slots: Vec<Option<(PendingTasks, usize)>> = (0..options.in_flight).map(|_| None).collect();
+    // Requests in flight, each with the number of tasks it asks for; `None` is a free slot. The
+    // first `asking` slots ask for tasks, the last one only delivers outcomes.
+    let asking = options.in_flight.min(MAX_ASKING_REQUESTS);
+    let mut slots: Vec<Option<(PendingTasks, usize)>> = (0..=asking).map(|_| None).collect();
     // Tasks answered by the learner and not yet simulated.
     let mut queue: VecDeque<WireTask> = VecDeque::new();
     // Outcomes not yet sent.
@@ -225,8 +229,10 @@ pub fn serve(
         // Budget: tasks queued, unsent or asked for stay within `in_flight`. The outcomes of a
         // batch go out when the batch is full or nothing else is left to simulate, and ask for
         // as many tasks as the budget then allows; a worker with room to spare asks for more.
-        // A free slot always exists for outcomes: every pending request asks for at least one
-        // task, and the outcomes' own tasks still count against the budget.
+        // Outcomes never wait for tasks: when every asking slot is taken they go out alone in
+        // the delivery slot, which the learner answers at once (its asking requests may wait
+        // for tasks that need these very outcomes). A worker with both kinds of slot taken
+        // stops simulating once its outbox is full, until an answer frees one.
         let mut sent = false;
         loop {
             let asked: usize = slots.iter().flatten().map(|(_, want)| want).sum();
@@ -239,11 +245,12 @@ pub fn serve(
             if !(flush || top_up) || room == 0 {
                 break;
             }
-            let slot = slots
-                .iter_mut()
-                .find(|slot| slot.is_none())
-                .expect("a pending request asks for at least one task of the budget");
-            let want = room.min(batch);
+            let (asking_slots, delivery) = slots.split_at_mut(asking);
+            let (slot, want) = match asking_slots.iter_mut().find(|slot| slot.is_none()) {
+                Some(slot) => (slot, room.min(batch)),
+                None if flush && delivery[0].is_none() => (&mut delivery[0], 0),
+                None => break,
+            };
             outbox.run = identity;
             outbox.want = want as u32;
             let request = client
@@ -257,8 +264,10 @@ pub fn serve(
             notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
         }
         // Polling every slot costs about as much as a trivial rollout, so it waits until the
-        // queue runs dry: answers that arrive meanwhile wait in their slots.
-        if queue.is_empty() {
+        // queue runs dry (or outcomes cannot go out): answers that arrive meanwhile wait in
+        // their slots.
+        let outbox_full = outbox.count as usize >= MAX_BATCH;
+        if queue.is_empty() || outbox_full {
             for slot in slots.iter_mut() {
                 let Some((request, _)) = slot.as_ref() else { continue };
                 let Some(response) = request
@@ -305,7 +314,8 @@ pub fn serve(
                 *slot = None;
             }
         }
-        if let Some(wire) = queue.pop_front() {
+        let next = if outbox_full { None } else { queue.pop_front() };
+        if let Some(wire) = next {
             let task = wire.to_task();
             let environment = factory
                 .environment(&wire.environment)
@@ -324,7 +334,7 @@ pub fn serve(
                 .expect("a failed outcome has no diagnostics");
             outbox
                 .push(wire_outcome)
-                .expect("the outbox is sent before it holds a full batch");
+                .expect("a full outbox stops the simulation until it is sent");
             idle_since = None;
             continue;
         }
