@@ -171,7 +171,8 @@ struct BenchArgs {
     /// Largest fleet (default: the number of cores).
     #[arg(long)]
     max_workers: Option<usize>,
-    /// Tasks each worker keeps in flight, asked for or queued (1..=64).
+    /// Tasks each worker keeps in flight, asked for or queued (1..=64; at most 8 of rollouts
+    /// slower than a batch's 800 us, which travel alone).
     #[arg(long, default_value_t = 64)]
     worker_in_flight: usize,
     /// Multiplies the work per row (1: a few seconds per row).
@@ -201,7 +202,8 @@ struct RunArgs {
     /// Worker processes to start (default: the number of cores).
     #[arg(long)]
     workers: Option<usize>,
-    /// Tasks each started worker keeps in flight, asked for or queued (1..=64).
+    /// Tasks each started worker keeps in flight, asked for or queued (1..=64; at most 8 of
+    /// rollouts slower than a batch's 800 us, which travel alone).
     #[arg(long, default_value_t = 4)]
     worker_in_flight: usize,
     #[command(flatten)]
@@ -218,7 +220,8 @@ struct WorkerArgs {
     #[arg(long)]
     run: String,
     /// Tasks kept in flight, asked for or queued (1..=64): more hides the wake-up latency
-    /// between processes; cheap rollouts travel in batches of up to half of them.
+    /// between processes; cheap rollouts travel in batches of up to half of them, and at most 8
+    /// of rollouts slower than a batch's 800 us, which travel alone, are in flight.
     #[arg(long, default_value_t = 4)]
     in_flight: usize,
     /// The worker's name in iceoryx2's node list (default: worker-PID).
