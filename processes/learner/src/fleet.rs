@@ -12,7 +12,7 @@
 
 use crate::learner::{Learner, LearningProgress, TellError};
 use acps_shared::ipc::{self, IpcError, RunName, TICK, TaskRequest};
-use acps_shared::wire::{Answer, CapacityError, EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, WireTask};
+use acps_shared::wire::{Answer, CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -257,14 +257,16 @@ fn answer(
     progress: &mut FleetProgress,
 ) -> Result<usize, FleetError> {
     let mut answered = 0;
-    let mut tasks = Vec::with_capacity(MAX_BATCH);
+    // Allocated only when a request is waiting: most passes have none.
+    let mut tasks = Vec::new();
     while let Some((request, want)) = parked.pop_front() {
         if !request.is_connected() {
             continue;
         }
         tasks.clear();
+        tasks.reserve(want);
         let started = Instant::now();
-        while tasks.len() < want.min(MAX_BATCH) {
+        while tasks.len() < want {
             let Some((job, task)) = next_task(jobs, next_job) else {
                 break;
             };
