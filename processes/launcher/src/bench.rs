@@ -28,21 +28,25 @@ pub struct Row {
     pub mode: &'static str,
     /// Worker processes (fleet), threads (rayon) or 1.
     pub workers: usize,
-    /// Rollouts (training and evaluation) per second of wall time; a fleet's from its first
-    /// request on.
+    /// Rollouts (training and evaluation) per second of wall time, the median over rounds; a
+    /// fleet's from its first request on.
     pub rollouts_per_s: f64,
-    /// rollouts_per_s / (workers x the single-thread rate).
+    /// Median over rounds of the round's rate / (workers x its single-thread rate).
     pub ratio: f64,
-    /// Share of the fleet's serving time spent inside the learner cores.
+    /// Share of the fleet's serving time (median round) spent inside the learner cores.
     pub learner_share: Option<f64>,
-    /// Fleet only: seconds from starting the worker processes to the first worker's first
-    /// request, which the rate leaves out (in-process rows build their environments before
+    /// Fleet only: seconds (median round) from starting the worker processes to the first
+    /// worker's first request, which the rate leaves out (in-process rows build their environments before
     /// the clock starts, too).
     pub startup_seconds: Option<f64>,
-    /// Rollouts performed.
+    /// Rollouts performed in the median round.
     pub rollouts: u64,
-    /// Wall time in seconds (a fleet's from its first request on).
+    /// Wall time in seconds of the median round (a fleet's from its first request on).
     pub seconds: f64,
+    /// Every round's rate, in order.
+    pub round_rates: Vec<f64>,
+    /// Every round's ratio, in order.
+    pub round_ratios: Vec<f64>,
 }
 
 /// What a fleet row measures beyond the rate.
@@ -76,6 +80,8 @@ pub struct BenchOptions {
     pub worker_nice: Option<u8>,
     /// Multiplies the amount of work per row (1 = a few seconds per row).
     pub scale: f64,
+    /// Times every mode is measured, interleaved, >= 1.
+    pub rounds: usize,
 }
 
 #[derive(Clone, Copy)]
@@ -175,114 +181,188 @@ fn consumed(learner: &Learner) -> u64 {
     learner.episodes().len() as u64 + evaluations as u64
 }
 
-/// Measure every row; `report` sees each row as it is measured.
-pub fn run(options: &BenchOptions, mut report: impl FnMut(&Row)) -> anyhow::Result<Vec<Row>> {
+/// What [`run`] reports while it works.
+pub enum BenchEvent<'a> {
+    /// A measurement starts: `index` of `total` in the whole bench.
+    Measuring {
+        /// The environment.
+        env: &'static str,
+        /// inprocess-1, inprocess-rayon or fleet.
+        mode: &'static str,
+        /// Worker processes, threads or 1.
+        workers: usize,
+        /// The round, from 1.
+        round: usize,
+        /// Measurements done before this one.
+        index: usize,
+        /// Measurements in the whole bench.
+        total: usize,
+    },
+    /// A row is final (after its environment's last round).
+    Row(&'a Row),
+}
+
+/// One round's measurement of one mode.
+#[derive(Clone, Copy)]
+struct Measurement {
+    rollouts: u64,
+    seconds: f64,
+    fleet: Option<Fleet>,
+}
+
+impl Measurement {
+    fn rate(&self) -> f64 {
+        self.rollouts as f64 / self.seconds
+    }
+}
+
+/// The lower median: an element of `values` (a measured round, not a mean of two).
+fn lower_median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted[(sorted.len() - 1) / 2]
+}
+
+/// Measure every row; `report` sees each measurement start and each row once it is final.
+///
+/// Rounds interleave the modes (one thread, rayon, fleets, then again), so that a slow spell
+/// of a shared machine hits every mode of a round alike. A row is the round with the (lower)
+/// median rate; its ratio is the median over rounds of the round's rate / (W x the same
+/// round's single-thread rate).
+pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow::Result<Vec<Row>> {
     let mut rows = Vec::new();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let fleets = options.max_workers.min(cores.max(1));
+    // (mode, workers) of every measurement of a round, in the order taken.
+    let modes: Vec<(&'static str, usize)> = [("inprocess-1", 1), ("inprocess-rayon", rayon::current_num_threads())]
+        .into_iter()
+        .chain((1..=fleets).map(|workers| ("fleet", workers)))
+        .collect();
+    let total = options.envs.len() * options.rounds * modes.len();
+    let mut index = 0;
     for workload in options.envs.iter().map(|env| match env {
         BenchEnv::Trivial => Workload::Trivial,
         BenchEnv::Analytic => Workload::Throw(Sim::Analytic),
         BenchEnv::Rapier => Workload::Throw(Sim::Rapier),
     }) {
-        let mut measure =
-            |mode: &'static str, workers: usize, rollouts: u64, seconds: f64, fleet: Option<Fleet>, single: f64| {
-                let rate = rollouts as f64 / seconds;
-                let row = Row {
+        let mut measured: Vec<Vec<Measurement>> = vec![Vec::new(); modes.len()];
+        for round in 1..=options.rounds {
+            for (&(mode, workers), samples) in modes.iter().zip(&mut measured) {
+                report(BenchEvent::Measuring {
                     env: workload.name(),
                     mode,
                     workers,
-                    rollouts_per_s: rate,
-                    ratio: if single > 0.0 {
-                        rate / (workers as f64 * single)
-                    } else {
-                        1.0
-                    },
-                    learner_share: fleet.map(|f| f.learner_seconds / seconds),
-                    startup_seconds: fleet.map(|f| f.startup_seconds),
-                    rollouts,
-                    seconds,
+                    round,
+                    index,
+                    total,
+                });
+                index += 1;
+                let measurement = match mode {
+                    "inprocess-1" => in_process(workload, options.scale, false)?,
+                    "inprocess-rayon" => in_process(workload, options.scale, true)?,
+                    _ => fleet(workload, options, workers)?,
                 };
-                report(&row);
-                rows.push(row);
-                rate
-            };
-        let mut single_jobs = jobs(workload, options.scale)?;
-        let start = Instant::now();
-        for job in &mut single_jobs {
-            run_in_process(&mut job.learner, job.environment.as_mut());
+                samples.push(measurement);
+            }
         }
-        let total: u64 = single_jobs.iter().map(|j| consumed(&j.learner)).sum();
-        let single = measure("inprocess-1", 1, total, start.elapsed().as_secs_f64(), None, 0.0);
-
-        let mut parallel = jobs(workload, options.scale)?;
-        let start = Instant::now();
-        parallel
-            .par_iter_mut()
-            .for_each(|job| run_in_process(&mut job.learner, job.environment.as_mut()));
-        let total: u64 = parallel.iter().map(|j| consumed(&j.learner)).sum();
-        measure(
-            "inprocess-rayon",
-            rayon::current_num_threads(),
-            total,
-            start.elapsed().as_secs_f64(),
-            None,
-            single,
-        );
-
-        for workers in 1..=options.max_workers.min(cores.max(1)) {
-            let run = RunName::new(&format!("bench-{}-{}-{workers}", std::process::id(), workload.name()))?;
-            let mut fleet_jobs: Vec<FleetJob> = jobs(workload, options.scale)?
-                .into_iter()
-                .map(|j| FleetJob {
-                    learner: j.learner,
-                    environment: j.spec,
-                })
+        let single_rates: Vec<f64> = measured[0].iter().map(Measurement::rate).collect();
+        for (&(mode, workers), samples) in modes.iter().zip(&measured) {
+            let rates: Vec<f64> = samples.iter().map(Measurement::rate).collect();
+            let ratios: Vec<f64> = rates
+                .iter()
+                .zip(&single_rates)
+                .map(|(rate, single)| rate / (workers as f64 * single))
                 .collect();
-            let nice = options.worker_nice.unwrap_or_else(|| workers::default_nice(workers));
-            let mut children = workers::spawn(&run, workers, options.worker_in_flight, nice)?;
-            let start = Instant::now();
-            let stop = AtomicBool::new(false);
-            let served = fleet::serve(
-                &mut fleet_jobs,
-                &run,
-                0x0bec_4000 + workers as u64,
-                workers::spin(workers),
-                &stop,
-                |_| {
-                    if workers::all_exited(&mut children) {
-                        stop.store(true, std::sync::atomic::Ordering::Relaxed);
-                    }
-                },
-                |_, _| Ok(()),
-            );
-            let total_seconds = start.elapsed().as_secs_f64();
-            let reaped = workers::reap(&mut children);
-            let cleaned = ipc::remove_run_files(&run);
-            let progress = served.with_context(|| format!("fleet of {workers} on {}", workload.name()))?;
-            reaped?;
-            cleaned?;
-            let fleet = Fleet {
-                learner_seconds: progress.learner_seconds,
-                startup_seconds: total_seconds - progress.serving_seconds,
-            };
-            measure(
-                "fleet",
+            let median = lower_median(&rates);
+            let chosen = samples[rates
+                .iter()
+                .position(|&rate| rate == median)
+                .expect("the median is a rate")];
+            let row = Row {
+                env: workload.name(),
+                mode,
                 workers,
-                progress.outcomes,
-                progress.serving_seconds,
-                Some(fleet),
-                single,
-            );
+                rollouts_per_s: median,
+                ratio: lower_median(&ratios),
+                learner_share: chosen.fleet.map(|f| f.learner_seconds / chosen.seconds),
+                startup_seconds: chosen.fleet.map(|f| f.startup_seconds),
+                rollouts: chosen.rollouts,
+                seconds: chosen.seconds,
+                round_rates: rates,
+                round_ratios: ratios,
+            };
+            report(BenchEvent::Row(&row));
+            rows.push(row);
         }
     }
     Ok(rows)
 }
 
+/// The jobs of `workload` run in this process, one after another or (`parallel`) by rayon.
+fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<Measurement> {
+    let mut jobs = jobs(workload, scale)?;
+    let start = Instant::now();
+    let run = |job: &mut Job| run_in_process(&mut job.learner, job.environment.as_mut());
+    if parallel {
+        jobs.par_iter_mut().for_each(run);
+    } else {
+        jobs.iter_mut().for_each(run);
+    }
+    Ok(Measurement {
+        seconds: start.elapsed().as_secs_f64(),
+        rollouts: jobs.iter().map(|j| consumed(&j.learner)).sum(),
+        fleet: None,
+    })
+}
+
+/// The jobs of `workload` served to a fleet of `workers` processes started for it.
+fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::Result<Measurement> {
+    let run = RunName::new(&format!("bench-{}-{}-{workers}", std::process::id(), workload.name()))?;
+    let mut fleet_jobs: Vec<FleetJob> = jobs(workload, options.scale)?
+        .into_iter()
+        .map(|j| FleetJob {
+            learner: j.learner,
+            environment: j.spec,
+        })
+        .collect();
+    let nice = options.worker_nice.unwrap_or_else(|| workers::default_nice(workers));
+    let mut children = workers::spawn(&run, workers, options.worker_in_flight, nice)?;
+    let start = Instant::now();
+    let stop = AtomicBool::new(false);
+    let served = fleet::serve(
+        &mut fleet_jobs,
+        &run,
+        0x0bec_4000 + workers as u64,
+        workers::spin(workers),
+        &stop,
+        |_| {
+            if workers::all_exited(&mut children) {
+                stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+        },
+        |_, _| Ok(()),
+    );
+    let total_seconds = start.elapsed().as_secs_f64();
+    let reaped = workers::reap(&mut children);
+    let cleaned = ipc::remove_run_files(&run);
+    let progress = served.with_context(|| format!("fleet of {workers} on {}", workload.name()))?;
+    reaped?;
+    cleaned?;
+    Ok(Measurement {
+        rollouts: progress.outcomes,
+        seconds: progress.serving_seconds,
+        fleet: Some(Fleet {
+            learner_seconds: progress.learner_seconds,
+            startup_seconds: total_seconds - progress.serving_seconds,
+        }),
+    })
+}
+
 /// The rows as an aligned table.
 pub fn table(rows: &[Row]) -> String {
     let mut text = format!(
-        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>14} {:>11}\n",
-        "env", "mode", "workers", "rollouts/s", "ratio", "learner share", "startup ms"
+        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>13} {:>14} {:>11}\n",
+        "env", "mode", "workers", "rollouts/s", "ratio", "ratio range", "learner share", "startup ms"
     );
     for row in rows {
         let share = row
@@ -291,9 +371,16 @@ pub fn table(rows: &[Row]) -> String {
         let startup = row
             .startup_seconds
             .map_or("-".to_string(), |s| format!("{:.0}", 1000.0 * s));
+        let lowest = row.round_ratios.iter().copied().fold(f64::INFINITY, f64::min);
+        let highest = row.round_ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let range = if row.round_ratios.len() > 1 {
+            format!("{lowest:.2}-{highest:.2}")
+        } else {
+            "-".to_string()
+        };
         text += &format!(
-            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>14} {:>11}\n",
-            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, share, startup
+            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>13} {:>14} {:>11}\n",
+            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, range, share, startup
         );
     }
     text

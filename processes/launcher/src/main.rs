@@ -1,5 +1,6 @@
 //! `acps`: the command line of Active Contextual Policy Search.
 
+use acps::bench::BenchEvent;
 use acps::checkpoints::Checkpoints;
 use acps::config::{self, ExperimentFile, Job, LoadedFile, Plan};
 use acps::experiment::{Experiment, Summary};
@@ -8,6 +9,7 @@ use acps_shared::ipc::{self, RunName};
 use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -178,6 +180,10 @@ struct BenchArgs {
     /// Multiplies the work per row (1: a few seconds per row).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
+    /// Times every mode is measured, interleaved (1..=100): rows report the median round, and
+    /// the table the range of the ratio over rounds.
+    #[arg(long, default_value_t = 3)]
+    rounds: usize,
     /// Environments to measure, comma separated.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "trivial,analytic,rapier")]
     env: Vec<acps::bench::BenchEnv>,
@@ -481,6 +487,9 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
         bail!("--scale must be finite and > 0, got {}", args.scale);
     }
     check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
+    if !(1..=100).contains(&args.rounds) {
+        bail!("--rounds must be in 1..=100, got {}", args.rounds);
+    }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let options = acps::bench::BenchOptions {
         envs: args.env,
@@ -488,12 +497,33 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
         worker_in_flight: args.worker_in_flight,
         worker_nice: args.worker_nice.worker_nice,
         scale: args.scale,
+        rounds: args.rounds,
     };
     print!("{}", acps::bench::table(&[]));
-    let rows = acps::bench::run(&options, |row| {
-        let table = acps::bench::table(std::slice::from_ref(row));
-        print!("{}", table.lines().nth(1).map(|l| format!("{l}\n")).unwrap_or_default());
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("[{bar:25}] {pos}/{len} measurements, {msg}, {elapsed}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    let rows = acps::bench::run(&options, |event| match event {
+        BenchEvent::Measuring {
+            env,
+            mode,
+            workers,
+            round,
+            index,
+            total,
+        } => {
+            bar.set_length(total as u64);
+            bar.set_position(index as u64);
+            bar.set_message(format!("{env} {mode} {workers}, round {round}"));
+        }
+        BenchEvent::Row(row) => {
+            let table = acps::bench::table(std::slice::from_ref(row));
+            bar.suspend(|| print!("{}", table.lines().nth(1).map(|l| format!("{l}\n")).unwrap_or_default()));
+        }
     })?;
+    bar.finish_and_clear();
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let json = serde_json::to_string_pretty(&serde_json::json!({ "rows": rows }))?;
     let path = args.out.join("bench.json");

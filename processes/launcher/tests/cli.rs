@@ -266,6 +266,29 @@ fn bench_writes_its_table_and_json() {
     let rows = bench["rows"].as_array().unwrap();
     // Three environments x (one thread, rayon, a fleet of one).
     assert_eq!(rows.len(), 9);
+    let numbers = |value: &serde_json::Value| -> Vec<f64> {
+        value.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+    };
+    let lower_median = |values: &[f64]| {
+        let mut sorted = values.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        sorted[(sorted.len() - 1) / 2]
+    };
+    for env in rows.chunks(3) {
+        // Three interleaved rounds (the default); each round's ratio is paired with the same
+        // round's single-thread rate.
+        let single = numbers(&env[0]["round_rates"]);
+        assert_eq!(single.len(), 3, "{}", env[0]);
+        for row in env {
+            let (rates, ratios) = (numbers(&row["round_rates"]), numbers(&row["round_ratios"]));
+            let workers = row["workers"].as_f64().unwrap();
+            for ((rate, ratio), single) in rates.iter().zip(&ratios).zip(&single) {
+                assert!((ratio - rate / (workers * single)).abs() <= 1e-9 * ratio, "{row}");
+            }
+            assert_eq!(row["rollouts_per_s"].as_f64().unwrap(), lower_median(&rates), "{row}");
+            assert_eq!(row["ratio"].as_f64().unwrap(), lower_median(&ratios), "{row}");
+        }
+    }
     for row in rows {
         assert!(["trivial", "analytic", "rapier"].contains(&row["env"].as_str().unwrap()));
         let mode = row["mode"].as_str().unwrap();
@@ -286,7 +309,7 @@ fn bench_writes_its_table_and_json() {
         );
     }
     // --env picks environments, in its order.
-    run_bench(&["--env", "rapier,trivial"]);
+    run_bench(&["--env", "rapier,trivial", "--rounds", "1"]);
     let envs: Vec<String> = summary(&dir.join("bench.json"))["rows"]
         .as_array()
         .unwrap()
@@ -296,6 +319,8 @@ fn bench_writes_its_table_and_json() {
     assert_eq!(envs, ["rapier", "rapier", "rapier", "trivial", "trivial", "trivial"]);
     let error = acps(&["bench", "--scale", "0"]);
     assert!(String::from_utf8_lossy(&error.stderr).contains("--scale must be finite and > 0"));
+    let error = acps(&["bench", "--rounds", "0"]);
+    assert!(String::from_utf8_lossy(&error.stderr).contains("--rounds must be in 1..=100, got 0"));
     let error = acps(&["bench", "--env", "mujoco"]);
     assert!(
         String::from_utf8_lossy(&error.stderr).contains("invalid value 'mujoco' for '--env <ENV>'"),
