@@ -49,6 +49,17 @@ pub struct Row {
     pub round_ratios: Vec<f64>,
 }
 
+impl Row {
+    /// The lowest and highest ratio over the rounds, when there were several.
+    pub fn ratio_range(&self) -> Option<(f64, f64)> {
+        (self.round_ratios.len() > 1).then(|| {
+            let lowest = self.round_ratios.iter().copied().fold(f64::INFINITY, f64::min);
+            let highest = self.round_ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (lowest, highest)
+        })
+    }
+}
+
 /// What a fleet row measures beyond the rate.
 #[derive(Clone, Copy)]
 struct Fleet {
@@ -371,13 +382,9 @@ pub fn table(rows: &[Row]) -> String {
         let startup = row
             .startup_seconds
             .map_or("-".to_string(), |s| format!("{:.0}", 1000.0 * s));
-        let lowest = row.round_ratios.iter().copied().fold(f64::INFINITY, f64::min);
-        let highest = row.round_ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let range = if row.round_ratios.len() > 1 {
-            format!("{lowest:.2}-{highest:.2}")
-        } else {
-            "-".to_string()
-        };
+        let range = row
+            .ratio_range()
+            .map_or("-".to_string(), |(lowest, highest)| format!("{lowest:.2}-{highest:.2}"));
         text += &format!(
             "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>13} {:>14} {:>11}\n",
             row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, range, share, startup

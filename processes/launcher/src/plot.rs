@@ -715,6 +715,14 @@ impl Picture for ThrowSideView<'_> {
     }
 }
 
+/// A bar's ratio, with its range over rounds when there were several.
+fn ratio_label(row: &crate::bench::Row) -> String {
+    match row.ratio_range() {
+        Some((lowest, highest)) if lowest < highest => format!("{:.2} ({lowest:.2}-{highest:.2})", row.ratio),
+        _ => format!("{:.2}", row.ratio),
+    }
+}
+
 /// `acps bench`'s rows as bars.
 struct BenchBars<'a>(&'a [crate::bench::Row]);
 
@@ -753,7 +761,7 @@ impl Picture for BenchBars<'_> {
             let top = 1.2 * bars.iter().map(|row| row.rollouts_per_s).fold(0.0, f64::max).max(1.0);
             let mut chart = ChartBuilder::on(&area)
                 .caption(
-                    format!("{env}: rollouts/s (ratio to W x one thread above each bar)"),
+                    format!("{env}: rollouts/s (median round; ratio to W x one thread and its range over rounds above each bar)"),
                     ("sans-serif", 16),
                 )
                 .margin(8)
@@ -784,7 +792,7 @@ impl Picture for BenchBars<'_> {
             }))?;
             chart.draw_series(bars.iter().enumerate().map(|(i, row)| {
                 Text::new(
-                    format!("{:.2}", row.ratio),
+                    ratio_label(row),
                     (SegmentValue::CenterOf(i), row.rollouts_per_s + 0.02 * top),
                     TextStyle::from(("sans-serif", 13).into_font()).pos(Pos::new(HPos::Center, VPos::Bottom)),
                 )
