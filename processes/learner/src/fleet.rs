@@ -120,7 +120,7 @@ pub fn serve(
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
             active_now = true;
-            let message = *request.payload();
+            let message = request.payload();
             if message.protocol != PROTOCOL_VERSION || (message.run != 0 && message.run != identity) {
                 progress.refused += 1;
                 if refused_clients.insert(request.origin()) {
