@@ -36,8 +36,8 @@ pub struct Row {
     /// Share of the fleet's serving time (median round) spent inside the learner cores.
     pub learner_share: Option<f64>,
     /// Fleet only: seconds (median round) from starting the worker processes to the first
-    /// worker's first request, which the rate leaves out (in-process rows build their environments before
-    /// the clock starts, too).
+    /// worker's first request, which the rate leaves out (in-process rows build their
+    /// environments before the clock starts, too).
     pub startup_seconds: Option<f64>,
     /// Rollouts performed in the median round.
     pub rollouts: u64,
@@ -213,6 +213,35 @@ pub enum BenchEvent<'a> {
     Row(&'a Row),
 }
 
+/// How a row runs its jobs.
+#[derive(Clone, Copy)]
+enum Mode {
+    /// In this process, one after another.
+    Single,
+    /// In this process, on rayon's threads.
+    Rayon,
+    /// Through a fleet of this many worker processes.
+    Fleet(usize),
+}
+
+impl Mode {
+    fn name(self) -> &'static str {
+        match self {
+            Mode::Single => "inprocess-1",
+            Mode::Rayon => "inprocess-rayon",
+            Mode::Fleet(_) => "fleet",
+        }
+    }
+
+    fn workers(self) -> usize {
+        match self {
+            Mode::Single => 1,
+            Mode::Rayon => rayon::current_num_threads(),
+            Mode::Fleet(workers) => workers,
+        }
+    }
+}
+
 /// One round's measurement of one mode.
 #[derive(Clone, Copy)]
 struct Measurement {
@@ -244,10 +273,10 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
     let mut rows = Vec::new();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let fleets = options.max_workers.min(cores.max(1));
-    // (mode, workers) of every measurement of a round, in the order taken.
-    let modes: Vec<(&'static str, usize)> = [("inprocess-1", 1), ("inprocess-rayon", rayon::current_num_threads())]
+    // Every measurement of a round, in the order taken; the first is the single-thread one.
+    let modes: Vec<Mode> = [Mode::Single, Mode::Rayon]
         .into_iter()
-        .chain((1..=fleets).map(|workers| ("fleet", workers)))
+        .chain((1..=fleets).map(Mode::Fleet))
         .collect();
     let total = options.envs.len() * options.rounds * modes.len();
     let mut index = 0;
@@ -258,26 +287,26 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
     }) {
         let mut measured: Vec<Vec<Measurement>> = vec![Vec::new(); modes.len()];
         for round in 1..=options.rounds {
-            for (&(mode, workers), samples) in modes.iter().zip(&mut measured) {
+            for (&mode, samples) in modes.iter().zip(&mut measured) {
                 report(BenchEvent::Measuring {
                     env: workload.name(),
-                    mode,
-                    workers,
+                    mode: mode.name(),
+                    workers: mode.workers(),
                     round,
                     index,
                     total,
                 });
                 index += 1;
-                let measurement = match mode {
-                    "inprocess-1" => in_process(workload, options.scale, false)?,
-                    "inprocess-rayon" => in_process(workload, options.scale, true)?,
-                    _ => fleet(workload, options, workers)?,
-                };
-                samples.push(measurement);
+                samples.push(match mode {
+                    Mode::Single => in_process(workload, options.scale, false)?,
+                    Mode::Rayon => in_process(workload, options.scale, true)?,
+                    Mode::Fleet(workers) => fleet(workload, options, workers)?,
+                });
             }
         }
         let single_rates: Vec<f64> = measured[0].iter().map(Measurement::rate).collect();
-        for (&(mode, workers), samples) in modes.iter().zip(&measured) {
+        for (&mode, samples) in modes.iter().zip(&measured) {
+            let workers = mode.workers();
             let rates: Vec<f64> = samples.iter().map(Measurement::rate).collect();
             let ratios: Vec<f64> = rates
                 .iter()
@@ -291,7 +320,7 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
                 .expect("the median is a rate")];
             let row = Row {
                 env: workload.name(),
-                mode,
+                mode: mode.name(),
                 workers,
                 rollouts_per_s: median,
                 ratio: lower_median(&ratios),
