@@ -70,8 +70,8 @@ enum Command {
     /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.
     Worker(WorkerArgs),
     /// Measure rollouts per second in-process and through fleets of 1 ..= cores workers, for a
-    /// trivial environment (the transport's cost) and the analytic and rapier PA-10; print a
-    /// table and write DIR/bench.json.
+    /// trivial environment (the transport's cost) and the analytic and rapier PA-10, in
+    /// interleaved rounds; print a table and write DIR/bench.json, bench.svg and bench.png.
     Bench(BenchArgs),
     /// Replay a learned policy from a run directory greedily (its mean, exploration off) at
     /// --target points or at the problem's test contexts, printing the landing point, error and
@@ -177,7 +177,8 @@ struct BenchArgs {
     /// slower than a batch's 800 us, which travel alone).
     #[arg(long, default_value_t = 64)]
     worker_in_flight: usize,
-    /// Multiplies the work per row (1: a few seconds per row).
+    /// Multiplies the work per measurement (1: a few seconds per row and round; the default
+    /// bench takes about a minute on 2 cores).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
     /// Times every mode is measured, interleaved (1..=100): rows report the median round, and
