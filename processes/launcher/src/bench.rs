@@ -7,7 +7,7 @@
 use crate::paper::{self, Options, Sim};
 use crate::workers;
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
-use acps_learner::fleet::{self, FleetJob};
+use acps_learner::fleet::{self, FleetError, FleetJob, ServeOptions};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
 use acps_models::environment::{self, TrivialEnvironment};
@@ -29,19 +29,19 @@ pub struct Row {
     /// Worker processes (fleet), threads (rayon) or 1.
     pub workers: usize,
     /// Rollouts (training and evaluation) per second of wall time, the median over rounds; a
-    /// fleet's from its first request on.
+    /// fleet's from the moment all its workers asked for tasks.
     pub rollouts_per_s: f64,
     /// Median over rounds of the round's rate / (workers x its single-thread rate).
     pub ratio: f64,
     /// Share of the fleet's serving time (median round) spent inside the learner cores.
     pub learner_share: Option<f64>,
-    /// Fleet only: seconds (median round) from starting the worker processes to the first
-    /// worker's first request, which the rate leaves out (in-process rows build their
-    /// environments before the clock starts, too).
+    /// Fleet only: seconds (median round) from starting the worker processes until every one
+    /// has asked for tasks, which the rate leaves out (in-process rows build their environments
+    /// before the clock starts, too).
     pub startup_seconds: Option<f64>,
     /// Rollouts performed in the median round.
     pub rollouts: u64,
-    /// Wall time in seconds of the median round (a fleet's from its first request on).
+    /// Wall time in seconds of the median round (a fleet's from its start, as for the rate).
     pub seconds: f64,
     /// Every round's rate, in order.
     pub round_rates: Vec<f64>,
@@ -372,11 +372,17 @@ fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::
     let served = fleet::serve(
         &mut fleet_jobs,
         &run,
-        0x0bec_4000 + workers as u64,
-        workers::spin(workers),
+        ServeOptions {
+            identity: 0x0bec_4000 + workers as u64,
+            spin: workers::spin(workers),
+            // The clock starts with the whole fleet at work, not with its first worker.
+            start_with: workers,
+        },
         &stop,
         |_| {
-            if workers::all_exited(&mut children) {
+            // Workers leave only once the learner is done: one gone means a broken fleet,
+            // which would also keep the fleet from starting.
+            if workers::any_exited(&mut children) {
                 stop.store(true, std::sync::atomic::Ordering::Relaxed);
             }
         },
@@ -385,7 +391,11 @@ fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::
     let total_seconds = start.elapsed().as_secs_f64();
     let reaped = workers::reap(&mut children);
     let cleaned = ipc::remove_run_files(&run);
-    let progress = served.with_context(|| format!("fleet of {workers} on {}", workload.name()))?;
+    let context = || format!("fleet of {workers} on {}", workload.name());
+    let progress = match served {
+        Err(FleetError::Interrupted) => anyhow::bail!("{}: a worker exited before the bench was done", context()),
+        served => served.with_context(context)?,
+    };
     reaped?;
     cleaned?;
     Ok(Measurement {

@@ -8,7 +8,7 @@ use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::Progress;
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
-use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress};
+use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress, ServeOptions};
 use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, run_in_process,
 };
@@ -437,8 +437,11 @@ impl Experiment {
         let served = fleet::serve(
             &mut learners,
             run,
-            self.identity(),
-            spin,
+            ServeOptions {
+                identity: self.identity(),
+                spin,
+                start_with: 0,
+            },
             stop,
             observe,
             |job, learner| match &mut writers[job] {

@@ -114,6 +114,11 @@ pub fn reap(children: &mut [Child]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// True when some child has exited.
+pub fn any_exited(children: &mut [Child]) -> bool {
+    children.iter_mut().any(|child| matches!(child.try_wait(), Ok(Some(_))))
+}
+
 /// True when every child has exited (a fleet without workers would wait forever).
 pub fn all_exited(children: &mut [Child]) -> bool {
     !children.is_empty() && children.iter_mut().all(|child| matches!(child.try_wait(), Ok(Some(_))))

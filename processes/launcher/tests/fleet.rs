@@ -1,7 +1,7 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
 use acps::paper::{self, Options, Sim};
-use acps_learner::fleet::{self, FleetJob};
+use acps_learner::fleet::{self, FleetJob, ServeOptions};
 use acps_learner::{Method, run_in_process};
 use acps_shared::ipc::{self, RunName};
 use acps_shared::wire::{Answer, Response, WorkerMessage};
@@ -664,8 +664,11 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
         let progress = fleet::serve(
             &mut jobs,
             &run,
-            7,
-            Duration::ZERO,
+            ServeOptions {
+                identity: 7,
+                spin: Duration::ZERO,
+                start_with: 0,
+            },
             &stop,
             |_| {
                 if started.elapsed() > Duration::from_secs(60) {
@@ -679,6 +682,100 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
         progress
     });
     assert!(progress.delivered > 0, "{progress:?}");
+    for (fleet, alone) in jobs.iter().zip(&reference) {
+        assert_eq!(
+            format!("{:?}", fleet.learner.episodes()),
+            format!("{:?}", alone.learner.episodes())
+        );
+    }
+    ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
+}
+
+#[test]
+fn a_fleet_told_to_start_with_two_workers_gives_the_first_nothing_until_the_second_asks() {
+    let options = Options {
+        runs: 2,
+        episodes: Some(40),
+        in_flight: 4,
+        methods: Some(vec![Method::MonotonicProgress]),
+        ..Options::default()
+    };
+    let experiment = paper::grid(Sim::Analytic, &options);
+    let mut reference = experiment.jobs().unwrap();
+    for job in &mut reference {
+        run_in_process(&mut job.learner, job.environment.as_mut());
+    }
+    let mut jobs: Vec<FleetJob> = experiment
+        .jobs()
+        .unwrap()
+        .into_iter()
+        .map(|job| FleetJob {
+            environment: job.spec.unwrap(),
+            learner: job.learner,
+        })
+        .collect();
+    let run = run_name("start-with");
+    let second_may_start = AtomicBool::new(false);
+    let served = AtomicBool::new(false);
+    let mut outcomes_before_second = None;
+    let serve_started = Instant::now();
+    let worker = |name: &str| {
+        let options = WorkerOptions {
+            name: name.into(),
+            ..WorkerOptions::default()
+        };
+        acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false))
+    };
+    let progress = std::thread::scope(|scope| {
+        let first = scope.spawn(|| worker("first"));
+        // Started once the first has waited, or not at all if the run ends before.
+        let second = scope.spawn(|| {
+            while !served.load(std::sync::atomic::Ordering::Relaxed) {
+                if second_may_start.load(std::sync::atomic::Ordering::Relaxed) {
+                    return Some(worker("second"));
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            None
+        });
+        let stop = AtomicBool::new(false);
+        let mut first_seen: Option<Instant> = None;
+        let progress = fleet::serve(
+            &mut jobs,
+            &run,
+            ServeOptions {
+                identity: 7,
+                spin: Duration::ZERO,
+                start_with: 2,
+            },
+            &stop,
+            |progress| {
+                // Several ticks after the first worker connected, it has asked and waits.
+                if progress.workers >= 1 && outcomes_before_second.is_none() {
+                    let seen = *first_seen.get_or_insert_with(Instant::now);
+                    if seen.elapsed() > Duration::from_millis(200) {
+                        outcomes_before_second = Some(progress.outcomes);
+                        second_may_start.store(true, std::sync::atomic::Ordering::Relaxed);
+                    }
+                }
+                if serve_started.elapsed() > Duration::from_secs(60) {
+                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            },
+            |_, _| Ok(()),
+        )
+        .expect("the run finishes within a minute");
+        served.store(true, std::sync::atomic::Ordering::Relaxed);
+        assert_eq!(first.join().unwrap().unwrap().exit, WorkerExit::Finished);
+        if let Some(second) = second.join().unwrap() {
+            assert_eq!(second.unwrap().exit, WorkerExit::Finished);
+        }
+        progress
+    });
+    assert_eq!(outcomes_before_second, Some(0), "the first worker got no task alone");
+    let waited = serve_started.elapsed().as_secs_f64() - progress.serving_seconds;
+    assert!(waited >= 0.2, "the serving time leaves out the wait: {progress:?}");
     for (fleet, alone) in jobs.iter().zip(&reference) {
         assert_eq!(
             format!("{:?}", fleet.learner.episodes()),

@@ -18,7 +18,7 @@ use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// One learner and the environment its tasks run in.
 pub struct FleetJob {
@@ -47,8 +47,8 @@ pub struct FleetProgress {
     pub delivered: u64,
     /// Time spent inside the learner cores (`tell` and `ask`), in seconds.
     pub learner_seconds: f64,
-    /// Seconds since the first worker's first request: the run's time without the workers'
-    /// start-up.
+    /// Seconds since the first task went out (see [`ServeOptions::start_with`]): the run's time
+    /// without the workers' start-up.
     pub serving_seconds: f64,
     /// Training episodes and latest test scores of all jobs together.
     pub learning: LearningProgress,
@@ -74,20 +74,32 @@ pub enum FleetError {
     Hook(Box<dyn std::error::Error + Send + Sync>),
 }
 
-/// Serve `jobs` to the workers of `run` until every job is done; `identity` is the run's
-/// identity (a hash of its configuration), checked against every worker's requests. When idle,
-/// the server polls (yielding the CPU) for `spin` before it blocks: worth it only when every
-/// process has a core of its own. `after_tell` sees a job's learner after every outcome it
-/// accepted (the place to write checkpoints); an error it returns ends the run.
+/// How [`serve`] serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ServeOptions {
+    /// The run's identity (a hash of its configuration), checked against every worker's requests.
+    pub identity: u64,
+    /// When idle, poll (yielding the CPU) this long before blocking: worth it only when every
+    /// process has a core of its own.
+    pub spin: Duration,
+    /// Hand out the first tasks only once this many workers have asked for them (0 and 1: at
+    /// once). A benchmark waits for its whole fleet, so that its clock measures every worker
+    /// and no worker's start-up; a run should not wait, its first tasks are done sooner.
+    pub start_with: usize,
+}
+
+/// Serve `jobs` to the workers of `run` until every job is done. `after_tell` sees a job's
+/// learner after every outcome it accepted (the place to write checkpoints); an error it returns
+/// ends the run.
 pub fn serve(
     jobs: &mut [FleetJob],
     run: &RunName,
-    identity: u64,
-    spin: std::time::Duration,
+    options: ServeOptions,
     stop: &AtomicBool,
     mut observe: impl FnMut(&FleetProgress),
     mut after_tell: impl FnMut(usize, &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
 ) -> Result<FleetProgress, FleetError> {
+    let identity = options.identity;
     let node = ipc::node(run, "learner")?;
     let services = ipc::open_services(&node)?;
     if services.tasks.dynamic_config().number_of_servers() > 0 {
@@ -115,7 +127,9 @@ pub fn serve(
     let mut outcomes = VecDeque::new();
     let mut unannounced = 0;
     let mut wake_now = false;
-    let mut first_request = None;
+    // Workers that asked for tasks, until `start_with` have; then the time the first tasks went out.
+    let mut waiting_for = HashSet::new();
+    let mut serving_since = None;
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
@@ -133,7 +147,12 @@ pub fn serve(
                 let _ = ipc::reply(&request, Answer::new(Response::Refused, identity), &[]);
                 continue;
             }
-            first_request.get_or_insert_with(Instant::now);
+            if serving_since.is_none() {
+                waiting_for.insert(request.origin());
+                if waiting_for.len() >= options.start_with {
+                    serving_since = Some(Instant::now());
+                }
+            }
             for (job, outcome) in message.outcomes() {
                 holders.remove(&(job, outcome.task_id));
                 outcomes.push_back((job, outcome));
@@ -152,7 +171,11 @@ pub fn serve(
         // Answer before telling, and tell one outcome per pass: tasks are created eagerly, so
         // ready ones wait in the cores, and workers get them without waiting for C-REPS updates
         // (a millisecond each) of the outcomes queued before theirs.
-        let answered = answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?;
+        let answered = if serving_since.is_some() {
+            answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?
+        } else {
+            0
+        };
         // Workers that are simulating need no wake-up; one per 8 tasks answered, or once the
         // queued outcomes are told, reaches those that wait without a syscall per task. A worker
         // whose outcomes waited for a free slot may be asleep: it is woken at once.
@@ -180,7 +203,7 @@ pub fn serve(
             false
         };
         progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
-        let serving = || first_request.map_or(0.0, |first: Instant| first.elapsed().as_secs_f64());
+        let serving = || serving_since.map_or(0.0, |since: Instant| since.elapsed().as_secs_f64());
         if progress.jobs_done == jobs.len() {
             for (request, _) in parked.drain(..) {
                 let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
@@ -231,7 +254,7 @@ pub fn serve(
         }
         if active_now || answered > 0 || told_one {
             idle_since = None;
-        } else if idle_since.get_or_insert_with(Instant::now).elapsed() < spin {
+        } else if idle_since.get_or_insert_with(Instant::now).elapsed() < options.spin {
             std::thread::yield_now();
         } else {
             idle_since = None;
