@@ -603,6 +603,43 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`), its jobs ready for a
+/// fleet, and each job's episodes when run in-process (as text: the bits, NaN included).
+fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>, Vec<String>) {
+    let options = Options {
+        runs: 2,
+        episodes: Some(40),
+        in_flight,
+        methods: Some(vec![Method::MonotonicProgress]),
+        ..Options::default()
+    };
+    let experiment = paper::grid(Sim::Analytic, &options);
+    let reference = experiment
+        .jobs()
+        .unwrap()
+        .into_iter()
+        .map(|mut job| {
+            run_in_process(&mut job.learner, job.environment.as_mut());
+            format!("{:?}", job.learner.episodes())
+        })
+        .collect();
+    let jobs = experiment
+        .jobs()
+        .unwrap()
+        .into_iter()
+        .map(|job| FleetJob {
+            environment: job.spec.unwrap(),
+            learner: job.learner,
+        })
+        .collect();
+    (experiment, jobs, reference)
+}
+
+/// Each fleet job's episodes, as [`short_grid`] gives the in-process ones.
+fn episodes(jobs: &[FleetJob]) -> Vec<String> {
+    jobs.iter().map(|job| format!("{:?}", job.learner.episodes())).collect()
+}
+
 /// Every rollout of the wrapped environment takes a millisecond, longer than a batch's worth of
 /// simulation, so each travels alone.
 struct Sleepy(Box<dyn Environment>);
@@ -626,27 +663,7 @@ impl Environment for Sleepy {
 fn outcomes_go_out_alone_while_every_asking_request_waits() {
     // P = 1 and two jobs: at most two tasks are ready at a time, so a worker with 64 tasks in
     // flight keeps all its 8 asking requests waiting, and its outcomes need the delivery slot.
-    let options = Options {
-        runs: 2,
-        episodes: Some(40),
-        in_flight: 1,
-        methods: Some(vec![Method::MonotonicProgress]),
-        ..Options::default()
-    };
-    let experiment = paper::grid(Sim::Analytic, &options);
-    let mut reference = experiment.jobs().unwrap();
-    for job in &mut reference {
-        run_in_process(&mut job.learner, job.environment.as_mut());
-    }
-    let mut jobs: Vec<FleetJob> = experiment
-        .jobs()
-        .unwrap()
-        .into_iter()
-        .map(|job| FleetJob {
-            environment: job.spec.unwrap(),
-            learner: job.learner,
-        })
-        .collect();
+    let (experiment, mut jobs, reference) = short_grid(1);
     let run = run_name("deliver");
     let environment = Sleepy(experiment.jobs().unwrap().remove(0).environment);
     let progress = std::thread::scope(|scope| {
@@ -682,39 +699,14 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
         progress
     });
     assert!(progress.delivered > 0, "{progress:?}");
-    for (fleet, alone) in jobs.iter().zip(&reference) {
-        assert_eq!(
-            format!("{:?}", fleet.learner.episodes()),
-            format!("{:?}", alone.learner.episodes())
-        );
-    }
+    assert_eq!(episodes(&jobs), reference);
     ipc::remove_run_files(&run).unwrap();
     assert_clean(&run);
 }
 
 #[test]
 fn a_fleet_told_to_start_with_two_workers_gives_the_first_nothing_until_the_second_asks() {
-    let options = Options {
-        runs: 2,
-        episodes: Some(40),
-        in_flight: 4,
-        methods: Some(vec![Method::MonotonicProgress]),
-        ..Options::default()
-    };
-    let experiment = paper::grid(Sim::Analytic, &options);
-    let mut reference = experiment.jobs().unwrap();
-    for job in &mut reference {
-        run_in_process(&mut job.learner, job.environment.as_mut());
-    }
-    let mut jobs: Vec<FleetJob> = experiment
-        .jobs()
-        .unwrap()
-        .into_iter()
-        .map(|job| FleetJob {
-            environment: job.spec.unwrap(),
-            learner: job.learner,
-        })
-        .collect();
+    let (_, mut jobs, reference) = short_grid(4);
     let run = run_name("start-with");
     let second_may_start = AtomicBool::new(false);
     let served = AtomicBool::new(false);
@@ -776,12 +768,7 @@ fn a_fleet_told_to_start_with_two_workers_gives_the_first_nothing_until_the_seco
     assert_eq!(outcomes_before_second, Some(0), "the first worker got no task alone");
     let waited = serve_started.elapsed().as_secs_f64() - progress.serving_seconds;
     assert!(waited >= 0.2, "the serving time leaves out the wait: {progress:?}");
-    for (fleet, alone) in jobs.iter().zip(&reference) {
-        assert_eq!(
-            format!("{:?}", fleet.learner.episodes()),
-            format!("{:?}", alone.learner.episodes())
-        );
-    }
+    assert_eq!(episodes(&jobs), reference);
     ipc::remove_run_files(&run).unwrap();
     assert_clean(&run);
 }
