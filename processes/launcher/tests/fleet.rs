@@ -772,3 +772,59 @@ fn a_fleet_told_to_start_with_two_workers_gives_the_first_nothing_until_the_seco
     ipc::remove_run_files(&run).unwrap();
     assert_clean(&run);
 }
+
+#[test]
+fn a_bench_whose_worker_dies_stops_with_an_error_instead_of_a_row() {
+    let dir = temp_dir("bench-worker-dies");
+    let mut bench = watched()
+        .args([
+            "bench",
+            "--env",
+            "rapier",
+            "--max-workers",
+            "1",
+            "--rounds",
+            "1",
+            "--scale",
+            "0.2",
+        ])
+        .arg("--out")
+        .arg(&dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The bench is the watchdog's child; its fleet's worker is the bench's only child.
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let children = |pid: u32| {
+        std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children"))
+            .unwrap_or_default()
+            .split_whitespace()
+            .filter_map(|p| p.parse::<u32>().ok())
+            .collect::<Vec<_>>()
+    };
+    let mut killed = None;
+    while killed.is_none() && bench.try_wait().unwrap().is_none() && Instant::now() < deadline {
+        for acps in children(bench.id()) {
+            if let Some(worker) = children(acps).first() {
+                let status = Command::new("kill")
+                    .args(["-KILL", &worker.to_string()])
+                    .status()
+                    .unwrap();
+                killed = status.success().then_some(acps);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let acps = killed.expect("the bench started a worker");
+    let output = bench.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success());
+    assert!(
+        stderr.contains("fleet of 1 on rapier: a worker exited before the bench was done"),
+        "{stderr}"
+    );
+    assert!(!dir.join("bench.json").exists(), "no table of a broken fleet");
+    assert_clean(&RunName::new(&format!("bench-{acps}-rapier-1")).unwrap());
+    let _ = std::fs::remove_dir_all(dir);
+}
