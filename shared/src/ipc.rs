@@ -17,7 +17,7 @@ use std::time::Duration;
 /// Most workers one run serves.
 pub const MAX_WORKERS: usize = 128;
 /// Most tasks one worker keeps in flight.
-pub const MAX_IN_FLIGHT_PER_WORKER: usize = 64;
+pub const MAX_IN_FLIGHT_PER_WORKER: usize = 128;
 /// Most requests one worker has waiting for tasks; one more may only deliver outcomes. The
 /// learner pays for every request channel of every worker whenever it loans an answer
 /// (iceoryx2 looks for returned chunks on each), so there are few: batches fill them.

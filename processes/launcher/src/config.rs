@@ -217,7 +217,7 @@ const KEYS: &[Key] = &[
     },
     Key {
         name: "in_flight",
-        accepted: "an integer in 1..=8192 (what a full fleet holds)",
+        accepted: "an integer in 1..=16384 (what a full fleet holds)",
         applies: ALL,
     },
     Key {
@@ -809,8 +809,8 @@ mod tests {
                 "e.toml:2: n_theta must be an integer in 5..=64",
             ),
             (
-                "experiment = \"function\"\nin_flight = 8193\n",
-                "e.toml:2: in_flight must be an integer in 1..=8192",
+                "experiment = \"function\"\nin_flight = 16385\n",
+                "e.toml:2: in_flight must be an integer in 1..=16384",
             ),
             (
                 "experiment = \"function\"\nruns = 2\nseed = 9223372036854775807\n",

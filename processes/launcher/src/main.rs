@@ -173,9 +173,9 @@ struct BenchArgs {
     /// Largest fleet (default: the number of cores).
     #[arg(long)]
     max_workers: Option<usize>,
-    /// Tasks each worker keeps in flight, asked for or queued (1..=64; at most 8 of rollouts
+    /// Tasks each worker keeps in flight, asked for or queued (1..=128; at most 8 of rollouts
     /// slower than a batch's 800 us, which travel alone).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 128)]
     worker_in_flight: usize,
     /// Multiplies the work per measurement (1: a few seconds per row and round; the default
     /// bench takes about a minute on 2 cores).
@@ -209,7 +209,7 @@ struct RunArgs {
     /// Worker processes to start (default: the number of cores).
     #[arg(long)]
     workers: Option<usize>,
-    /// Tasks each started worker keeps in flight, asked for or queued (1..=64; at most 8 of
+    /// Tasks each started worker keeps in flight, asked for or queued (1..=128; at most 8 of
     /// rollouts slower than a batch's 800 us, which travel alone).
     #[arg(long, default_value_t = 4)]
     worker_in_flight: usize,
@@ -226,7 +226,7 @@ struct WorkerArgs {
     /// The run to join (the learner's --run).
     #[arg(long)]
     run: String,
-    /// Tasks kept in flight, asked for or queued (1..=64): more hides the wake-up latency
+    /// Tasks kept in flight, asked for or queued (1..=128): more hides the wake-up latency
     /// between processes; cheap rollouts travel in batches of up to half of them, and at most 8
     /// of rollouts slower than a batch's 800 us, which travel alone, are in flight.
     #[arg(long, default_value_t = 4)]

@@ -160,7 +160,7 @@ fn bad_options_are_refused_naming_the_option() {
                 "--episodes",
                 "10",
             ],
-            "--in-flight must be an integer in 1..=8192 (what a full fleet holds), got 0",
+            "--in-flight must be an integer in 1..=16384 (what a full fleet holds), got 0",
         ),
         (
             &["experiment", "toy", "--epsilon", "1"],
@@ -335,11 +335,11 @@ fn fleet_options_are_checked_before_anything_starts() {
     let cases: [(&[&str], &str); 7] = [
         (
             &["run", "grid", "--worker-in-flight", "0"],
-            "--worker-in-flight must be in 1..=64, got 0",
+            "--worker-in-flight must be in 1..=128, got 0",
         ),
         (
-            &["worker", "--run", "x", "--in-flight", "65"],
-            "--in-flight must be in 1..=64, got 65",
+            &["worker", "--run", "x", "--in-flight", "129"],
+            "--in-flight must be in 1..=128, got 129",
         ),
         (
             &["worker", "--run", "x", "--startup-timeout=-1"],

@@ -478,7 +478,7 @@ fn an_embedded_worker_stops_cleanly_when_asked() {
     )
     .unwrap_err();
     assert!(
-        error.to_string().contains("in_flight must be in 1..=64, got 0"),
+        error.to_string().contains("in_flight must be in 1..=128, got 0"),
         "{error}"
     );
     ipc::remove_run_files(&run).unwrap();

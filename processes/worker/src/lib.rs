@@ -55,7 +55,7 @@ impl<E: Environment> EnvironmentFactory for Single<E> {
 /// How a worker behaves.
 #[derive(Debug, Clone)]
 pub struct WorkerOptions {
-    /// Tasks kept in flight (asked for, queued or not yet reported), 1..=64: more hides the
+    /// Tasks kept in flight (asked for, queued or not yet reported), 1..=128: more hides the
     /// wake-up latency between processes. Cheap rollouts travel in batches of up to half of them;
     /// at most 8 requests ask for tasks at once, so rollouts that travel alone (slower than a
     /// batch's 800 us) keep at most 8 in flight.
@@ -166,7 +166,7 @@ pub fn serve(
     if !(1..=MAX_IN_FLIGHT_PER_WORKER).contains(&options.in_flight) {
         return Err(WorkerError::Option {
             field: "in_flight",
-            accepted: "in 1..=64",
+            accepted: "in 1..=128",
             got: options.in_flight.to_string(),
         });
     }
