@@ -6,8 +6,9 @@
 //! the cores that have one ready, so even P = 1 runs keep many workers busy, and every core's
 //! trajectory stays the one it has in-process.
 //!
-//! Faults: every tick the server asks iceoryx2 to clean up dead nodes, lists the live clients,
-//! and re-issues exactly the tasks held by clients that are gone. A late outcome of a re-issued
+//! Faults: on a tick (50 ms) after which a connected worker has been silent, or a worker holding
+//! tasks is no longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live
+//! clients, and re-issues exactly the tasks held by clients that are gone. A late outcome of a re-issued
 //! task is recognised as a duplicate and dropped. Workers of another build or run are refused.
 
 use crate::learner::{Learner, LearningProgress, TellError};
