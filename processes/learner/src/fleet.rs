@@ -8,11 +8,12 @@
 //!
 //! Faults: on a tick (50 ms) after which a connected worker has been silent, or a worker holding
 //! tasks is no longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live
-//! clients, and re-issues exactly the tasks held by clients that are gone. A late outcome of a re-issued
-//! task is recognised as a duplicate and dropped. Workers of another build or run are refused.
+//! clients, and re-issues exactly the tasks held by clients that are gone. A late outcome of a
+//! re-issued task is recognised as a duplicate and dropped. Workers of another build or run are
+//! refused.
 
 use crate::learner::{Learner, LearningProgress, TellError};
-use acps_shared::ipc::{self, IpcError, RunName, TICK, TaskRequest};
+use acps_shared::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
 use acps_shared::wire::{Answer, CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
@@ -247,35 +248,13 @@ pub fn serve(
                 || holders.values().any(|client| !connected.contains(client));
             heard.clear();
             if look {
-                services.tasks.try_cleanup_dead_nodes();
-                // A node being created or removed at this moment can make the listing fail; the
-                // next tick looks again.
-                let Ok(alive_nodes) = ipc::alive_nodes(run) else {
+                let Some(live) =
+                    reissue_tasks_of_dead_workers(run, &services.tasks, jobs, &mut holders, &mut progress.reissued)
+                else {
                     observe(&progress);
                     continue;
                 };
-                let mut live = HashSet::new();
-                services.tasks.dynamic_config().list_clients(|client| {
-                    if alive_nodes.contains(&client.node_id) {
-                        live.insert(client.client_id);
-                    }
-                    CallbackProgression::Continue
-                });
-                progress.workers = live.len();
-                let reissued_before = progress.reissued;
-                holders.retain(|&(job, task_id), client| {
-                    let alive = live.contains(client);
-                    if !alive && jobs[job as usize].learner.reissue(task_id) {
-                        progress.reissued += 1;
-                    }
-                    alive
-                });
-                if progress.reissued > reissued_before {
-                    tracing::info!(
-                        "run '{run}': a worker is gone; re-issued its {} tasks",
-                        progress.reissued - reissued_before
-                    );
-                }
+                progress.workers = live;
             } else {
                 progress.workers = connected.len();
             }
@@ -299,6 +278,42 @@ pub fn serve(
             }
         }
     }
+}
+
+/// Give the tasks held by workers that are gone back to their learners. Returns how many workers
+/// are alive, or `None` when the nodes could not be listed (a node being created or removed at
+/// this moment; the next tick looks again).
+fn reissue_tasks_of_dead_workers(
+    run: &RunName,
+    tasks: &TaskService,
+    jobs: &mut [FleetJob],
+    holders: &mut HashMap<(u32, u64), UniqueClientId>,
+    reissued: &mut u64,
+) -> Option<usize> {
+    tasks.try_cleanup_dead_nodes();
+    let alive_nodes = ipc::alive_nodes(run).ok()?;
+    let mut live = HashSet::new();
+    tasks.dynamic_config().list_clients(|client| {
+        if alive_nodes.contains(&client.node_id) {
+            live.insert(client.client_id);
+        }
+        CallbackProgression::Continue
+    });
+    let before = *reissued;
+    holders.retain(|&(job, task_id), client| {
+        let alive = live.contains(client);
+        if !alive && jobs[job as usize].learner.reissue(task_id) {
+            *reissued += 1;
+        }
+        alive
+    });
+    if *reissued > before {
+        tracing::info!(
+            "run '{run}': a worker is gone; re-issued its {} tasks",
+            *reissued - before
+        );
+    }
+    Some(live.len())
 }
 
 /// Answer parked requests, each with as many ready tasks as it asks for (round robin over the
