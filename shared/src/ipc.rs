@@ -148,10 +148,16 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         .max_loaned_requests(2)
         .open_or_create()
         .map_err(|e| {
-            IpcError::new(
-                "opening the task service (a worker of another build has incompatible types)",
-                e,
-            )
+            use iceoryx2::service::builder::request_response::{
+                RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as OpenOrCreate,
+            };
+            let why = match e {
+                OpenOrCreate::RequestResponseOpenError(Open::HangsInCreation) => {
+                    "a process of this run died while creating it"
+                }
+                _ => "a worker of another build has incompatible types",
+            };
+            IpcError::new(format!("opening the task service ({why})"), e)
         })?;
     let event = |name: &str| {
         node.service_builder(&service_name(name)?)

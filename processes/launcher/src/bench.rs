@@ -390,11 +390,16 @@ fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::
         |_, _| Ok(()),
     );
     let total_seconds = start.elapsed().as_secs_f64();
+    // Checked before the reaping, which waits for every worker to leave: a worker that died
+    // explains a failure, for example one that died while creating the run's services.
+    let worker_died = workers::any_exited(&mut children);
     let reaped = workers::reap(&mut children);
     let cleaned = ipc::remove_run_files(&run);
     let context = || format!("fleet of {workers} on {}", workload.name());
+    let died = || format!("{}: a worker exited before the bench was done", context());
     let progress = match served {
-        Err(FleetError::Interrupted) => anyhow::bail!("{}: a worker exited before the bench was done", context()),
+        Err(FleetError::Interrupted) => anyhow::bail!(died()),
+        Err(error) if worker_died => return Err(anyhow::Error::new(error).context(died())),
         served => served.with_context(context)?,
     };
     reaped?;
