@@ -131,6 +131,9 @@ pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
         .map_err(|e| IpcError::new(format!("creating node '{name}' of run '{run}'"), e))
 }
 
+/// Why a service hangs in creation: its creator died before finishing it.
+const DIED_CREATING: &str = "a process of this run died while creating it";
+
 /// Open (or create) every service of the run on `node`.
 pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
     let nodes = MAX_WORKERS + 8;
@@ -152,9 +155,7 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
                 RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as OpenOrCreate,
             };
             let why = match e {
-                OpenOrCreate::RequestResponseOpenError(Open::HangsInCreation) => {
-                    "a process of this run died while creating it"
-                }
+                OpenOrCreate::RequestResponseOpenError(Open::HangsInCreation) => DIED_CREATING,
                 _ => "a worker of another build has incompatible types",
             };
             IpcError::new(format!("opening the task service ({why})"), e)
@@ -166,7 +167,16 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
             .max_notifiers(nodes)
             .max_nodes(nodes)
             .open_or_create()
-            .map_err(|e| IpcError::new(format!("opening the event service '{name}'"), e))
+            .map_err(|e| {
+                use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+                let what = format!("opening the event service '{name}'");
+                match e {
+                    EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation) => {
+                        IpcError::new(format!("{what} ({DIED_CREATING})"), e)
+                    }
+                    _ => IpcError::new(what, e),
+                }
+            })
     };
     Ok(Services {
         tasks,
