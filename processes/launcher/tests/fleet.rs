@@ -603,6 +603,15 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// How the tests serve in-process jobs: no polling, a fixed run identity.
+fn serve_options(start_with: usize) -> ServeOptions {
+    ServeOptions {
+        identity: 7,
+        spin: Duration::ZERO,
+        start_with,
+    }
+}
+
 /// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`), its jobs ready for a
 /// fleet, and each job's episodes when run in-process (as text: the bits, NaN included).
 fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>, Vec<String>) {
@@ -681,11 +690,7 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
         let progress = fleet::serve(
             &mut jobs,
             &run,
-            ServeOptions {
-                identity: 7,
-                spin: Duration::ZERO,
-                start_with: 0,
-            },
+            serve_options(0),
             &stop,
             |_| {
                 if started.elapsed() > Duration::from_secs(60) {
@@ -736,11 +741,7 @@ fn a_fleet_told_to_start_with_two_workers_gives_the_first_nothing_until_the_seco
         let progress = fleet::serve(
             &mut jobs,
             &run,
-            ServeOptions {
-                identity: 7,
-                spin: Duration::ZERO,
-                start_with: 2,
-            },
+            serve_options(2),
             &stop,
             |progress| {
                 // Several ticks after the first worker connected, it has asked and waits.
