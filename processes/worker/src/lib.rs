@@ -219,6 +219,8 @@ pub fn serve(
     let mut batching = Batching::new(options.in_flight);
     let mut rollouts = 0;
     let mut idle_since = None;
+    // Requests sent since the learner was last woken.
+    let mut unannounced = false;
     loop {
         if stop.load(Ordering::Relaxed) {
             return Ok(WorkerReport {
@@ -260,13 +262,21 @@ pub fn serve(
             outbox = WorkerMessage::request(identity, 1);
             sent = true;
         }
-        if sent {
+        unannounced |= sent;
+        // At W = cores the learner has no core of its own, so every wake-up preempts a worker. A
+        // request therefore wakes the learner only once this worker could run dry before the
+        // learner next looks (fewer than two batches queued) or is about to stop simulating;
+        // until then the learner reads it when it wakes for this or another worker. A worker
+        // waits only in those two states, so it never sleeps on requests the learner was not
+        // told of.
+        let outbox_full = outbox.count as usize >= MAX_BATCH;
+        if unannounced && (queue.len() < 2 * batching.size() || outbox_full) {
             notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
+            unannounced = false;
         }
         // Polling every slot costs about as much as a trivial rollout, so it waits until the
         // queue runs dry (or outcomes cannot go out): answers that arrive meanwhile wait in
         // their slots.
-        let outbox_full = outbox.count as usize >= MAX_BATCH;
         if queue.is_empty() || outbox_full {
             for slot in slots.iter_mut() {
                 let Some((request, _)) = slot.as_ref() else { continue };
@@ -359,9 +369,9 @@ pub fn serve(
     }
 }
 
-/// How much simulation one request should carry: enough to pay for the message and the two
-/// wake-ups it costs, little enough that outcomes return promptly, since the learner creates
-/// new tasks only from outcomes. At W = cores every request wakes the learner, which preempts a
+/// How much simulation one request should carry: enough to pay for the message and the
+/// wake-ups it may cost, little enough that outcomes return promptly, since the learner creates
+/// new tasks only from outcomes. At W = cores a request that wakes the learner preempts a
 /// worker: 800 us (32 analytic PA-10 throws) halved those switches and beat 400 us, given the
 /// tasks in flight to fill such batches (docs/FLEET.md#throughput).
 const BATCH_TIME: Duration = Duration::from_micros(800);
