@@ -263,14 +263,8 @@ pub fn serve(
             sent = true;
         }
         unannounced |= sent;
-        // At W = cores the learner has no core of its own, so every wake-up preempts a worker. A
-        // request therefore wakes the learner only once this worker could run dry before the
-        // learner next looks (fewer than two batches queued) or is about to stop simulating;
-        // until then the learner reads it when it wakes for this or another worker. A worker
-        // waits only in those two states, so it never sleeps on requests the learner was not
-        // told of.
         let outbox_full = outbox.count as usize >= MAX_BATCH;
-        if unannounced && (queue.len() < 2 * batching.size() || outbox_full) {
+        if unannounced && wakes_learner(queue.len(), batching.size(), outbox_full) {
             notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
             unannounced = false;
         }
@@ -369,6 +363,16 @@ pub fn serve(
     }
 }
 
+/// Whether a worker with `queued` tasks left wakes the learner for the requests it sent. At
+/// W = cores the learner has no core of its own, so every wake-up preempts a worker. A worker
+/// therefore wakes it only once it could run dry before the learner next looks (fewer than two
+/// batches queued) or is about to stop simulating (`outbox_full`); until then the learner reads
+/// its requests when it wakes for this or another worker. A worker waits only in those two
+/// states, so it never sleeps on requests the learner was not told of.
+fn wakes_learner(queued: usize, batch: usize, outbox_full: bool) -> bool {
+    queued < 2 * batch || outbox_full
+}
+
 /// How much simulation one request should carry: enough to pay for the message and the
 /// wake-ups it may cost, little enough that outcomes return promptly, since the learner creates
 /// new tasks only from outcomes. At W = cores a request that wakes the learner preempts a
@@ -408,6 +412,22 @@ impl Batching {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_worker_wakes_the_learner_only_when_it_could_run_dry() {
+        // 128 analytic throws in flight, batches of 32.
+        assert!(
+            !wakes_learner(96, 32, false),
+            "three batches left: the learner may sleep"
+        );
+        assert!(!wakes_learner(64, 32, false), "two batches left");
+        assert!(wakes_learner(63, 32, false), "less than two batches left");
+        assert!(wakes_learner(0, 32, false), "about to wait for tasks");
+        assert!(wakes_learner(96, 32, true), "about to stop simulating");
+        // Rapier throws travel alone.
+        assert!(!wakes_learner(2, 1, false));
+        assert!(wakes_learner(1, 1, false), "one throw left");
+    }
 
     #[test]
     fn batches_follow_the_rollout_time_within_half_the_budget() {
