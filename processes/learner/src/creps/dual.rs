@@ -166,7 +166,7 @@ impl<'a> Dual<'a> {
         for (b, r) in residuals.iter_mut().zip(self.returns.as_slice()) {
             *b = r - *b;
         }
-        // nalgebra's `max`, which the solver's results were first published with.
+        // `>=` as in nalgebra's `max`, which this used before: the same bits for every input.
         let max_r = residuals
             .iter()
             .copied()
