@@ -1,6 +1,6 @@
 //! The ask/tell core: determinism, in-flight window, reordering, bad input.
 
-use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, TellError};
 use acps_models::contextual_function::ContextualFunction;
@@ -24,7 +24,7 @@ fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) 
     .unwrap();
     let creps = CRepsConfig {
         epsilon: 1.0,
-        eta_min: 1e-8,
+        eta_min: DEFAULT_ETA_MIN,
         ridge: 1e-4,
         update_every: 25,
         memory: MemoryConfig::SlidingWindow { capacity: 50 },

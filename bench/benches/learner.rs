@@ -2,7 +2,7 @@
 //! samples, 21 parameters, 6 polar-quadratic features) and one D-UCB step over K = 81 arms.
 //! The learner must stay far below the time of the rollouts it serves.
 
-use acps_learner::creps::{CReps, CRepsConfig, FeatureMap, MemoryConfig};
+use acps_learner::creps::{CReps, CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{BanditSelector, Choice, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
@@ -17,7 +17,7 @@ const SAMPLES: usize = 300;
 fn creps_before_update(rng: &mut ChaCha8Rng) -> (CReps, Vec<f64>, Vec<f64>, f64) {
     let config = CRepsConfig {
         epsilon: 0.5,
-        eta_min: 1e-8,
+        eta_min: DEFAULT_ETA_MIN,
         ridge: 1e-4,
         update_every: SAMPLES,
         memory: MemoryConfig::SlidingWindow { capacity: SAMPLES },

@@ -6,7 +6,7 @@
 
 use crate::paper::{self, Options, Sim};
 use crate::workers;
-use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::fleet::{self, FleetError, FleetJob, ServeOptions};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
@@ -141,7 +141,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                 };
                 let creps = CRepsConfig {
                     epsilon: 1.0,
-                    eta_min: 1e-8,
+                    eta_min: DEFAULT_ETA_MIN,
                     ridge: 1e-4,
                     update_every: 1000,
                     memory: MemoryConfig::SlidingWindow { capacity: 1000 },

@@ -4,7 +4,7 @@
 //! `settings` and explained in docs/CHOICES.md.
 
 use crate::experiment::{Experiment, Instance, RunResult, mean};
-use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
@@ -242,7 +242,7 @@ fn function_experiment(
     };
     let creps = CRepsConfig {
         epsilon: overrides.epsilon.unwrap_or(setting.epsilon),
-        eta_min: 1e-8,
+        eta_min: DEFAULT_ETA_MIN,
         ridge: 1e-4,
         update_every: setting.update_every,
         memory,
@@ -315,7 +315,7 @@ fn throwing_creps(tasks: usize, options: &Options) -> CRepsConfig {
     let per_task = (300 / tasks).max(1);
     CRepsConfig {
         epsilon: options.overrides.epsilon.unwrap_or(0.5),
-        eta_min: 1e-8,
+        eta_min: DEFAULT_ETA_MIN,
         ridge: 1e-4,
         update_every: 50,
         memory: if options.overrides.best_per_task == Some(false) {

@@ -30,7 +30,7 @@
 //! exactly as the original would have. Tasks that were handed out but whose outcome had not
 //! arrived are handed out again (same task, same seed), before the tasks never handed out.
 
-use crate::creps::{CReps, CRepsConfig, CRepsError, CRepsState, UpdateOutcome};
+use crate::creps::{CReps, CRepsConfig, CRepsError, CRepsState, Rejection, UpdateReport};
 use crate::selection::{Choice, ContextSelector, SelectionError, SelectorState};
 use acps_shared::{Outcome, Problem, Stream, Task, TaskKind, derive_seed};
 use rand::SeedableRng;
@@ -164,7 +164,16 @@ pub struct LearnerStats {
     /// Failed outcomes whose task was handed out once more.
     pub retries: u64,
     /// Why the latest rejected update was rejected.
-    pub last_rejection: Option<String>,
+    pub last_rejection: Option<Rejection>,
+}
+
+/// One C-REPS update of a run and what it did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UpdateRecord {
+    /// Training episodes consumed when it ran: it used rollouts up to this one.
+    pub episode: u64,
+    /// What it did.
+    pub report: UpdateReport,
 }
 
 /// A snapshot that does not belong to the learner it is restored into.
@@ -283,6 +292,7 @@ pub struct LearnerSnapshot {
     arrived: BTreeMap<u64, Outcome>,
     evaluations: Vec<Evaluation>,
     episodes: Vec<Episode>,
+    updates: Vec<UpdateRecord>,
     lowest_reward: Option<f64>,
     retried: Vec<u64>,
     stats: LearnerStats,
@@ -310,6 +320,14 @@ impl LearnerSnapshot {
                 self.episodes.len(),
                 self.next_id,
                 self.next_to_consume
+            ));
+        }
+        if self.updates.len() as u64 != self.stats.updates + self.stats.rejected_updates {
+            return Err(format!(
+                "{} update reports for {} applied and {} rejected updates",
+                self.updates.len(),
+                self.stats.updates,
+                self.stats.rejected_updates
             ));
         }
         for (&id, pending) in &self.pending {
@@ -355,6 +373,7 @@ pub struct Learner {
     arrived: BTreeMap<u64, Outcome>,
     evaluations: Vec<Evaluation>,
     episodes: Vec<Episode>,
+    updates: Vec<UpdateRecord>,
     lowest_reward: Option<f64>,
     retried: std::collections::HashSet<u64>,
     stats: LearnerStats,
@@ -436,6 +455,7 @@ impl Learner {
             arrived: BTreeMap::new(),
             evaluations: Vec::new(),
             episodes: Vec::new(),
+            updates: Vec::new(),
             lowest_reward: None,
             retried: std::collections::HashSet::new(),
             stats: LearnerStats::default(),
@@ -535,6 +555,11 @@ impl Learner {
         &self.episodes
     }
 
+    /// Every C-REPS update so far, in order, with its report.
+    pub fn updates(&self) -> &[UpdateRecord] {
+        &self.updates
+    }
+
     /// Counters of the run.
     pub fn stats(&self) -> &LearnerStats {
         &self.stats
@@ -597,6 +622,7 @@ impl Learner {
             arrived: self.arrived.clone(),
             evaluations: self.evaluations.clone(),
             episodes: self.episodes.clone(),
+            updates: self.updates.clone(),
             lowest_reward: self.lowest_reward,
             retried,
             stats: self.stats.clone(),
@@ -638,6 +664,7 @@ impl Learner {
         self.arrived = snapshot.arrived;
         self.evaluations = snapshot.evaluations;
         self.episodes = snapshot.episodes;
+        self.updates = snapshot.updates;
         self.lowest_reward = snapshot.lowest_reward;
         self.retried = snapshot.retried.into_iter().collect();
         self.stats = snapshot.stats;
@@ -728,14 +755,19 @@ impl Learner {
                 .policy
                 .as_mut()
                 .and_then(|p| p.record(bucket, &task.context, &task.theta, outcome.reward));
-            match report.map(|r| r.outcome) {
-                Some(UpdateOutcome::Updated { .. }) => self.stats.updates += 1,
-                Some(UpdateOutcome::Rejected { reason }) => {
-                    tracing::debug!(seed = self.config.seed, episode = self.train_consumed, %reason, "C-REPS update rejected; the old policy stays");
-                    self.stats.rejected_updates += 1;
-                    self.stats.last_rejection = Some(reason);
+            if let Some(report) = report {
+                match report.rejected {
+                    None => self.stats.updates += 1,
+                    Some(reason) => {
+                        tracing::debug!(seed = self.config.seed, episode = self.train_consumed, %reason, "C-REPS update rejected; the old policy stays");
+                        self.stats.rejected_updates += 1;
+                        self.stats.last_rejection = Some(reason);
+                    }
                 }
-                None => {}
+                self.updates.push(UpdateRecord {
+                    episode: self.train_consumed,
+                    report,
+                });
             }
             outcome.reward
         } else {

@@ -12,6 +12,6 @@ pub mod selection;
 
 pub use learner::{
     Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerSnapshot, LearnerStats, LearningProgress,
-    RestoreError, TellError, run_in_process,
+    RestoreError, TellError, UpdateRecord, run_in_process,
 };
 pub use method::{Method, SelectorConfig, UnknownMethod};

@@ -1,45 +1,100 @@
-//! The C-REPS dual (P Alg. 2 line 7) and its solution.
+//! The C-REPS dual (P Alg. 2 line 7), solved to its optimum whatever the units of the returns.
 //!
-//! With `r_i = R_i - v^T phi_i`, `A_i = r_i / eta` and `phi_bar` the mean feature vector,
+//! With `phi_bar` the mean feature vector, the dual is
 //!
-//! `g(eta, v) = eta eps + v^T phi_bar + eta log( (1/N) sum_i exp(A_i) )`,
+//! `g(eta, v) = eta eps + v^T phi_bar + eta log( (1/N) sum_i exp((R_i - v^T phi_i) / eta) )`
 //!
-//! `dg/deta = eps + LSE(A) - sum_i p_i A_i` and `dg/dv = phi_bar - sum_i p_i phi_i`, where
-//! `LSE` is the log-mean-exp and `p = softmax(A)`. Since `KL(p || uniform) = sum p_i A_i - LSE(A)`,
-//! `dg/deta = eps - KL` and `dg/dv` is the feature-matching residual with the sign flipped: at an
-//! interior optimum both optimality conditions hold to within the solver's gradient tolerance.
+//! over `eta >= eta_min` and free `v`; the sample weights are `d = softmax((R - Phi v) / eta)`.
+//! Its gradient is `dg/deta = eps - KL(d || uniform)` and `dg/dv = phi_bar - sum_i d_i phi_i`, so
+//! at the optimum the KL bound holds with equality (unless eta sits on its bound) and the
+//! weighted features match the sample mean.
 //!
-//! As in BOLeRo the returns are not normalised, the solver starts at `eta = 1, v = 1` and uses
-//! scipy's default stopping rules (see [`DualOptions`]).
+//! # How it is solved
+//! 1. **The flat directions go.** `g` depends on `v` only through the centred baseline
+//!    `(Phi - 1 phi_bar^T) v`: the constant feature, and any combination of features that is
+//!    constant over the samples, change nothing. So `v` is replaced by coordinates `u` in an
+//!    orthonormal basis of the centred features' column space (a thin SVD, rank-revealing),
+//!    scaled to unit root mean square. The problem no longer depends on how the features are
+//!    scaled or how ill-conditioned they are (polar-quadratic features of the PA-10 targets:
+//!    ~1e7).
+//! 2. **The units go.** With `R = m + s R~` (m the mean and s the standard deviation of the
+//!    returns), `eta = s eta~` and a baseline scaled by s, `g = m + s g~(eta~, u)`, where `g~` is
+//!    the same dual on the standardised returns `R~`. The weights depend on `(eta~, u)` only, and
+//!    the bound is relative too (`eta >= eta_min s`), so the whole update is invariant to
+//!    `R -> a R + b`, a > 0.
+//! 3. **Newton with the exact Hessian.** `g~` is jointly convex, with Hessian
+//!    `(1/eta~) Cov_d([A, Q])`, the `d`-weighted covariance of the scaled residuals
+//!    `A_i = (R~_i - q_i^T u) / eta~` and the basis rows `q_i`: 1 + rank(features) variables, cheap
+//!    to form and to factorise. Each step eliminates u through the Schur complement, takes the
+//!    Newton step on `h(eta~) = min_u g~`, whose derivative is `eps - KL`, and moves u with it
+//!    (see `Step::new`). Where the dual is far from its quadratic model (it is exponential in
+//!    u / eta~) the steps are kept short: eta~ moves by at most a factor 8, waits while u is far
+//!    from its optimum for the current eta~, and no step changes a sample's log-weight by more
+//!    than 8; a backtracking line search on `g~` does the rest. When the KL bound is slack, eta~
+//!    thus follows the path of optima down to its bound, like an interior-point method, and
+//!    stops exactly on it.
+//!
+//! It stops when the projected gradient of `g~` (dimensionless: `eps - KL` for eta~, zero when
+//! eta~ is on its bound and the KL bound is slack, and the feature-matching residual in the
+//! basis for u) has an inf-norm of at most [`DualOptions::tolerance`], or of what double
+//! precision allows at that eta~, `1e-15 / eta~` (the rounding of the residuals, divided by
+//! eta~, is the precision of the log-weights). A solve takes 5-10 Newton steps when the KL bound
+//! is active and 15-45 when eta~ must follow the path to a bound of 1e-5.
 
-use nalgebra::{DMatrix, DVector, DVectorView};
+use nalgebra::{Cholesky, DMatrix, DVector, SVD};
 use serde::{Deserialize, Serialize};
 
-use super::error::{CRepsError, check_at_least_one, check_finite, check_non_negative, check_positive};
-use super::solver::minimize;
+use super::error::{CRepsError, check_at_least_one, check_finite, check_positive};
 
-/// Solver settings for [`solve_dual`]; the defaults are scipy's `fmin_l_bfgs_b` defaults, which
-/// BOLeRo uses.
+/// The largest factor by which one step on the path may raise or lower eta.
+const ETA_STEP_FACTOR: f64 = 8.0;
+
+/// Step halvings of one backtracking line search before the point counts as optimal.
+const MAX_HALVINGS: usize = 40;
+
+/// The largest change of a sample's log-weight `(R~_i - q_i^T u) / eta` through u that a step
+/// may try: where the weights sit on too few samples to span every direction of u, the Newton
+/// step along a direction without curvature is unbounded. Only a guard: good steps change
+/// log-weights by up to a few hundred (when eta falls by 8 on a steep path), so a smaller bound
+/// slowed those solves down, sometimes past the iteration cap; the line search shortens what is
+/// too long.
+const MAX_LOG_WEIGHT_CHANGE: f64 = 1000.0;
+
+/// The Newton decrement of u, in units of eta, above which eta waits for u (see [`Step::new`]).
+const CENTRING: f64 = 0.1;
+
+/// The default `eta_min`, relative to the returns' standard deviation: within the paper's
+/// 1e-6..1e-4, and large enough that the log-weights keep 10 significant digits there.
+pub const DEFAULT_ETA_MIN: f64 = 1e-5;
+
+/// Accepted `eta_min` (relative to the returns' standard deviation): below 1e-8 the log-weights
+/// carry less than 7 significant digits (see [`ROUNDING`]); above 1 the floor would override
+/// the KL bound for any epsilon above about 0.5.
+pub const ETA_MIN_RANGE: (f64, f64) = (1e-8, 1.0);
+
+/// The rounding of a standardised residual: the log-weights `residual / eta~`, and with them the
+/// gradient, are known to about `ROUNDING / eta~`.
+const ROUNDING: f64 = 1e-15;
+
+/// Accepted [`DualOptions::tolerance`]: below 1e-14 rounding can keep the gradient above it.
+pub const TOLERANCE_RANGE: (f64, f64) = (1e-14, 1e-3);
+
+/// Solver settings for [`solve_dual`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DualOptions {
-    /// Stop when the projected gradient's inf-norm is <= `pgtol` (default 1e-5).
-    pub pgtol: f64,
-    /// Stop when an iteration reduces the objective by a relative amount <= `factr *
-    /// f64::EPSILON` (default 1e7, i.e. about 2.2e-9). 0 disables this test.
-    pub factr: f64,
-    /// Iteration cap (default 15000).
+    /// Stop when the projected gradient of the standardised dual has an inf-norm of at most this
+    /// (default 1e-10), within [`TOLERANCE_RANGE`].
+    pub tolerance: f64,
+    /// Iteration cap (default 100; a solve takes 5-45 Newton steps). A solve that reaches it is
+    /// reported as not converged.
     pub max_iterations: usize,
-    /// Number of L-BFGS correction pairs (default 10).
-    pub memory: usize,
 }
 
 impl Default for DualOptions {
     fn default() -> Self {
         Self {
-            pgtol: 1e-5,
-            factr: 1e7,
-            max_iterations: 15_000,
-            memory: 10,
+            tolerance: 1e-10,
+            max_iterations: 100,
         }
     }
 }
@@ -47,27 +102,59 @@ impl Default for DualOptions {
 /// The minimiser of the dual and the sample weights it implies.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DualSolution {
-    /// The temperature eta (>= `eta_min`).
+    /// The temperature eta, in the returns' units (>= `eta_min` times their standard deviation).
     pub eta: f64,
-    /// The baseline coefficients v (one per feature).
+    /// Whether eta sits on its lower bound (the KL bound is then slack: even the greediest
+    /// weighting the features allow stays within epsilon).
+    pub eta_at_bound: bool,
+    /// Baseline coefficients v (one per feature), in the returns' units. The dual is flat along
+    /// the constant feature (and any combination of features constant over the samples); the
+    /// minimum-norm v is returned.
     pub v: DVector<f64>,
     /// `d = softmax((R - Phi v) / eta)`; sums to 1.
     pub weights: DVector<f64>,
-    /// `g(eta, v)`.
+    /// `g(eta, v)`, in the returns' units.
     pub objective: f64,
-    /// `KL(d || uniform)`.
+    /// `KL(d || uniform)` (= epsilon when eta is off its bound).
     pub kl: f64,
-    /// Solver iterations.
+    /// The inf-norm of the standardised dual's projected gradient at the returned point.
+    pub optimality: f64,
+    /// Newton iterations.
     pub iterations: usize,
-    /// Whether a stopping rule of [`DualOptions`] was met (BOLeRo ignores this flag, and so does
-    /// the C-REPS update; it is reported for diagnostics).
+    /// Whether the optimality reached the tolerance (or, for eta below 1e-5 times the returns'
+    /// standard deviation, what double precision allows there) within the iteration cap.
     pub converged: bool,
 }
 
-/// Minimises the C-REPS dual over `eta >= eta_min` and free `v`.
+/// The dual's value and gradient at one point, from [`evaluate_dual`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DualValue {
+    /// `g(eta, v)`.
+    pub value: f64,
+    /// `(dg/deta, dg/dv_0, ..., dg/dv_{n_phi - 1})`.
+    pub gradient: DVector<f64>,
+}
+
+/// Minimises the C-REPS dual over `eta >= eta_min s` and free `v`, s being the standard
+/// deviation of `returns`.
 ///
 /// `phi` holds one feature vector per row (N x n_phi), `returns` the N returns. Errors if the
-/// inputs are inconsistent or non-finite, or if the dual is not finite at the start point.
+/// inputs are inconsistent or not finite, or a setting is out of its range. Returns that are all
+/// equal (to rounding) carry no preference: the weights are then uniform, eta is 0 and on its
+/// bound.
+///
+/// ```
+/// use acps_learner::creps::{DualOptions, solve_dual};
+/// use nalgebra::DMatrix;
+///
+/// // Features (s, 1) of five contexts, and returns in any units.
+/// let phi = DMatrix::from_row_slice(5, 2, &[-1.0, 1.0, -0.5, 1.0, 0.0, 1.0, 0.5, 1.0, 1.0, 1.0]);
+/// let returns = [-3.0, -1.0, 0.0, -2.0, -0.5];
+/// let solution = solve_dual(&phi, &returns, 0.5, 1e-8, &DualOptions::default()).unwrap();
+/// assert!(solution.converged && !solution.eta_at_bound);
+/// assert!((solution.kl - 0.5).abs() < 1e-9);
+/// assert!((solution.weights.sum() - 1.0).abs() < 1e-12);
+/// ```
 pub fn solve_dual(
     phi: &DMatrix<f64>,
     returns: &[f64],
@@ -76,8 +163,142 @@ pub fn solve_dual(
     options: &DualOptions,
 ) -> Result<DualSolution, CRepsError> {
     check_positive("epsilon", epsilon)?;
-    check_positive("eta_min", eta_min)?;
+    check_eta_min(eta_min)?;
     check_options(options)?;
+    check_data(phi, returns)?;
+    let n = returns.len();
+    let Some(problem) = Standardised::new(phi, returns, epsilon) else {
+        // Equal returns: any eta gives uniform weights with v = 0, and g = m + eta eps is least
+        // at eta = 0.
+        return Ok(DualSolution {
+            eta: 0.0,
+            eta_at_bound: true,
+            v: DVector::zeros(phi.ncols()),
+            weights: DVector::from_element(n, 1.0 / n as f64),
+            objective: returns.iter().sum::<f64>() / n as f64,
+            kl: 0.0,
+            optimality: 0.0,
+            iterations: 0,
+            converged: true,
+        });
+    };
+    let newton = problem.minimise(eta_min, options);
+    let weights = newton.weights;
+    Ok(DualSolution {
+        eta: problem.scale * newton.eta,
+        eta_at_bound: newton.eta <= eta_min,
+        v: &problem.to_v * &newton.u * problem.scale,
+        kl: kl_to_uniform(weights.as_slice()),
+        weights,
+        objective: problem.mean + problem.scale * newton.value,
+        optimality: newton.optimality,
+        iterations: newton.iterations,
+        converged: newton.optimality <= attainable(options.tolerance, newton.eta),
+    })
+}
+
+/// The dual `g(eta, v)` and its gradient at one point, in the returns' units (computed with a
+/// shifted log-sum-exp, so a tiny eta and huge returns stay finite).
+///
+/// ```
+/// use acps_learner::creps::{DualOptions, evaluate_dual, solve_dual};
+/// use nalgebra::DMatrix;
+///
+/// let phi = DMatrix::from_row_slice(4, 2, &[0.0, 1.0, 1.0, 1.0, 2.0, 1.0, 3.0, 1.0]);
+/// let returns = [1.0, 3.0, 2.0, 0.0];
+/// let optimum = solve_dual(&phi, &returns, 0.3, 1e-5, &DualOptions::default()).unwrap();
+/// assert!(!optimum.eta_at_bound);
+/// let at_optimum = evaluate_dual(&phi, &returns, 0.3, optimum.eta, optimum.v.as_slice()).unwrap();
+/// assert!((at_optimum.value - optimum.objective).abs() < 1e-12);
+/// // The optimum: KL = epsilon and the features matched.
+/// assert!(at_optimum.gradient.amax() < 1e-9);
+/// ```
+pub fn evaluate_dual(
+    phi: &DMatrix<f64>,
+    returns: &[f64],
+    epsilon: f64,
+    eta: f64,
+    v: &[f64],
+) -> Result<DualValue, CRepsError> {
+    check_positive("epsilon", epsilon)?;
+    check_positive("eta", eta)?;
+    check_data(phi, returns)?;
+    if v.len() != phi.ncols() {
+        return Err(CRepsError::LengthMismatch {
+            first: "the length of v",
+            first_len: v.len(),
+            second: "the number of phi columns",
+            second_len: phi.ncols(),
+        });
+    }
+    check_finite("v", v)?;
+    let v = DVector::from_column_slice(v);
+    let residuals = DVector::from_column_slice(returns) - phi * &v;
+    let mut softmax = Softmax::new(returns.len());
+    let (max_r, log_mean) = softmax.compute(&residuals, eta);
+    let phi_mean = phi.row_mean().transpose();
+    let mut gradient = DVector::zeros(1 + phi.ncols());
+    gradient[0] = epsilon - softmax.kl(log_mean);
+    gradient
+        .rows_mut(1, phi.ncols())
+        .copy_from(&(&phi_mean - phi.tr_mul(&softmax.p)));
+    Ok(DualValue {
+        value: eta * epsilon + v.dot(&phi_mean) + max_r + eta * log_mean,
+        gradient,
+    })
+}
+
+/// `KL(d || uniform) = sum_i d_i ln(N d_i)` for weights `d` that sum to 1 (`0 ln 0 = 0`).
+pub fn kl_to_uniform(weights: &[f64]) -> f64 {
+    let n = weights.len() as f64;
+    weights.iter().filter(|&&d| d > 0.0).map(|&d| d * (n * d).ln()).sum()
+}
+
+/// The effective sample size `1 / sum_i d_i^2` of weights `d` that sum to 1: N for uniform
+/// weights, 1 when one sample carries all the weight.
+pub fn effective_sample_size(weights: &[f64]) -> f64 {
+    1.0 / weights.iter().map(|d| d * d).sum::<f64>()
+}
+
+/// The feature-matching residual `sum_i d_i phi_i - phi_bar` (rows of `phi` are the `phi_i`,
+/// `phi_bar` their plain mean); zero at an optimum of the dual.
+pub fn feature_matching_residual(phi: &DMatrix<f64>, weights: &[f64]) -> DVector<f64> {
+    phi.tr_mul(&DVector::from_column_slice(weights)) - phi.row_mean().transpose()
+}
+
+/// The optimality a solve can reach at `eta~`.
+fn attainable(tolerance: f64, eta: f64) -> f64 {
+    tolerance.max(ROUNDING / eta)
+}
+
+pub(crate) fn check_eta_min(eta_min: f64) -> Result<(), CRepsError> {
+    let (low, high) = ETA_MIN_RANGE;
+    if (low..=high).contains(&eta_min) {
+        Ok(())
+    } else {
+        Err(CRepsError::OutOfRange {
+            name: "eta_min",
+            value: eta_min,
+            low,
+            high,
+        })
+    }
+}
+
+fn check_options(options: &DualOptions) -> Result<(), CRepsError> {
+    let (low, high) = TOLERANCE_RANGE;
+    if !(low..=high).contains(&options.tolerance) {
+        return Err(CRepsError::OutOfRange {
+            name: "tolerance",
+            value: options.tolerance,
+            low,
+            high,
+        });
+    }
+    check_at_least_one("max_iterations", options.max_iterations)
+}
+
+fn check_data(phi: &DMatrix<f64>, returns: &[f64]) -> Result<(), CRepsError> {
     if phi.nrows() != returns.len() {
         return Err(CRepsError::LengthMismatch {
             first: "the number of phi rows",
@@ -90,376 +311,374 @@ pub fn solve_dual(
         return Err(CRepsError::NoSamples);
     }
     check_finite("returns", returns)?;
-    check_finite("phi", phi.as_slice())?;
-
-    let dual = Dual::new(phi, returns, epsilon);
-    let mut scratch = Scratch::new(phi.nrows(), phi.ncols());
-    let n_phi = phi.ncols();
-    let mut lower = DVector::from_element(n_phi + 1, f64::NEG_INFINITY);
-    lower[0] = eta_min;
-    let x0 = DVector::from_element(n_phi + 1, 1.0);
-    let mut gradient = DVector::zeros(n_phi + 1);
-    let start = dual.evaluate(&x0.zip_map(&lower, f64::max), &mut gradient, &mut scratch);
-    if !start.is_finite() || gradient.iter().any(|g| !g.is_finite()) {
-        return Err(CRepsError::NonFiniteDual);
-    }
-
-    let minimum = minimize(|x, g| dual.evaluate(x, g, &mut scratch), x0, &lower, options);
-    let eta = minimum.x[0];
-    let v = minimum.x.rows(1, n_phi).into_owned();
-    dual.softmax(eta, &v.as_view(), &mut scratch);
-    let weights = scratch.p;
-    Ok(DualSolution {
-        eta,
-        kl: kl_to_uniform(weights.as_slice()),
-        v,
-        weights,
-        objective: minimum.f,
-        iterations: minimum.iterations,
-        converged: minimum.converged,
-    })
+    check_finite("phi", phi.as_slice())
 }
 
-/// `KL(d || uniform) = sum_i d_i ln(N d_i)` for weights `d` that sum to 1 (`0 ln 0 = 0`).
-pub fn kl_to_uniform(weights: &[f64]) -> f64 {
-    let n = weights.len() as f64;
-    weights.iter().filter(|&&d| d > 0.0).map(|&d| d * (n * d).ln()).sum()
-}
-
-/// The feature-matching residual `sum_i d_i phi_i - phi_bar` (rows of `phi` are the `phi_i`,
-/// `phi_bar` their plain mean); zero at an optimum of the dual.
-pub fn feature_matching_residual(phi: &DMatrix<f64>, weights: &[f64]) -> DVector<f64> {
-    phi.tr_mul(&DVector::from_column_slice(weights)) - mean_row(phi)
-}
-
-fn mean_row(phi: &DMatrix<f64>) -> DVector<f64> {
-    phi.row_mean().transpose()
-}
-
-/// The dual's data.
-struct Dual<'a> {
-    phi: &'a DMatrix<f64>,
-    returns: DVector<f64>,
-    phi_mean: DVector<f64>,
-    epsilon: f64,
-}
-
-impl<'a> Dual<'a> {
-    fn new(phi: &'a DMatrix<f64>, returns: &[f64], epsilon: f64) -> Self {
-        Self {
-            phi,
-            returns: DVector::from_column_slice(returns),
-            phi_mean: mean_row(phi),
-            epsilon,
-        }
-    }
-
-    /// Writes `p = softmax((R - Phi v) / eta)` into `scratch.p` and `a = A - max A` (<= 0) into
-    /// `scratch.shifted`; returns `max_r = max_i r_i` and `log((1/N) sum exp(a))`, the shifted
-    /// log-mean-exp parts.
-    fn softmax(&self, eta: f64, v: &DVectorView<f64>, scratch: &mut Scratch) -> (f64, f64) {
-        let Scratch {
-            baseline, shifted, p, ..
-        } = scratch;
-        baseline.gemv(1.0, self.phi, v, 0.0);
-        let residuals = baseline.as_mut_slice();
-        for (b, r) in residuals.iter_mut().zip(self.returns.as_slice()) {
-            *b = r - *b;
-        }
-        // `>=` as in nalgebra's `max`, which this used before: the same bits for every input.
-        let max_r = residuals
-            .iter()
-            .copied()
-            .reduce(|a, b| if a >= b { a } else { b })
-            .expect("the dual has samples");
-        for (a, r) in shifted.iter_mut().zip(residuals.iter()) {
-            *a = (r - max_r) / eta;
-        }
-        let exps = p.as_mut_slice();
-        for (e, a) in exps.iter_mut().zip(shifted.iter()) {
-            *e = a.exp();
-        }
-        let total: f64 = exps.iter().sum();
-        let log_mean = (total / exps.len() as f64).ln();
-        exps.iter_mut().for_each(|e| *e /= total);
-        (max_r, log_mean)
-    }
-
-    /// g at `x = (eta, v)`; writes the gradient into `gradient`.
-    ///
-    /// `eta LSE(A) = max_r + eta log_mean` avoids multiplying a huge `max A` back by a tiny eta.
-    fn evaluate(&self, x: &DVector<f64>, gradient: &mut DVector<f64>, scratch: &mut Scratch) -> f64 {
-        let eta = x[0];
-        let v = x.rows(1, x.len() - 1);
-        let (max_r, log_mean) = self.softmax(eta, &v, scratch);
-        let Scratch {
-            shifted, p, matched, ..
-        } = scratch;
-        // p_i = 0 terms are skipped: their shifted A_i may be -inf.
-        let p_dot_a: f64 = p
-            .as_slice()
-            .iter()
-            .zip(shifted.iter())
-            .filter(|&(&pi, _)| pi > 0.0)
-            .map(|(pi, a)| pi * a)
-            .sum();
-        gradient[0] = self.epsilon + log_mean - p_dot_a;
-        self.phi.tr_mul_to(p, matched);
-        for (g, (mean, weighted)) in gradient
-            .as_mut_slice()
-            .iter_mut()
-            .skip(1)
-            .zip(self.phi_mean.as_slice().iter().zip(matched.as_slice()))
-        {
-            *g = mean - weighted;
-        }
-        eta * self.epsilon + v.dot(&self.phi_mean) + max_r + eta * log_mean
-    }
-}
-
-/// The buffers of one evaluation of the dual, reused by every evaluation of a solve (tens per
-/// C-REPS update): an evaluation allocates nothing, which made an update of the grid problem
-/// 2.8% faster (`cargo bench -p acps-bench --bench learner -- creps_update`).
-struct Scratch {
-    /// `Phi v`, then the residuals `R - Phi v` in place.
-    baseline: DVector<f64>,
-    /// `A - max A`.
-    shifted: Vec<f64>,
-    /// The softmax weights.
+/// Softmax weights of `r / eta`, computed after subtracting `max r`.
+struct Softmax {
+    /// `(r_i - max r) / eta` (<= 0).
+    shifted: DVector<f64>,
+    /// The weights.
     p: DVector<f64>,
-    /// `Phi^T p`.
+}
+
+impl Softmax {
+    fn new(n: usize) -> Self {
+        Self {
+            shifted: DVector::zeros(n),
+            p: DVector::zeros(n),
+        }
+    }
+
+    /// Fills the weights of `residuals / eta`; returns `max r` and `log((1/N) sum exp(shifted))`,
+    /// so that `eta LSE(r / eta) = max r + eta log_mean` without multiplying a huge `max r / eta`
+    /// back by a tiny eta.
+    fn compute(&mut self, residuals: &DVector<f64>, eta: f64) -> (f64, f64) {
+        let max_r = residuals.max();
+        for ((a, p), r) in self.shifted.iter_mut().zip(self.p.iter_mut()).zip(residuals.iter()) {
+            *a = (r - max_r) / eta;
+            *p = a.exp();
+        }
+        let total = self.p.sum();
+        self.p /= total;
+        (max_r, (total / residuals.len() as f64).ln())
+    }
+
+    /// `sum_i p_i a_i`, skipping `p_i = 0` terms (whose `a_i` may be -inf).
+    fn mean_shifted(&self) -> f64 {
+        self.p
+            .iter()
+            .zip(self.shifted.iter())
+            .filter(|&(&p, _)| p > 0.0)
+            .map(|(p, a)| p * a)
+            .sum()
+    }
+
+    /// `KL(p || uniform) = sum_i p_i a_i - log_mean`.
+    fn kl(&self, log_mean: f64) -> f64 {
+        self.mean_shifted() - log_mean
+    }
+}
+
+/// The dual on standardised returns in an orthonormal basis of the centred features.
+struct Standardised {
+    epsilon: f64,
+    /// `(R - m) / s`.
+    returns: DVector<f64>,
+    /// N x k, orthogonal columns with mean 0 and root mean square 1 spanning the centred
+    /// features' columns.
+    basis: DMatrix<f64>,
+    /// m.
+    mean: f64,
+    /// s.
+    scale: f64,
+    /// n_phi x k: `v = s to_v u` is the minimum-norm v whose centred baseline is `s basis u`.
+    to_v: DMatrix<f64>,
+}
+
+impl Standardised {
+    /// `None` when the returns are all equal to rounding.
+    fn new(phi: &DMatrix<f64>, returns: &[f64], epsilon: f64) -> Option<Self> {
+        let n = returns.len();
+        // Dividing by the largest magnitude first keeps squares finite for any finite returns.
+        let largest = returns.iter().fold(0.0f64, |m, r| m.max(r.abs()));
+        if largest == 0.0 {
+            return None;
+        }
+        let unit = DVector::from_iterator(n, returns.iter().map(|r| r / largest));
+        let unit_mean = unit.mean();
+        let centred = unit.add_scalar(-unit_mean);
+        let unit_std = (centred.norm_squared() / n as f64).sqrt();
+        // Entries are in [-1, 1], each rounded by up to one ulp: a smaller spread is rounding.
+        if unit_std <= 4.0 * f64::EPSILON {
+            return None;
+        }
+        let (basis, to_v) = centred_basis(phi);
+        Some(Self {
+            epsilon,
+            returns: centred / unit_std,
+            basis,
+            mean: unit_mean * largest,
+            scale: unit_std * largest,
+            to_v,
+        })
+    }
+
+    fn rank(&self) -> usize {
+        self.basis.ncols()
+    }
+
+    /// Path following on eta with Newton steps (see the module documentation).
+    fn minimise(&self, eta_min: f64, options: &DualOptions) -> Newton {
+        let mut scratch = Scratch::new(self.returns.len(), self.rank());
+        let mut steps = 0;
+        let (eta, u) = self.start(eta_min);
+        let mut current = self.evaluate(eta, u, &mut scratch);
+        let mut hessian = scratch.hessian(&self.basis, eta);
+        loop {
+            let optimality = current.optimality(eta_min);
+            if optimality <= attainable(options.tolerance, current.eta) || steps >= options.max_iterations {
+                return Newton {
+                    weights: scratch.softmax.p.clone(),
+                    eta: current.eta,
+                    u: current.u,
+                    value: current.value,
+                    optimality,
+                    iterations: steps,
+                };
+            }
+            steps += 1;
+            let newton = Step::new(&current, &hessian, eta_min);
+            // Should the Newton step find no decrease, steepest descent in u (log-weight
+            // changes of the gradient's size) is tried before the point counts as optimal.
+            let descent = || Step {
+                eta: current.eta,
+                u: -&current.gradient_u * current.eta,
+            };
+            let found = self
+                .search(&current, &newton, &mut scratch)
+                .or_else(|| self.search(&current, &descent(), &mut scratch));
+            let Some(next) = found else {
+                // No decrease along a descent direction: the optimum to rounding; the scratch
+                // holds the last trial, so evaluate the point again for its weights.
+                current = self.evaluate(current.eta, current.u, &mut scratch);
+                return Newton {
+                    weights: scratch.softmax.p.clone(),
+                    optimality: current.optimality(eta_min),
+                    eta: current.eta,
+                    u: current.u,
+                    value: current.value,
+                    iterations: steps,
+                };
+            };
+            current = next;
+            hessian = scratch.hessian(&self.basis, current.eta);
+        }
+    }
+
+    /// A backtracking line search along `step` from `point`: the first of the step (shortened
+    /// so that no sample's log-weight moves by more than [`MAX_LOG_WEIGHT_CHANGE`] through u),
+    /// its half, quarter, ... that decreases the dual sufficiently (Armijo), or does not
+    /// increase it when the decrease is below what the objective can resolve. The scratch then
+    /// holds its evaluation.
+    fn search(&self, point: &Point, step: &Step, scratch: &mut Scratch) -> Option<Point> {
+        let slope = point.gradient_eta * (step.eta - point.eta) + point.gradient_u.dot(&step.u);
+        let resolution = 1e-14 * (1.0 + point.value.abs());
+        let stretch = (&self.basis * &step.u).amax() / point.eta;
+        let mut fraction = (MAX_LOG_WEIGHT_CHANGE / stretch).min(1.0);
+        for _ in 0..MAX_HALVINGS {
+            let eta = if fraction == 1.0 {
+                step.eta
+            } else {
+                point.eta + fraction * (step.eta - point.eta)
+            };
+            let trial = self.evaluate(eta, &point.u + &step.u * fraction, scratch);
+            let sufficient = trial.value <= point.value + 1e-4 * fraction * slope;
+            let unresolved = -fraction * slope <= resolution && trial.value <= point.value + resolution;
+            if sufficient || unresolved {
+                return Some(trial);
+            }
+            fraction /= 2.0;
+        }
+        None
+    }
+
+    /// The least-squares baseline, and the eta at which the weights of its residuals `e` would
+    /// have KL = epsilon to second order (`KL ~ Var(e) / (2 eta^2)`).
+    fn start(&self, eta_min: f64) -> (f64, DVector<f64>) {
+        let n = self.returns.len() as f64;
+        let u = self.basis.tr_mul(&self.returns) / n;
+        let residuals = &self.returns - &self.basis * &u;
+        let spread = (residuals.norm_squared() / n).sqrt();
+        ((spread / (2.0 * self.epsilon).sqrt()).max(eta_min), u)
+    }
+
+    fn evaluate(&self, eta: f64, u: DVector<f64>, scratch: &mut Scratch) -> Point {
+        scratch.residuals.copy_from(&self.returns);
+        scratch.residuals.gemv(-1.0, &self.basis, &u, 1.0);
+        let (max_r, log_mean) = scratch.softmax.compute(&scratch.residuals, eta);
+        scratch.matched.gemv_tr(1.0, &self.basis, &scratch.softmax.p, 0.0);
+        Point {
+            eta,
+            value: eta * self.epsilon + max_r + eta * log_mean,
+            gradient_eta: self.epsilon - scratch.softmax.kl(log_mean),
+            gradient_u: -&scratch.matched,
+            u,
+        }
+    }
+}
+
+/// An orthogonal basis of the column space of `phi - 1 phi_bar^T`, scaled to root mean square 1
+/// per column (N x k), and the n_phi x k map from coordinates in it to the minimum-norm v. Left
+/// singular vectors whose singular value is below `max(N, n_phi) eps sigma` are left out as
+/// rounding (numpy's rank rule), with sigma the larger of the centred matrix's largest singular
+/// value and `sqrt(N) max |phi|`: centring a constant column leaves rounding of that size.
+fn centred_basis(phi: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
+    let (n, n_phi) = phi.shape();
+    let mean = phi.row_mean();
+    let mut centred = phi.clone();
+    for mut row in centred.row_iter_mut() {
+        row -= &mean;
+    }
+    let svd = SVD::new(centred, true, true);
+    let (left, right) = (svd.u.expect("requested"), svd.v_t.expect("requested").transpose());
+    let reference = svd.singular_values.max().max((n as f64).sqrt() * phi.amax());
+    let cutoff = n.max(n_phi) as f64 * f64::EPSILON * reference;
+    let kept: Vec<usize> = (0..svd.singular_values.len())
+        .filter(|&j| svd.singular_values[j] > cutoff)
+        .collect();
+    let root_n = (n as f64).sqrt();
+    let basis = DMatrix::from_fn(n, kept.len(), |i, j| left[(i, kept[j])] * root_n);
+    let to_v = DMatrix::from_fn(n_phi, kept.len(), |i, j| {
+        right[(i, kept[j])] * root_n / svd.singular_values[kept[j]]
+    });
+    (basis, to_v)
+}
+
+/// Buffers of one solve, reused by every evaluation.
+struct Scratch {
+    residuals: DVector<f64>,
+    softmax: Softmax,
+    /// `basis^T p`.
     matched: DVector<f64>,
+    /// `sqrt(p_i) ([A_i, q_i] - their weighted mean)`, N x (1 + k).
+    centred: DMatrix<f64>,
 }
 
 impl Scratch {
-    fn new(n: usize, n_phi: usize) -> Self {
+    fn new(n: usize, k: usize) -> Self {
         Self {
-            baseline: DVector::zeros(n),
-            shifted: vec![0.0; n],
-            p: DVector::zeros(n),
-            matched: DVector::zeros(n_phi),
+            residuals: DVector::zeros(n),
+            softmax: Softmax::new(n),
+            matched: DVector::zeros(k),
+            centred: DMatrix::zeros(n, 1 + k),
+        }
+    }
+
+    /// `(1/eta) Cov_p([A, q])` at the point last evaluated.
+    fn hessian(&mut self, basis: &DMatrix<f64>, eta: f64) -> DMatrix<f64> {
+        let p = &self.softmax.p;
+        let mean_a = self.softmax.mean_shifted();
+        let k = self.matched.len();
+        for i in 0..p.len() {
+            let root = p[i].sqrt();
+            if root == 0.0 {
+                self.centred.row_mut(i).fill(0.0);
+                continue;
+            }
+            self.centred[(i, 0)] = root * (self.softmax.shifted[i] - mean_a);
+            for j in 0..k {
+                self.centred[(i, j + 1)] = root * (basis[(i, j)] - self.matched[j]);
+            }
+        }
+        self.centred.tr_mul(&self.centred) / eta
+    }
+}
+
+/// One evaluated point of the standardised dual.
+struct Point {
+    eta: f64,
+    u: DVector<f64>,
+    value: f64,
+    /// `eps - KL`.
+    gradient_eta: f64,
+    /// `-basis^T p`.
+    gradient_u: DVector<f64>,
+}
+
+impl Point {
+    /// Whether eta is held on its bound: there, and the dual would decrease below it.
+    fn eta_held(&self, eta_min: f64) -> bool {
+        self.eta <= eta_min && self.gradient_eta > 0.0
+    }
+
+    fn optimality(&self, eta_min: f64) -> f64 {
+        let eta_part = if self.eta_held(eta_min) {
+            0.0
+        } else {
+            self.gradient_eta.abs()
+        };
+        self.gradient_u.amax().max(eta_part)
+    }
+}
+
+/// A Newton step: the new eta and the change of u.
+struct Step {
+    eta: f64,
+    u: DVector<f64>,
+}
+
+impl Step {
+    /// The Newton step from `point`, through the Schur complement on eta.
+    ///
+    /// With `z = H_uu^-1 g_u` and `w = H_uu^-1 H_ue`, minimising the quadratic model over u for a
+    /// given change `d` of eta leaves `h(d) = (g_e - H_eu z) d + S d^2 / 2`, `S = H_ee - H_eu w`
+    /// (exactly h''(eta) when u is optimal), with `du = -z - w d`. While the Newton decrement of
+    /// u, `g_u^T z`, exceeds [`CENTRING`] eta the model is poor (the dual is exponential in
+    /// u / eta), so eta stays and only u moves; else eta takes the Newton step on `h`, kept
+    /// within a factor [`ETA_STEP_FACTOR`] and above `eta_min`.
+    fn new(point: &Point, hessian: &DMatrix<f64>, eta_min: f64) -> Self {
+        let eta = point.eta;
+        let k = point.u.len();
+        let h_uu = hessian.view((1, 1), (k, k)).into_owned();
+        let h_ue = hessian.view((1, 0), (k, 1)).column(0).into_owned();
+        let scale = 1.0 / eta;
+        let z = solve_regularised(&h_uu, point.gradient_u.clone(), scale).unwrap_or_else(|| point.gradient_u.clone());
+        let decrement = point.gradient_u.dot(&z);
+        if decrement > CENTRING * eta || point.eta_held(eta_min) {
+            return Self { eta, u: -z };
+        }
+        let w = solve_regularised(&h_uu, h_ue.clone(), scale).unwrap_or_else(|| DVector::zeros(k));
+        let curvature = hessian[(0, 0)] - h_ue.dot(&w);
+        let slope = point.gradient_eta - h_ue.dot(&z);
+        let newton = if curvature > 0.0 {
+            eta - slope / curvature
+        } else if slope > 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+        let target = newton.clamp(eta / ETA_STEP_FACTOR, eta * ETA_STEP_FACTOR).max(eta_min);
+        Self {
+            eta: target,
+            u: -z - w * (target - eta),
         }
     }
 }
 
-fn check_options(options: &DualOptions) -> Result<(), CRepsError> {
-    check_non_negative("pgtol", options.pgtol)?;
-    check_non_negative("factr", options.factr)?;
-    check_at_least_one("max_iterations", options.max_iterations)?;
-    check_at_least_one("memory", options.memory)
+/// Solves `H x = rhs` by Cholesky, adding `1e-12 scale` to the diagonal, and more, tenfold,
+/// until `H` is positive definite (a Hessian whose weights sit on too few samples to span every
+/// direction); `scale` is the Hessian's natural size, `1/eta`.
+fn solve_regularised(hessian: &DMatrix<f64>, rhs: DVector<f64>, scale: f64) -> Option<DVector<f64>> {
+    if rhs.is_empty() {
+        return Some(rhs);
+    }
+    let mut shift = 0.0;
+    for _ in 0..30 {
+        let mut shifted = hessian.clone();
+        for i in 0..shifted.nrows() {
+            shifted[(i, i)] += shift;
+        }
+        if let Some(factor) = Cholesky::new(shifted) {
+            let solution = factor.solve(&rhs);
+            if solution.iter().all(|x| x.is_finite()) {
+                return Some(solution);
+            }
+        }
+        shift = if shift == 0.0 { 1e-12 * scale } else { shift * 10.0 };
+    }
+    None
+}
+
+/// The result of [`Standardised::minimise`], in standardised units.
+struct Newton {
+    eta: f64,
+    u: DVector<f64>,
+    value: f64,
+    weights: DVector<f64>,
+    optimality: f64,
+    iterations: usize,
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::{Rng, SeedableRng};
-    use rand_chacha::ChaCha8Rng;
-    use rand_distr::StandardNormal;
-
-    fn linspace(a: f64, b: f64, n: usize) -> Vec<f64> {
-        (0..n).map(|i| a + (b - a) * i as f64 / (n - 1) as f64).collect()
-    }
-
-    /// Rows `(x_i, 1)` or `(x_i^2, x_i, 1)`.
-    fn polynomial_features(x: &[f64], degree: i32) -> DMatrix<f64> {
-        DMatrix::from_fn(x.len(), degree as usize + 1, |i, j| x[i].powi(degree - j as i32))
-    }
-
-    fn tight() -> DualOptions {
-        DualOptions {
-            pgtol: 1e-9,
-            factr: 0.0,
-            ..DualOptions::default()
-        }
-    }
-
-    /// A random problem: `n_features` standard-normal features plus a constant, returns on
-    /// the scale `scale`.
-    fn random_problem(seed: u64, n: usize, n_features: usize, scale: f64) -> (DMatrix<f64>, Vec<f64>) {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let phi = DMatrix::from_fn(n, n_features + 1, |_, j| {
-            if j == n_features {
-                1.0
-            } else {
-                rng.sample(StandardNormal)
-            }
-        });
-        let returns = (0..n).map(|_| scale * rng.sample::<f64, _>(StandardNormal)).collect();
-        (phi, returns)
-    }
-
-    #[test]
-    fn gradient_matches_central_differences() {
-        for seed in 0..5 {
-            let (phi, returns) = random_problem(seed, 30, 3, 2.0);
-            let dual = Dual::new(&phi, &returns, 0.7);
-            let mut rng = ChaCha8Rng::seed_from_u64(100 + seed);
-            let x = DVector::from_fn(5, |i, _| {
-                if i == 0 {
-                    rng.random_range(0.2..3.0)
-                } else {
-                    rng.random_range(-2.0..2.0)
-                }
-            });
-            let mut buffers = Scratch::new(30, 4);
-            let mut gradient = DVector::zeros(5);
-            dual.evaluate(&x, &mut gradient, &mut buffers);
-            let mut scratch = DVector::zeros(5);
-            for i in 0..5 {
-                let h = 1e-6;
-                let mut up = x.clone();
-                up[i] += h;
-                let mut down = x.clone();
-                down[i] -= h;
-                let numeric = (dual.evaluate(&up, &mut scratch, &mut buffers)
-                    - dual.evaluate(&down, &mut scratch, &mut buffers))
-                    / (2.0 * h);
-                assert!(
-                    (numeric - gradient[i]).abs() < 1e-7 * (1.0 + numeric.abs()),
-                    "seed {seed}, component {i}: analytic {} vs numeric {numeric}",
-                    gradient[i]
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn objective_is_stable_for_tiny_eta_and_huge_returns() {
-        let (phi, returns) = random_problem(3, 20, 1, 1e6);
-        let dual = Dual::new(&phi, &returns, 0.5);
-        let mut gradient = DVector::zeros(3);
-        let f = dual.evaluate(
-            &DVector::from_vec(vec![1e-8, 0.0, 0.0]),
-            &mut gradient,
-            &mut Scratch::new(20, 2),
-        );
-        // eta LSE -> max_i R_i as eta -> 0.
-        let max_return = returns.iter().cloned().fold(f64::MIN, f64::max);
-        assert!((f - max_return).abs() < 1e-6 * max_return.abs());
-        assert!(gradient.iter().all(|g| g.is_finite()));
-    }
-
-    /// Notes section 1.2: a NumPy re-run of BOLeRo's dual (scipy L-BFGS-B with defaults).
-    #[test]
-    fn reproduces_the_reference_solution() {
-        let x = linspace(-1.0, 1.0, 11);
-        let phi = polynomial_features(&x, 1);
-        let returns: Vec<f64> = x.iter().map(|x| (3.0 * x).sin() - x * x).collect();
-        let solution = solve_dual(&phi, &returns, 0.5, 1e-8, &DualOptions::default()).unwrap();
-        assert!(solution.converged);
-        assert!((solution.eta - 0.341885).abs() < 1e-4, "{}", solution.eta);
-        assert!((solution.v[0] - 1.227724).abs() < 1e-4, "{}", solution.v);
-        // The constant feature's coefficient lies on a flat direction and stays at its start.
-        assert!((solution.v[1] - 1.0).abs() < 1e-12, "{}", solution.v);
-        assert!((solution.objective - 0.08925233).abs() < 1e-6);
-        assert!((solution.kl - 0.5).abs() < 1e-5, "{}", solution.kl);
-        let expected = [
-            0.1487, 0.04355, 0.02013, 0.01991, 0.04038, 0.1154, 0.2612, 0.2626, 0.08061, 0.007241, 0.000258,
-        ];
-        for (d, want) in solution.weights.iter().zip(expected) {
-            assert!((d - want).abs() < 1e-3, "{} vs {want}", solution.weights);
-        }
-        assert!((solution.weights.sum() - 1.0).abs() < 1e-12);
-        let residual = feature_matching_residual(&phi, solution.weights.as_slice());
-        assert!(residual.amax() < 1e-5, "{residual}");
-    }
-
-    /// Off the bound, KL = eps and the features are matched: the gradient components are exactly
-    /// `eps - KL` and `-residual`. How small they get is limited by the objective's resolution,
-    /// not by `pgtol`: a step whose effect on g (~|grad|^2 / curvature) is below ~1e-16 |g|
-    /// yields no decrease, and the search stops there; on these problems that is at |grad| of
-    /// about 1e-8 (worst seen 1.2e-8), so we allow 1e-7. On the bound the eta-derivative
-    /// `eps - KL` must be >= 0 (up to the same tolerance) and nothing is claimed about the
-    /// residual: g is nearly piecewise linear in v for eta = 1e-8.
-    #[test]
-    fn random_problems_satisfy_the_optimality_conditions() {
-        let mut off_bound = 0;
-        for seed in 0..12 {
-            let n = [10, 40, 150][seed as usize % 3];
-            let scale = [0.01, 1.0, 100.0][seed as usize / 3 % 3];
-            let (phi, returns) = random_problem(seed, n, 2, scale);
-            let epsilon = [0.1, 0.5, 1.0, 2.0][seed as usize % 4];
-            let solution = solve_dual(&phi, &returns, epsilon, 1e-8, &tight()).unwrap();
-            assert!(solution.converged, "seed {seed}");
-            if solution.eta > 1e-8 {
-                off_bound += 1;
-                let residual = feature_matching_residual(&phi, solution.weights.as_slice());
-                assert!(residual.amax() <= 1e-7, "seed {seed}: {residual}");
-                assert!((solution.kl - epsilon).abs() <= 1e-7, "seed {seed}: {}", solution.kl);
-            } else {
-                assert!(solution.kl <= epsilon + 1e-7, "seed {seed}: {}", solution.kl);
-            }
-            // scipy's default stopping rules end close to the tight optimum: they stop once a
-            // step reduces g by <= 2.2e-9 relative, and convergence is superlinear by then
-            // (largest gap seen: 5e-9 relative).
-            let default = solve_dual(&phi, &returns, epsilon, 1e-8, &DualOptions::default()).unwrap();
-            let gap = default.objective - solution.objective;
-            assert!(
-                (-1e-12..1e-7 * solution.objective.abs().max(1.0)).contains(&gap),
-                "seed {seed}: gap {gap}"
-            );
-        }
-        assert!(off_bound >= 6, "only {off_bound} problems had eta off its bound");
-    }
-
-    /// BOLeRo's `test_baseline_overestimates`: R is exactly representable, the KL bound is
-    /// inactive, eta sits on its bound and the baseline covers every return.
-    #[test]
-    fn baseline_overestimates_when_eta_is_on_its_bound() {
-        let x = linspace(0.0, 1.0, 11);
-        let phi = polynomial_features(&x, 2);
-        let returns: Vec<f64> = x.iter().map(|x| 10.0 * (x - 0.3).powi(2)).collect();
-        let solution = solve_dual(&phi, &returns, 1.0, 1e-6, &DualOptions::default()).unwrap();
-        assert_eq!(solution.eta, 1e-6);
-        let baseline = &phi * &solution.v;
-        for (b, r) in baseline.iter().zip(&returns) {
-            assert!(b >= r, "baseline {b} < return {r}");
-        }
-        assert!(solution.weights.iter().all(|&d| d >= 0.0));
-        assert!((solution.weights.sum() - 1.0).abs() < 1e-7);
-    }
-
-    #[test]
-    fn kl_helper_matches_hand_values() {
-        assert_eq!(kl_to_uniform(&[0.25; 4]), 0.0);
-        assert!((kl_to_uniform(&[1.0, 0.0]) - 2f64.ln()).abs() < 1e-15);
-        assert!((kl_to_uniform(&[0.75, 0.25]) - (0.75 * 1.5f64.ln() + 0.25 * 0.5f64.ln())).abs() < 1e-15);
-    }
-
-    #[test]
-    fn bad_inputs_are_errors_naming_the_argument() {
-        let x = linspace(-1.0, 1.0, 11);
-        let phi = polynomial_features(&x, 1);
-        let returns = vec![0.0; 10];
-        let error = solve_dual(&phi, &returns, 0.5, 1e-8, &DualOptions::default()).unwrap_err();
-        assert_eq!(
-            error.to_string(),
-            "the number of phi rows (11) must equal the number of returns (10)"
-        );
-        let returns = vec![0.0; 11];
-        let message = |epsilon, eta_min, options: &DualOptions| {
-            solve_dual(&phi, &returns, epsilon, eta_min, options)
-                .unwrap_err()
-                .to_string()
-        };
-        let defaults = DualOptions::default();
-        assert_eq!(message(-1.0, 1e-8, &defaults), "epsilon must be finite and > 0, got -1");
-        assert!(message(0.5, 0.0, &defaults).starts_with("eta_min must be"));
-        let bad_pgtol = DualOptions {
-            pgtol: f64::NAN,
-            ..DualOptions::default()
-        };
-        assert!(message(0.5, 1e-8, &bad_pgtol).starts_with("pgtol must be"));
-        let no_memory = DualOptions {
-            memory: 0,
-            ..DualOptions::default()
-        };
-        assert!(message(0.5, 1e-8, &no_memory).starts_with("memory must be"));
-        let mut nan_returns = returns.clone();
-        nan_returns[3] = f64::NAN;
-        let error = solve_dual(&phi, &nan_returns, 0.5, 1e-8, &defaults).unwrap_err();
-        assert_eq!(error.to_string(), "returns must be finite, got NaN at index 3");
-        let empty = DMatrix::zeros(0, 2);
-        assert!(solve_dual(&empty, &[], 0.5, 1e-8, &defaults).is_err());
-    }
-}
+mod tests;

@@ -20,6 +20,18 @@ pub enum CRepsError {
         /// The rejected value.
         value: f64,
     },
+    /// A value outside its accepted range.
+    #[error("{name} must be within [{low:e}, {high:e}], got {value:e}")]
+    OutOfRange {
+        /// The field or argument.
+        name: &'static str,
+        /// The rejected value.
+        value: f64,
+        /// The smallest accepted value.
+        low: f64,
+        /// The largest accepted value.
+        high: f64,
+    },
     /// A count that must be at least 1.
     #[error("{name} must be >= 1, got 0")]
     Zero {
@@ -82,20 +94,15 @@ pub enum CRepsError {
     /// `solve_dual` without samples.
     #[error("solve_dual needs at least one sample, got phi with 0 rows")]
     NoSamples,
-    /// The dual is not finite at the start point `eta = max(1, eta_min), v = 1`.
-    #[error(
-        "the dual objective or its gradient is not finite at the start point (eta = max(1, eta_min), v = 1); the returns or features are too large"
-    )]
-    NonFiniteDual,
     /// A covariance that is not symmetric positive semi-definite.
     #[error("{name} must be symmetric positive semi-definite")]
     NotPositiveSemiDefinite {
         /// The matrix.
         name: &'static str,
     },
-    /// A singular weighted least-squares system.
-    #[error("the weighted least-squares matrix Phi^T D Phi + ridge I is not positive definite; use ridge > 0")]
-    SingularRegression,
+    /// A weighted fit the data makes impossible.
+    #[error("update rejected: {0}")]
+    Rejected(#[from] super::update::Rejection),
     /// A saved state that does not fit this learner (see [`CReps::restore`](super::CReps::restore)).
     #[error("C-REPS state: {0}")]
     State(String),

@@ -1,33 +1,70 @@
 //! Contextual relative entropy policy search (C-REPS; P Algorithm 2 and Appendix A), with the
-//! implementation choices of BOLeRo's `CREPSOptimizer` where the paper is silent.
+//! implementation choices of BOLeRo's `CREPSOptimizer` where the paper is silent, and a dual
+//! solved to its optimum in any reward units.
 //!
 //! The policy `N(theta | W^T phi(s), Sigma)` ([`LinearGaussianPolicy`]) starts at `W = 0` except
 //! for the constant feature's coefficients, which are `theta0` (so the initial mean is `theta0`
 //! in every context), and `Sigma = initial_sigma I`. Rollouts are [`record`](CReps::record)ed into
-//! a [`MemoryConfig`] memory; after every `update_every` recorded rollouts an update runs on the
-//! whole memory (so the first update sees `update_every` samples, as in BOLeRo):
+//! a [`MemoryConfig`] memory; after every `update_every` recorded rollouts an [`update`] runs on
+//! the whole memory (so the first update sees `update_every` samples, as in BOLeRo):
 //!
-//! 1. [`solve_dual`]: minimise the dual over `eta >= eta_min` and `v` (returns not normalised,
-//!    as in BOLeRo) and take `d = softmax((R - Phi v) / eta)`.
+//! 1. [`solve_dual`]: minimise the dual over `eta >= eta_min std(R)` and `v`, exactly (a Newton
+//!    method on standardised returns, see the module [`dual`]), and take
+//!    `d = softmax((R - Phi v) / eta)`. The update is invariant to `R -> a R + b`, a > 0.
 //! 2. [`LinearGaussianPolicy::fit`]: weighted maximum likelihood with ridge `lambda`.
 //!
-//! A failed update (non-finite dual, singular regression, non-finite or non-positive-definite
-//! covariance) is reported as [`UpdateOutcome::Rejected`] and leaves the policy unchanged.
+//! Every update returns an [`UpdateReport`]: eta, the achieved KL, the effective sample size,
+//! the dual's value and optimality, the solver's iterations and the resulting exploration. A
+//! failed update (a singular regression, a non-finite or non-positive-semi-definite covariance)
+//! is reported with its [`Rejection`] and leaves the policy unchanged.
+//!
+//! [`update`] runs one update on rollouts of your own, without a memory or a learner:
+//!
+//! ```
+//! use acps_learner::creps::{Batch, FeatureMap, LinearGaussianPolicy, UpdateSettings, update};
+//! use nalgebra::DMatrix;
+//! use rand::SeedableRng;
+//!
+//! // theta in R^2 should equal (s, -s); start at W = 0, Sigma = I.
+//! let mut policy = LinearGaussianPolicy::new(DMatrix::zeros(2, 2), DMatrix::identity(2, 2)).unwrap();
+//! let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+//! for _ in 0..30 {
+//!     let (mut contexts, mut thetas, mut returns) = (vec![], vec![], vec![]);
+//!     for i in 0..40 {
+//!         let s = i as f64 / 40.0;
+//!         let theta = policy.sample(&FeatureMap::Affine.apply(&[s]), &mut rng);
+//!         returns.push(-(theta[0] - s).powi(2) - (theta[1] + s).powi(2));
+//!         contexts.push(vec![s]);
+//!         thetas.push(theta.as_slice().to_vec());
+//!     }
+//!     let batch = Batch::from_contexts(&FeatureMap::Affine, &contexts, &thetas, &returns).unwrap();
+//!     let settings = UpdateSettings { epsilon: 1.0, ..Default::default() };
+//!     let (next, report) = update(&policy, &batch, &settings).unwrap();
+//!     assert!(report.rejected.is_none() && report.optimality <= 1e-10);
+//!     policy = next;
+//! }
+//! let mean = policy.mean(&FeatureMap::Affine.apply(&[0.5]));
+//! assert!((mean[0] - 0.5).abs() < 0.05 && (mean[1] + 0.5).abs() < 0.05);
+//! ```
 
-mod dual;
+pub mod dual;
 mod error;
 mod features;
 mod memory;
 mod policy;
 mod snapshot;
-mod solver;
+mod update;
 
-pub use dual::{DualOptions, DualSolution, feature_matching_residual, kl_to_uniform, solve_dual};
+pub use dual::{
+    DEFAULT_ETA_MIN, DualOptions, DualSolution, DualValue, ETA_MIN_RANGE, TOLERANCE_RANGE, effective_sample_size,
+    evaluate_dual, feature_matching_residual, kl_to_uniform, solve_dual,
+};
 pub use error::CRepsError;
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
 pub use snapshot::{PolicySnapshot, RestoredPolicy, SnapshotError};
+pub use update::{Batch, Rejection, UpdateReport, UpdateSettings, update};
 
 use nalgebra::{DMatrix, DVector};
 use rand::RngCore;
@@ -41,7 +78,8 @@ use memory::{Memory, Sample};
 pub struct CRepsConfig {
     /// Bound on the KL divergence between successive sample weightings, finite and > 0.
     pub epsilon: f64,
-    /// Lower bound of eta, finite and > 0 (P suggests 1e-6..1e-4; BOLeRo uses 1e-8).
+    /// Lower bound of eta relative to the standard deviation of the returns in the update,
+    /// within [`ETA_MIN_RANGE`] (P suggests 1e-6..1e-4 in reward units; BOLeRo 1e-8).
     pub eta_min: f64,
     /// Ridge lambda of the weighted least squares, finite and >= 0 (P and BOLeRo: 1e-4).
     pub ridge: f64,
@@ -56,12 +94,12 @@ pub struct CRepsConfig {
 }
 
 impl Default for CRepsConfig {
-    /// BOLeRo's `CREPSOptimizer` defaults: epsilon 2, eta_min 1e-8, ridge 1e-4, an update every
-    /// 25 rollouts on a sliding window of 100, affine features, Sigma_0 = I.
+    /// BOLeRo's `CREPSOptimizer` defaults (epsilon 2, ridge 1e-4, an update every 25 rollouts
+    /// on a sliding window of 100, affine features, Sigma_0 = I) and [`DEFAULT_ETA_MIN`].
     fn default() -> Self {
         Self {
             epsilon: 2.0,
-            eta_min: 1e-8,
+            eta_min: DEFAULT_ETA_MIN,
             ridge: 1e-4,
             update_every: 25,
             memory: MemoryConfig::SlidingWindow { capacity: 100 },
@@ -69,36 +107,6 @@ impl Default for CRepsConfig {
             initial_sigma: 1.0,
         }
     }
-}
-
-/// What an update did.
-#[derive(Clone, Debug, PartialEq)]
-pub struct UpdateReport {
-    /// The number of samples in memory that the update ran on.
-    pub samples: usize,
-    /// The result.
-    pub outcome: UpdateOutcome,
-}
-
-/// The result of an update.
-#[derive(Clone, Debug, PartialEq)]
-pub enum UpdateOutcome {
-    /// The policy was replaced.
-    Updated {
-        /// The dual's temperature.
-        eta: f64,
-        /// `KL(d || uniform)` of the sample weights (= epsilon when eta is off its bound).
-        kl: f64,
-        /// Dual solver iterations.
-        iterations: usize,
-        /// Whether eta ended exactly on `eta_min` (the KL bound was then not active).
-        eta_at_bound: bool,
-    },
-    /// The policy was kept; `reason` says why.
-    Rejected {
-        /// The failed step's error message.
-        reason: String,
-    },
 }
 
 /// Everything of a [`CReps`] that changes while it learns (for checkpoints): the policy's W,
@@ -131,7 +139,7 @@ impl CReps {
     /// and every argument is validated.
     pub fn new(config: CRepsConfig, context_dim: usize, theta0: &[f64], n_tasks: usize) -> Result<Self, CRepsError> {
         check_positive("epsilon", config.epsilon)?;
-        check_positive("eta_min", config.eta_min)?;
+        dual::check_eta_min(config.eta_min)?;
         check_non_negative("ridge", config.ridge)?;
         check_at_least_one("update_every", config.update_every)?;
         match config.memory {
@@ -310,42 +318,29 @@ impl CReps {
         self.config.features.apply(context)
     }
 
+    /// The settings of its updates.
+    pub fn update_settings(&self) -> UpdateSettings {
+        UpdateSettings {
+            epsilon: self.config.epsilon,
+            eta_min: self.config.eta_min,
+            ridge: self.config.ridge,
+            dual: DualOptions::default(),
+        }
+    }
+
     /// One C-REPS update on everything in memory.
     fn update(&mut self) -> UpdateReport {
         let samples: Vec<&Sample> = self.memory.samples().collect();
-        let n = samples.len();
         let features = stack_rows(samples.iter().map(|s| &s.features), self.policy.n_features());
         let thetas = stack_rows(samples.iter().map(|s| &s.theta), self.policy.n_params());
         let returns: Vec<f64> = samples.iter().map(|s| s.reward).collect();
-        let config = &self.config;
-        let result = solve_dual(
-            &features,
-            &returns,
-            config.epsilon,
-            config.eta_min,
-            &DualOptions::default(),
-        )
-        .and_then(|dual| {
-            let policy = self
-                .policy
-                .fit(&features, &thetas, dual.weights.as_slice(), config.ridge)?;
-            Ok((dual, policy))
-        });
-        let outcome = match result {
-            Ok((dual, policy)) => {
-                self.policy = policy;
-                UpdateOutcome::Updated {
-                    eta: dual.eta,
-                    kl: dual.kl,
-                    iterations: dual.iterations,
-                    eta_at_bound: dual.eta <= config.eta_min,
-                }
-            }
-            Err(error) => UpdateOutcome::Rejected {
-                reason: error.to_string(),
-            },
-        };
-        UpdateReport { samples: n, outcome }
+        // The memory holds finite samples of this policy's widths and the settings were checked
+        // by `new`, so the batch and the update cannot fail.
+        let batch = Batch::new(features, thetas, returns).expect("the memory holds finite samples");
+        let (policy, report) = update(&self.policy, &batch, &self.update_settings())
+            .expect("the memory fits the policy and the settings were checked");
+        self.policy = policy;
+        report
     }
 }
 

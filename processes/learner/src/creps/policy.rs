@@ -6,6 +6,7 @@ use rand::RngCore;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::error::{CRepsError, check_finite, check_non_negative};
+use super::update::Rejection;
 
 /// A Gaussian over parameter vectors whose mean is linear in the context features.
 ///
@@ -114,6 +115,12 @@ impl LinearGaussianPolicy {
         self.mean(features) + &self.sampling_factor * z
     }
 
+    /// `ln det Sigma`, from the sampling factor `V sqrt(Lambda)`, whose column norms are the
+    /// square roots of the eigenvalues; -inf when Sigma is singular.
+    pub fn log_det_covariance(&self) -> f64 {
+        self.sampling_factor.column_iter().map(|c| c.norm_squared().ln()).sum()
+    }
+
     /// Weighted maximum likelihood on samples (rows of `features` and `thetas`) with weights
     /// `weights` (>= 0; C-REPS passes the softmax weights, which sum to 1), following BOLeRo:
     ///
@@ -126,8 +133,8 @@ impl LinearGaussianPolicy {
     ///   `e_i = theta_i - W_old^T phi_i` of the **old** mean (P Alg. 2 line 17 does not say which
     ///   W it means; BOLeRo uses the old one, before the mean update).
     ///
-    /// Returns the new policy, or an error (and no change) if the weighted least-squares matrix
-    /// or the new covariance is not positive definite, or anything is non-finite.
+    /// Returns the new policy. Inputs of the wrong shape or with non-finite or negative entries
+    /// are errors; a fit the data makes impossible is [`CRepsError::Rejected`] with the reason.
     pub fn fit(
         &self,
         features: &DMatrix<f64>,
@@ -164,7 +171,19 @@ impl LinearGaussianPolicy {
         if let Some(&value) = weights.iter().find(|&&w| w < 0.0) {
             return Err(CRepsError::Negative { name: "weights", value });
         }
+        check_finite("features", features.as_slice())?;
+        check_finite("thetas", thetas.as_slice())?;
+        Ok(self.fit_weighted(features, thetas, weights, ridge)?)
+    }
 
+    /// [`fit`](Self::fit) on inputs already checked.
+    pub(crate) fn fit_weighted(
+        &self,
+        features: &DMatrix<f64>,
+        thetas: &DMatrix<f64>,
+        weights: &[f64],
+        ridge: f64,
+    ) -> Result<Self, Rejection> {
         let d = DVector::from_iterator(
             weights.len(),
             weights.iter().map(|&w| if w == 0.0 { f64::EPSILON } else { w }),
@@ -174,6 +193,9 @@ impl LinearGaussianPolicy {
         let residuals = thetas - features * &self.weights;
         let weighted_residuals = scale_rows(&residuals, &d);
         let covariance = residuals.tr_mul(&weighted_residuals) * scale;
+        if !covariance.iter().all(|c| c.is_finite()) {
+            return Err(Rejection::CovarianceNotFinite);
+        }
 
         let mut normal_matrix = features.tr_mul(&scale_rows(features, &d));
         for i in 0..normal_matrix.nrows() {
@@ -181,9 +203,12 @@ impl LinearGaussianPolicy {
         }
         let right_hand_side = features.tr_mul(&scale_rows(thetas, &d));
         let weights = Cholesky::new(normal_matrix)
-            .ok_or(CRepsError::SingularRegression)?
+            .ok_or(Rejection::SingularRegression)?
             .solve(&right_hand_side);
-        Self::new(weights, covariance)
+        if !weights.iter().all(|w| w.is_finite()) {
+            return Err(Rejection::MeanNotFinite);
+        }
+        Self::new(weights, covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)
     }
 }
 
@@ -322,7 +347,7 @@ mod tests {
         let thetas = DMatrix::from_element(5, 1, 1e200);
         // Squared residuals of 1e200 overflow.
         let error = policy(2, 1).fit(&phi, &thetas, &[0.2; 5], 1e-4).unwrap_err();
-        assert!(error.to_string().starts_with("covariance must be finite"), "{error}");
+        assert_eq!(error, CRepsError::Rejected(Rejection::CovarianceNotFinite));
         // One sample: sum d = sum d^2, the normaliser divides by zero.
         let one = policy(2, 1).fit(
             &phi.rows(0, 1).into_owned(),
@@ -336,7 +361,7 @@ mod tests {
         let error = policy(2, 1)
             .fit(&same, &DMatrix::zeros(5, 1), &[0.2; 5], 0.0)
             .unwrap_err();
-        assert_eq!(error, CRepsError::SingularRegression);
+        assert_eq!(error, CRepsError::Rejected(Rejection::SingularRegression));
         let error = policy(2, 1)
             .fit(&phi, &DMatrix::zeros(4, 1), &[0.2; 5], 0.0)
             .unwrap_err();

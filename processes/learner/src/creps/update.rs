@@ -1,0 +1,285 @@
+//! One C-REPS update on given rollouts, and the report of what it did.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use super::dual::{DualOptions, effective_sample_size, solve_dual};
+use super::error::{CRepsError, check_finite, check_non_negative, check_positive};
+use super::{FeatureMap, LinearGaussianPolicy};
+
+/// The settings of one update.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UpdateSettings {
+    /// Bound on `KL(d || uniform)` of the sample weights, finite and > 0.
+    pub epsilon: f64,
+    /// Lower bound of eta relative to the standard deviation of the returns, within
+    /// [`ETA_MIN_RANGE`](super::ETA_MIN_RANGE).
+    pub eta_min: f64,
+    /// Ridge lambda of the weighted least squares, finite and >= 0.
+    pub ridge: f64,
+    /// How exactly the dual is solved.
+    pub dual: DualOptions,
+}
+
+impl Default for UpdateSettings {
+    /// BOLeRo's `CREPSOptimizer`: epsilon 2, ridge 1e-4; and [`DEFAULT_ETA_MIN`](super::DEFAULT_ETA_MIN).
+    fn default() -> Self {
+        Self {
+            epsilon: 2.0,
+            eta_min: super::DEFAULT_ETA_MIN,
+            ridge: 1e-4,
+            dual: DualOptions::default(),
+        }
+    }
+}
+
+/// Why an update was rejected (the old policy is kept).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
+pub enum Rejection {
+    /// Fewer than two samples: the covariance estimate divides by `1 - sum d^2 = 0`.
+    #[error("fewer than 2 samples, too few to estimate a covariance")]
+    TooFewSamples,
+    /// The dual solver reached its iteration cap before its tolerance (the report's
+    /// `optimality` says how far it got).
+    #[error("the dual solver reached its iteration cap before the optimum")]
+    DualNotSolved,
+    /// `Phi^T D Phi + ridge I` is not positive definite (ridge 0 and too few distinct contexts).
+    #[error("the weighted least-squares matrix Phi^T D Phi + ridge I is not positive definite; use ridge > 0")]
+    SingularRegression,
+    /// The new mean coefficients W overflowed.
+    #[error("the new mean coefficients W are not finite")]
+    MeanNotFinite,
+    /// The new covariance overflowed.
+    #[error("the new covariance is not finite")]
+    CovarianceNotFinite,
+    /// The new covariance has a clearly negative eigenvalue.
+    #[error("the new covariance is not positive semi-definite")]
+    CovarianceNotPositiveSemiDefinite,
+}
+
+impl Rejection {
+    /// A short kebab-case name, as in `updates.csv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Rejection::TooFewSamples => "too-few-samples",
+            Rejection::DualNotSolved => "dual-not-solved",
+            Rejection::SingularRegression => "singular-regression",
+            Rejection::MeanNotFinite => "mean-not-finite",
+            Rejection::CovarianceNotFinite => "covariance-not-finite",
+            Rejection::CovarianceNotPositiveSemiDefinite => "covariance-not-positive-semi-definite",
+        }
+    }
+}
+
+/// What one update did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UpdateReport {
+    /// The number of samples the update ran on.
+    pub samples: usize,
+    /// The KL bound.
+    pub epsilon: f64,
+    /// The dual's temperature, in the returns' units (0 when all returns are equal).
+    pub eta: f64,
+    /// Whether eta sits on its lower bound, so the KL bound was slack.
+    pub eta_at_bound: bool,
+    /// `KL(d || uniform)` of the sample weights (= epsilon when eta is off its bound).
+    pub kl: f64,
+    /// The effective sample size `1 / sum d_i^2` of the weights (N when uniform).
+    pub ess: f64,
+    /// The dual's value at its optimum, in the returns' units.
+    pub dual: f64,
+    /// The inf-norm of the standardised dual's projected gradient where the solver stopped.
+    pub optimality: f64,
+    /// Newton iterations of the dual solve.
+    pub iterations: usize,
+    /// `ln det Sigma` of the policy in force after the update (the new one, or the old one when
+    /// rejected); -inf when Sigma is singular.
+    pub logdet_sigma: f64,
+    /// `trace Sigma` of that policy: the total exploration variance.
+    pub trace_sigma: f64,
+    /// Why the update was rejected; `None` when the new policy was applied.
+    pub rejected: Option<Rejection>,
+}
+
+/// Rollouts to update on, one row each: features `phi(s_i)`, parameters `theta_i`, returns
+/// `R_i`, all finite.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Batch {
+    features: DMatrix<f64>,
+    thetas: DMatrix<f64>,
+    returns: Vec<f64>,
+}
+
+impl Batch {
+    /// A batch from feature rows (N x n_phi), parameter rows (N x n_theta) and N returns.
+    pub fn new(features: DMatrix<f64>, thetas: DMatrix<f64>, returns: Vec<f64>) -> Result<Self, CRepsError> {
+        let rows = [
+            ("the number of feature rows", features.nrows()),
+            ("the number of theta rows", thetas.nrows()),
+        ];
+        for (name, len) in rows {
+            if len != returns.len() {
+                return Err(CRepsError::LengthMismatch {
+                    first: name,
+                    first_len: len,
+                    second: "the number of returns",
+                    second_len: returns.len(),
+                });
+            }
+        }
+        if returns.is_empty() {
+            return Err(CRepsError::NoSamples);
+        }
+        check_finite("features", features.as_slice())?;
+        check_finite("thetas", thetas.as_slice())?;
+        check_finite("returns", &returns)?;
+        Ok(Self {
+            features,
+            thetas,
+            returns,
+        })
+    }
+
+    /// A batch from contexts, mapped through `features`, with their parameters and returns.
+    pub fn from_contexts(
+        features: &FeatureMap,
+        contexts: &[Vec<f64>],
+        thetas: &[Vec<f64>],
+        returns: &[f64],
+    ) -> Result<Self, CRepsError> {
+        let context_dim = contexts.first().map_or(0, Vec::len);
+        let n_theta = thetas.first().map_or(0, Vec::len);
+        check_rows("context", contexts, context_dim)?;
+        check_rows("theta", thetas, n_theta)?;
+        if contexts.len() != thetas.len() {
+            return Err(CRepsError::LengthMismatch {
+                first: "the number of contexts",
+                first_len: contexts.len(),
+                second: "the number of thetas",
+                second_len: thetas.len(),
+            });
+        }
+        for context in contexts {
+            check_finite("contexts", context)?;
+        }
+        features.validate(context_dim, &[])?;
+        let n_phi = features.dim(context_dim);
+        let mut phi = DMatrix::zeros(contexts.len(), n_phi);
+        for (i, context) in contexts.iter().enumerate() {
+            phi.row_mut(i).tr_copy_from(&features.apply(context));
+        }
+        let thetas = DMatrix::from_fn(thetas.len(), n_theta, |i, j| thetas[i][j]);
+        Self::new(phi, thetas, returns.to_vec())
+    }
+
+    /// N.
+    pub fn len(&self) -> usize {
+        self.returns.len()
+    }
+
+    /// Always false: a batch has at least one rollout.
+    pub fn is_empty(&self) -> bool {
+        self.returns.is_empty()
+    }
+}
+
+fn check_rows(name: &'static str, rows: &[Vec<f64>], width: usize) -> Result<(), CRepsError> {
+    match rows.iter().find(|row| row.len() != width) {
+        Some(row) => Err(CRepsError::LengthMismatch {
+            first: name,
+            first_len: row.len(),
+            second: "the length of the first one",
+            second_len: width,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// One C-REPS update of `policy` on `batch` (P Alg. 2 lines 7-17): solve the dual, weight the
+/// rollouts, fit the new policy by weighted maximum likelihood. Returns the policy to continue
+/// with (the new one, or `policy` itself when the update is rejected) and the report.
+///
+/// Errors only for settings out of range or a batch whose widths do not fit the policy; what the
+/// data makes impossible (a singular regression, an overflowing covariance) is a rejection in
+/// the report.
+///
+/// ```
+/// use acps_learner::creps::{Batch, FeatureMap, LinearGaussianPolicy, UpdateSettings, update};
+/// use nalgebra::DMatrix;
+///
+/// // A 1-D policy theta ~ N(w s + b, 1), W = 0, and five rollouts in which theta = s did best.
+/// let policy = LinearGaussianPolicy::new(DMatrix::zeros(2, 1), DMatrix::identity(1, 1)).unwrap();
+/// let contexts: Vec<Vec<f64>> = vec![vec![0.0], vec![0.5], vec![1.0], vec![0.5], vec![0.0]];
+/// let thetas: Vec<Vec<f64>> = vec![vec![0.1], vec![0.4], vec![0.2], vec![-0.9], vec![1.0]];
+/// let returns: Vec<f64> = contexts.iter().zip(&thetas).map(|(s, t)| -(t[0] - s[0]).powi(2)).collect();
+/// let batch = Batch::from_contexts(&FeatureMap::Affine, &contexts, &thetas, &returns).unwrap();
+/// let (policy, report) = update(&policy, &batch, &UpdateSettings { epsilon: 0.5, ..Default::default() }).unwrap();
+/// assert_eq!(report.rejected, None);
+/// assert!((report.kl - 0.5).abs() < 1e-8);
+/// assert!(report.ess < 5.0 && policy.covariance()[(0, 0)] < 1.0);
+/// ```
+pub fn update(
+    policy: &LinearGaussianPolicy,
+    batch: &Batch,
+    settings: &UpdateSettings,
+) -> Result<(LinearGaussianPolicy, UpdateReport), CRepsError> {
+    check_positive("epsilon", settings.epsilon)?;
+    check_non_negative("ridge", settings.ridge)?;
+    let widths = [
+        (
+            "the number of feature columns",
+            batch.features.ncols(),
+            "the policy's n_phi",
+            policy.n_features(),
+        ),
+        (
+            "the number of theta columns",
+            batch.thetas.ncols(),
+            "the policy's n_theta",
+            policy.n_params(),
+        ),
+    ];
+    for (first, first_len, second, second_len) in widths {
+        if first_len != second_len {
+            return Err(CRepsError::LengthMismatch {
+                first,
+                first_len,
+                second,
+                second_len,
+            });
+        }
+    }
+    let dual = solve_dual(
+        &batch.features,
+        &batch.returns,
+        settings.epsilon,
+        settings.eta_min,
+        &settings.dual,
+    )?;
+    let fitted = if batch.len() < 2 {
+        Err(Rejection::TooFewSamples)
+    } else if !dual.converged {
+        Err(Rejection::DualNotSolved)
+    } else {
+        policy.fit_weighted(&batch.features, &batch.thetas, dual.weights.as_slice(), settings.ridge)
+    };
+    let (next, rejected) = match fitted {
+        Ok(next) => (next, None),
+        Err(rejection) => (policy.clone(), Some(rejection)),
+    };
+    let report = UpdateReport {
+        samples: batch.len(),
+        epsilon: settings.epsilon,
+        eta: dual.eta,
+        eta_at_bound: dual.eta_at_bound,
+        kl: dual.kl,
+        ess: effective_sample_size(dual.weights.as_slice()),
+        dual: dual.objective,
+        optimality: dual.optimality,
+        iterations: dual.iterations,
+        logdet_sigma: next.log_det_covariance(),
+        trace_sigma: next.covariance().trace(),
+        rejected,
+    };
+    Ok((next, report))
+}
