@@ -10,7 +10,8 @@ use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress, ServeOptions};
 use acps_learner::{
-    Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, run_in_process,
+    Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
+    run_in_process,
 };
 use acps_shared::ipc::RunName;
 use acps_shared::wire::EnvironmentSpec;
@@ -84,6 +85,8 @@ pub struct RunResult {
     pub scores: Vec<Option<f64>>,
     /// The consumed training episodes.
     pub episodes: Vec<Episode>,
+    /// Every C-REPS update with its report.
+    pub updates: Vec<UpdateRecord>,
     /// Counters.
     pub stats: LearnerStats,
     /// The instance's optimal score.
@@ -236,6 +239,7 @@ impl Job {
             eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
             scores: learner.evaluations().iter().map(|e| e.score).collect(),
             episodes: learner.episodes().to_vec(),
+            updates: learner.updates().to_vec(),
             stats: learner.stats().clone(),
             optimal_score: self.optimal_score,
             final_outcomes: learner

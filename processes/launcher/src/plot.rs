@@ -10,6 +10,9 @@
 //!   episodes (Fig. 5).
 //! - `selections-time`: per method, the share of selections of every training context in bins
 //!   of episodes, averaged over runs (Fig. 3 and 5 over the whole run).
+//! - `updates`: per method, the exploration (trace Sigma, log scale) and the effective sample
+//!   size of every C-REPS update, every run a thin line and the median a thick one, so that the
+//!   collapse of one run in twenty shows.
 //! - for the dartboard, `board` (Fig. 10), and for the throwing problems `throw`, a side view of
 //!   the initial throw.
 //! - `bench`, from `acps bench`: rollouts/s of every mode per environment, ratio above each bar.
@@ -82,6 +85,9 @@ fn save(picture: &impl Picture, dir: &Path, stem: &str) -> PlotResult {
 /// Write every picture that fits the summary into `dir`.
 pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
     save(&LearningCurves(summary), dir, "curves")?;
+    if let Some(picture) = Exploration::new(summary) {
+        save(&picture, dir, "updates")?;
+    }
     if let Some(picture) = SelectionsOverTime::new(summary) {
         save(&picture, dir, "selections-time")?;
     }
@@ -296,6 +302,139 @@ fn short(metric: &str) -> String {
         .chars()
         .take(60)
         .collect()
+}
+
+/// Per method, every run's updates: (episode, trace Sigma, ESS).
+type UpdateTraces = Vec<(String, Vec<Vec<(f64, f64, f64)>>)>;
+
+/// The exploration and the effective sample size of every C-REPS update: a row per method, every
+/// run a thin line and the median over runs (update by update) a thick one.
+struct Exploration {
+    caption: String,
+    methods: UpdateTraces,
+}
+
+impl Exploration {
+    const ROW_HEIGHT: u32 = 190;
+
+    /// `None` when no run made an update (problems without a policy).
+    fn new(summary: &Summary) -> Option<Self> {
+        let methods: UpdateTraces = summary
+            .run_results
+            .iter()
+            .map(|(name, runs)| {
+                let traces = runs
+                    .iter()
+                    .map(|run| {
+                        run.updates
+                            .iter()
+                            .map(|u| (u.episode as f64, u.report.trace_sigma, u.report.ess))
+                            .collect()
+                    })
+                    .collect();
+                (name.clone(), traces)
+            })
+            .collect();
+        let any = methods.iter().flat_map(|(_, runs)| runs).any(|run| !run.is_empty());
+        any.then(|| Self {
+            caption: format!(
+                "{}: every C-REPS update of {} runs (thin) and their median (thick)",
+                summary.experiment, summary.runs
+            ),
+            methods,
+        })
+    }
+
+    /// The median over runs of the k-th update's value, at the k-th update's mean episode.
+    fn median(runs: &[Vec<(f64, f64, f64)>], value: fn(&(f64, f64, f64)) -> f64) -> Vec<(f64, f64)> {
+        let updates = runs.iter().map(Vec::len).max().unwrap_or(0);
+        (0..updates)
+            .map(|k| {
+                let at: Vec<_> = runs.iter().filter_map(|run| run.get(k)).collect();
+                let mut values: Vec<f64> = at.iter().map(|u| value(u)).collect();
+                values.sort_by(f64::total_cmp);
+                let episode = at.iter().map(|u| u.0).sum::<f64>() / at.len() as f64;
+                (episode, values[values.len() / 2])
+            })
+            .collect()
+    }
+}
+
+impl Picture for Exploration {
+    fn size(&self) -> (u32, u32) {
+        (1100, 60 + Self::ROW_HEIGHT * self.methods.len() as u32)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let root = root.titled(&self.caption, ("sans-serif", 20))?;
+        let all = || self.methods.iter().flat_map(|(_, runs)| runs.iter().flatten());
+        let x_max = all().map(|u| u.0).fold(1.0, f64::max);
+        // A Sigma collapsed to exactly 0 still needs a positive value on the log axis.
+        let trace = |u: &(f64, f64, f64)| u.1.max(f64::MIN_POSITIVE);
+        let trace_range = all()
+            .map(trace)
+            .fold((f64::MAX, f64::MIN), |(lo, hi), t| (lo.min(t), hi.max(t)));
+        let ess_max = all().map(|u| u.2).fold(1.0, f64::max);
+        let panels = root.split_evenly((self.methods.len(), 2));
+        for (row, (name, runs)) in self.methods.iter().enumerate() {
+            let color = COLORS[row % COLORS.len()];
+            let last = row + 1 == self.methods.len();
+            let mut left = panel(&panels[2 * row], last);
+            let mut chart =
+                left.build_cartesian_2d(0.0..x_max, (trace_range.0 / 2.0..trace_range.1 * 2.0).log_scale())?;
+            let mut mesh = chart.configure_mesh();
+            mesh.y_desc("trace Sigma")
+                .x_desc(if last { "training episodes" } else { "" })
+                .x_label_formatter(&|x| format!("{x:.0}"))
+                .y_label_formatter(&|y| format!("{y:.0e}"))
+                .y_labels(5);
+            mesh.draw()?;
+            for run in runs {
+                chart.draw_series(LineSeries::new(run.iter().map(|u| (u.0, trace(u))), color.mix(0.25)))?;
+            }
+            chart.draw_series(LineSeries::new(Self::median(runs, trace), color.stroke_width(2)))?;
+            label(&panels[2 * row], name)?;
+
+            let mut right = panel(&panels[2 * row + 1], last);
+            let mut chart = right.build_cartesian_2d(0.0..x_max, 0.0..ess_max * 1.05)?;
+            let mut mesh = chart.configure_mesh();
+            mesh.y_desc("ESS")
+                .x_desc(if last { "training episodes" } else { "" })
+                .x_label_formatter(&|x| format!("{x:.0}"))
+                .y_label_formatter(&|y| format!("{y:.0}"))
+                .y_labels(5);
+            mesh.draw()?;
+            for run in runs {
+                chart.draw_series(LineSeries::new(run.iter().map(|u| (u.0, u.2)), color.mix(0.25)))?;
+            }
+            chart.draw_series(LineSeries::new(Self::median(runs, |u| u.2), color.stroke_width(2)))?;
+        }
+        Ok(())
+    }
+}
+
+/// A chart builder for one small panel; only the bottom row has room for the x axis' name.
+fn panel<'a, 'b, DB: DrawingBackend>(area: &'a DrawingArea<DB, Shift>, last: bool) -> ChartBuilder<'a, 'b, DB> {
+    let mut builder = ChartBuilder::on(area);
+    builder
+        .margin_left(8)
+        .margin_right(16)
+        .margin_top(22)
+        .x_label_area_size(if last { 40 } else { 22 })
+        .y_label_area_size(70);
+    builder
+}
+
+/// The method's name in the top left corner of its row.
+fn label<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, name: &str) -> PlotResult
+where
+    DB::ErrorType: 'static,
+{
+    area.draw_text(name, &("sans-serif", 16).into_font().color(&BLACK), (80, 2))?;
+    Ok(())
 }
 
 /// Per method, the share of selections of every training context in bins of episodes,

@@ -5,13 +5,18 @@
 //! - `selections.csv`: `method,episode,arm,s0,..,reward`, one row per training episode of run 0
 //!   of every method (arm empty for contexts drawn from the continuous space, reward empty for a
 //!   failed rollout);
+//! - `updates.csv`: `method,run,update,episode,samples,eta,eta_at_bound,kl,epsilon,ess,dual,
+//!   optimality,iterations,logdet_sigma,trace_sigma,rejected`, one row per C-REPS update of every
+//!   run (the fields of [`UpdateReport`](acps_learner::creps::UpdateReport); `episode` is the
+//!   training episodes consumed when it ran, `rejected` the reason's name or empty when the update
+//!   was applied; only the header for problems without a policy);
 //! - `policies/METHOD-runR.json`: the final C-REPS policy of every run with what `acps evaluate`
 //!   needs to rebuild its problem and environment.
 //!
 //! Empty CSV fields mean "no value" (an evaluation whose rollouts all failed).
 
 use crate::experiment::{RunResult, Summary};
-use acps_learner::creps::{PolicySnapshot, RestoredPolicy};
+use acps_learner::creps::{PolicySnapshot, Rejection, RestoredPolicy};
 use acps_shared::Problem;
 use acps_shared::wire::EnvironmentSpec;
 use anyhow::{Context, bail};
@@ -118,6 +123,7 @@ pub fn write(summary: &Summary, dir: &Path) -> anyhow::Result<()> {
     file("curves.csv", curves_csv(summary))?;
     file("runs.csv", runs_csv(summary))?;
     file("selections.csv", selections_csv(summary))?;
+    file("updates.csv", updates_csv(summary))?;
     write_policies(summary, dir)
 }
 
@@ -164,6 +170,39 @@ fn selections_csv(summary: &Summary) -> String {
             }
             let reward = Some(e.reward).filter(|r| r.is_finite());
             writeln!(csv, ",{}", field(reward)).expect("writing to a string");
+        }
+    }
+    csv
+}
+
+/// The header of `updates.csv`.
+pub const UPDATES_HEADER: &str = "method,run,update,episode,samples,eta,eta_at_bound,kl,epsilon,ess,dual,optimality,iterations,logdet_sigma,trace_sigma,rejected";
+
+fn updates_csv(summary: &Summary) -> String {
+    let mut csv = format!("{UPDATES_HEADER}\n");
+    for (method, runs) in &summary.run_results {
+        for (index, run) in runs.iter().enumerate() {
+            for (update, record) in run.updates.iter().enumerate() {
+                let r = &record.report;
+                writeln!(
+                    csv,
+                    "{method},{index},{update},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    record.episode,
+                    r.samples,
+                    r.eta,
+                    r.eta_at_bound,
+                    r.kl,
+                    r.epsilon,
+                    r.ess,
+                    r.dual,
+                    r.optimality,
+                    r.iterations,
+                    r.logdet_sigma,
+                    r.trace_sigma,
+                    r.rejected.map_or("", Rejection::name)
+                )
+                .expect("writing to a string");
+            }
         }
     }
     csv

@@ -71,6 +71,12 @@ fn toy_panel_writes_the_summary_contract() {
         assert!(m["final_sem"].as_f64().unwrap() >= 0.0);
         assert_eq!(m["selections_run0"].as_array().unwrap().len(), 120);
     }
+    // The Section 4 model has no policy: no C-REPS update, so no rows and no picture of them.
+    assert_eq!(
+        std::fs::read_to_string(dir.join("updates.csv")).unwrap(),
+        format!("{}\n", acps::records::UPDATES_HEADER)
+    );
+    assert!(!dir.join("updates.png").exists());
     for picture in ["curves.svg", "selections.svg"] {
         let svg = std::fs::read_to_string(dir.join(picture)).unwrap();
         assert!(

@@ -113,6 +113,11 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
                 reference,
                 "P = {p}, W = {workers}"
             );
+            assert_eq!(
+                std::fs::read(out.join("updates.csv")).unwrap(),
+                std::fs::read(dir.join("in-process").join("updates.csv")).unwrap(),
+                "P = {p}, W = {workers}"
+            );
             // The fleet records the same experiment file: how a run is executed is not part of it.
             assert_eq!(
                 std::fs::read(out.join("config.toml")).unwrap(),
@@ -550,6 +555,11 @@ fn a_killed_fleet_learner_resumes_from_its_checkpoints_to_the_in_process_result(
             .unwrap(),
     );
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    // The update reports were saved in the checkpoints: the table is the uninterrupted run's.
+    assert_eq!(
+        std::fs::read(out.join("updates.csv")).unwrap(),
+        std::fs::read(dir.join("in-process").join("updates.csv")).unwrap()
+    );
     assert_clean(&run);
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -112,12 +112,54 @@ fn the_csv_tables_repeat_summary_json() {
         assert_eq!(number(&row[4]), contexts[arm][1].as_f64().unwrap());
         assert!(number(&row[5]) < 0.0, "grid rewards are -||s - b||^2");
     }
+
+    // An update every 50 rollouts, each solved to the optimum: KL = epsilon off the bound.
+    let updates = csv(&dir.join("updates.csv"), acps::records::UPDATES_HEADER);
+    assert_eq!(
+        updates.len() as u64,
+        m["updates"].as_u64().unwrap() + m["rejected_updates"].as_u64().unwrap()
+    );
+    assert_eq!(updates.len(), 4);
+    let epsilon = s["settings"]["creps"]["epsilon"].as_f64().unwrap();
+    for (k, row) in updates.iter().enumerate() {
+        let column = |name: &str| acps::records::UPDATES_HEADER.split(',').position(|h| h == name);
+        let field = |name: &str| row[column(name).unwrap()].as_str();
+        assert_eq!((field("method"), field("run")), ("monotonic-progress", "0"));
+        assert_eq!(number(field("update")), k as f64);
+        assert_eq!(number(field("episode")), 50.0 * (k + 1) as f64);
+        assert_eq!(number(field("epsilon")), epsilon);
+        assert_eq!(field("rejected"), "", "update {k} was applied");
+        let samples = number(field("samples"));
+        assert!(samples >= 25.0 && samples <= 50.0 * (k + 1) as f64, "{row:?}");
+        assert!(
+            number(field("optimality")) <= 1e-10 && number(field("iterations")) >= 1.0,
+            "{row:?}"
+        );
+        let kl = number(field("kl"));
+        if field("eta_at_bound") == "false" {
+            assert!((kl - epsilon).abs() < 1e-8, "{row:?}");
+        } else {
+            assert!(kl <= epsilon, "{row:?}");
+        }
+        let ess = number(field("ess"));
+        assert!(ess >= 1.0 && ess <= samples, "{row:?}");
+        assert!(
+            number(field("eta")) > 0.0 && number(field("trace_sigma")) > 0.0,
+            "{row:?}"
+        );
+        // 21 parameters: the mean of the eigenvalues bounds their geometric mean (AM-GM).
+        let (logdet, trace) = (number(field("logdet_sigma")), number(field("trace_sigma")));
+        assert!(
+            logdet.is_finite() && logdet <= 21.0 * (trace / 21.0).ln() + 1e-9,
+            "{row:?}"
+        );
+    }
 }
 
 #[test]
 fn every_picture_is_written_as_svg_and_png() {
     let dir = grid();
-    for stem in ["curves", "selections", "selections-time", "throw"] {
+    for stem in ["curves", "selections", "selections-time", "throw", "updates"] {
         let png = std::fs::read(dir.join(format!("{stem}.png"))).unwrap();
         assert!(png.starts_with(b"\x89PNG\r\n\x1a\n"), "{stem}.png");
         assert!(png.len() > 5_000, "{stem}.png has only {} bytes", png.len());
