@@ -414,7 +414,6 @@ impl Standardised {
         let mut steps = 0;
         let (eta, u) = self.start(eta_min);
         let mut current = self.evaluate(eta, u, &mut scratch);
-        let mut hessian = scratch.hessian(&self.basis, eta);
         loop {
             let optimality = current.optimality(eta_min);
             if optimality <= attainable(options.tolerance, current.eta) || steps >= options.max_iterations {
@@ -428,6 +427,8 @@ impl Standardised {
                 };
             }
             steps += 1;
+            // The scratch holds the evaluation of `current`: the start, or the step accepted last.
+            let hessian = scratch.hessian(&self.basis, current.eta);
             let newton = Step::new(&current, &hessian, eta_min);
             // Should the Newton step find no decrease, steepest descent in u (log-weight
             // changes of the gradient's size) is tried before the point counts as optimal.
@@ -452,7 +453,6 @@ impl Standardised {
                 };
             };
             current = next;
-            hessian = scratch.hessian(&self.basis, current.eta);
         }
     }
 
