@@ -1,9 +1,10 @@
 //! The run directory's tables, policies and pictures, and `acps evaluate` replaying a saved
 //! policy.
 
+use std::ops::Deref;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::OnceLock;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 fn acps(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_acps"))
@@ -24,13 +25,33 @@ fn refusal(args: &[&str]) -> String {
     String::from_utf8(out.stderr).unwrap()
 }
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("acps-rundir-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+/// A directory of its own under the system's temp dir, removed when dropped, also when the test
+/// that made it fails.
+struct TempDir(PathBuf);
+
+impl Deref for TempDir {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.0
+    }
 }
 
-fn experiment(name: &str, method: &str, episodes: &str) -> PathBuf {
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn temp_dir(name: &str) -> TempDir {
+    static MADE: AtomicUsize = AtomicUsize::new(0);
+    let made = MADE.fetch_add(1, Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("acps-rundir-{name}-{}-{made}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    TempDir(dir)
+}
+
+fn experiment(name: &str, method: &str, episodes: &str) -> TempDir {
     let dir = temp_dir(name);
     let out = acps(&[
         "experiment",
@@ -51,10 +72,9 @@ fn experiment(name: &str, method: &str, episodes: &str) -> PathBuf {
     dir
 }
 
-/// One short grid run shared by the tests of this file.
-fn grid() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| experiment("grid", "monotonic-progress", "200"))
+/// One short grid run (0.04 s), a test's own.
+fn grid() -> TempDir {
+    experiment("grid", "monotonic-progress", "200")
 }
 
 fn summary(dir: &Path) -> serde_json::Value {
@@ -78,7 +98,7 @@ fn number(field: &str) -> f64 {
 #[test]
 fn the_csv_tables_repeat_summary_json() {
     let dir = grid();
-    let s = summary(dir);
+    let s = summary(&dir);
     let m = &s["methods"]["monotonic-progress"];
     let episodes = m["episodes"].as_array().unwrap();
     assert_eq!(episodes.len(), 3, "evaluations at 0, 100 and 200");
@@ -173,7 +193,7 @@ fn every_picture_is_written_as_svg_and_png() {
 #[test]
 fn the_policy_file_describes_the_final_policy() {
     let dir = grid();
-    let s = summary(dir);
+    let s = summary(&dir);
     let path = dir.join("policies/monotonic-progress-run0.json");
     let policy: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
     assert_eq!(policy["format"], "acps-policy-1");
@@ -277,7 +297,7 @@ fn value_after<'a>(text: &'a str, label: &str) -> &'a str {
 #[test]
 fn evaluate_reproduces_the_learners_final_test_score() {
     let dir = grid();
-    let s = summary(dir);
+    let s = summary(&dir);
     let text = stdout(&acps(&["evaluate", dir.to_str().unwrap()]));
     assert_eq!(
         text.lines().filter(|l| l.starts_with("  target (")).count(),
@@ -347,7 +367,8 @@ fn evaluate_throws_at_chosen_targets_and_renders() {
 
 #[test]
 fn evaluate_refuses_bad_targets_with_the_accepted_range() {
-    let dir = grid().to_str().unwrap();
+    let grid = grid();
+    let dir = grid.to_str().unwrap();
     let error = refusal(&["evaluate", dir, "--target", "-9,-4"]);
     assert!(
         error.contains("--target -9,-4: outside the grid problem's context space, which takes coordinate 0 in [-5, -3], coordinate 1 in [-5, -3]"),
@@ -384,13 +405,13 @@ fn evaluate_refuses_missing_and_corrupted_policies() {
     let error = refusal(&["evaluate", dir, "--run", "4"]);
     assert!(error.contains("holds no policy file of run 4 (--run)"), "{error}");
     let empty = temp_dir("empty");
-    std::fs::create_dir_all(&empty).unwrap();
+    std::fs::create_dir_all(&*empty).unwrap();
     let error = refusal(&["evaluate", empty.to_str().unwrap()]);
     assert!(error.contains("has no policies/ directory"), "{error}");
 
     let original = std::fs::read_to_string(grid.join("policies/monotonic-progress-run0.json")).unwrap();
     let broken = temp_dir("broken");
-    std::fs::create_dir_all(&broken).unwrap();
+    std::fs::create_dir_all(&*broken).unwrap();
     let file = broken.join("policy.json");
     let check = |text: &str, expected: &str| {
         std::fs::write(&file, text).unwrap();
