@@ -382,38 +382,51 @@ impl Picture for Exploration {
         for (row, (name, runs)) in self.methods.iter().enumerate() {
             let color = COLORS[row % COLORS.len()];
             let last = row + 1 == self.methods.len();
-            let mut left = panel(&panels[2 * row], last);
-            let mut chart =
-                left.build_cartesian_2d(0.0..x_max, (trace_range.0 / 2.0..trace_range.1 * 2.0).log_scale())?;
-            let mut mesh = chart.configure_mesh();
-            mesh.y_desc("trace Sigma")
-                .x_desc(if last { "training episodes" } else { "" })
-                .x_label_formatter(&|x| format!("{x:.0}"))
-                .y_label_formatter(&|y| format!("{y:.0e}"))
-                .y_labels(5);
-            mesh.draw()?;
-            for run in runs {
-                chart.draw_series(LineSeries::new(run.iter().map(|u| (u.0, trace(u))), color.mix(0.25)))?;
-            }
-            chart.draw_series(LineSeries::new(Self::median(runs, trace), color.stroke_width(2)))?;
+            let mut chart = panel(&panels[2 * row], last)
+                .build_cartesian_2d(0.0..x_max, (trace_range.0 / 2.0..trace_range.1 * 2.0).log_scale())?;
+            run_lines(
+                &mut chart,
+                runs,
+                trace,
+                ("trace Sigma", &|y| format!("{y:.0e}")),
+                last,
+                color,
+            )?;
             label(&panels[2 * row], name)?;
-
-            let mut right = panel(&panels[2 * row + 1], last);
-            let mut chart = right.build_cartesian_2d(0.0..x_max, 0.0..ess_max * 1.05)?;
-            let mut mesh = chart.configure_mesh();
-            mesh.y_desc("ESS")
-                .x_desc(if last { "training episodes" } else { "" })
-                .x_label_formatter(&|x| format!("{x:.0}"))
-                .y_label_formatter(&|y| format!("{y:.0}"))
-                .y_labels(5);
-            mesh.draw()?;
-            for run in runs {
-                chart.draw_series(LineSeries::new(run.iter().map(|u| (u.0, u.2)), color.mix(0.25)))?;
-            }
-            chart.draw_series(LineSeries::new(Self::median(runs, |u| u.2), color.stroke_width(2)))?;
+            let mut chart = panel(&panels[2 * row + 1], last).build_cartesian_2d(0.0..x_max, 0.0..ess_max * 1.05)?;
+            run_lines(&mut chart, runs, |u| u.2, ("ESS", &|y| format!("{y:.0}")), last, color)?;
         }
         Ok(())
     }
+}
+
+/// The axes of one panel of [`Exploration`] (`y`: the axis' name and label format), every run's
+/// `value` as a thin line and their median as a thick one.
+fn run_lines<'a, DB: DrawingBackend + 'a, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, Y>>,
+    runs: &[Vec<(f64, f64, f64)>],
+    value: fn(&(f64, f64, f64)) -> f64,
+    y: (&str, &dyn Fn(&f64) -> String),
+    last: bool,
+    color: RGBColor,
+) -> PlotResult
+where
+    DB::ErrorType: 'static,
+    Y: Ranged<ValueType = f64> + plotters::coord::ranged1d::ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .y_desc(y.0)
+        .x_desc(if last { "training episodes" } else { "" })
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(y.1)
+        .y_labels(5)
+        .draw()?;
+    for run in runs {
+        chart.draw_series(LineSeries::new(run.iter().map(|u| (u.0, value(u))), color.mix(0.25)))?;
+    }
+    chart.draw_series(LineSeries::new(Exploration::median(runs, value), color.stroke_width(2)))?;
+    Ok(())
 }
 
 /// A chart builder for one small panel; only the bottom row has room for the x axis' name.

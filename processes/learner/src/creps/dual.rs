@@ -28,9 +28,10 @@
 //!    to form and to factorise. Each step eliminates u through the Schur complement, takes the
 //!    Newton step on `h(eta~) = min_u g~`, whose derivative is `eps - KL`, and moves u with it
 //!    (see `Step::new`). Where the dual is far from its quadratic model (it is exponential in
-//!    u / eta~) the steps are kept short: eta~ moves by at most a factor 8, waits while u is far
-//!    from its optimum for the current eta~, and no step changes a sample's log-weight by more
-//!    than 8; a backtracking line search on `g~` does the rest. When the KL bound is slack, eta~
+//!    u / eta~) the steps are kept short: eta~ moves by at most a factor 8 and waits while u is
+//!    far from its optimum for the current eta~, and a backtracking line search on `g~` does the
+//!    rest (a step may change no sample's log-weight by more than 1000 through u, a guard against
+//!    unbounded steps where the Hessian is nearly singular). When the KL bound is slack, eta~
 //!    thus follows the path of optima down to its bound, like an interior-point method, and
 //!    stops exactly on it.
 //!
@@ -39,12 +40,12 @@
 //! basis for u) has an inf-norm of at most [`DualOptions::tolerance`], or of what double
 //! precision allows at that eta~, `1e-15 / eta~` (the rounding of the residuals, divided by
 //! eta~, is the precision of the log-weights). A solve takes 5-10 Newton steps when the KL bound
-//! is active and 15-45 when eta~ must follow the path to a bound of 1e-5.
+//! is active and 15-40 when eta~ must follow the path to a bound of 1e-5.
 
-use nalgebra::{Cholesky, DMatrix, DVector, SVD};
+use nalgebra::{Cholesky, DMatrix, DVector, Dyn, SVD};
 use serde::{Deserialize, Serialize};
 
-use super::error::{CRepsError, check_at_least_one, check_finite, check_positive};
+use super::error::{CRepsError, check_at_least_one, check_finite, check_len, check_positive, check_range};
 
 /// The largest factor by which one step on the path may raise or lower eta.
 const ETA_STEP_FACTOR: f64 = 8.0;
@@ -162,10 +163,21 @@ pub fn solve_dual(
     eta_min: f64,
     options: &DualOptions,
 ) -> Result<DualSolution, CRepsError> {
+    check_data(phi, returns)?;
+    solve_valid(phi, returns, epsilon, eta_min, options)
+}
+
+/// [`solve_dual`] on data known to be consistent and finite (a [`Batch`](super::Batch)'s).
+pub(crate) fn solve_valid(
+    phi: &DMatrix<f64>,
+    returns: &[f64],
+    epsilon: f64,
+    eta_min: f64,
+    options: &DualOptions,
+) -> Result<DualSolution, CRepsError> {
     check_positive("epsilon", epsilon)?;
     check_eta_min(eta_min)?;
     check_options(options)?;
-    check_data(phi, returns)?;
     let n = returns.len();
     let Some(problem) = Standardised::new(phi, returns, epsilon) else {
         // Equal returns: any eta gives uniform weights with v = 0, and g = m + eta eps is least
@@ -223,14 +235,7 @@ pub fn evaluate_dual(
     check_positive("epsilon", epsilon)?;
     check_positive("eta", eta)?;
     check_data(phi, returns)?;
-    if v.len() != phi.ncols() {
-        return Err(CRepsError::LengthMismatch {
-            first: "the length of v",
-            first_len: v.len(),
-            second: "the number of phi columns",
-            second_len: phi.ncols(),
-        });
-    }
+    check_len("the length of v", v.len(), "the number of phi columns", phi.ncols())?;
     check_finite("v", v)?;
     let v = DVector::from_column_slice(v);
     let residuals = DVector::from_column_slice(returns) - phi * &v;
@@ -272,41 +277,21 @@ fn attainable(tolerance: f64, eta: f64) -> f64 {
 }
 
 pub(crate) fn check_eta_min(eta_min: f64) -> Result<(), CRepsError> {
-    let (low, high) = ETA_MIN_RANGE;
-    if (low..=high).contains(&eta_min) {
-        Ok(())
-    } else {
-        Err(CRepsError::OutOfRange {
-            name: "eta_min",
-            value: eta_min,
-            low,
-            high,
-        })
-    }
+    check_range("eta_min", eta_min, ETA_MIN_RANGE)
 }
 
 fn check_options(options: &DualOptions) -> Result<(), CRepsError> {
-    let (low, high) = TOLERANCE_RANGE;
-    if !(low..=high).contains(&options.tolerance) {
-        return Err(CRepsError::OutOfRange {
-            name: "tolerance",
-            value: options.tolerance,
-            low,
-            high,
-        });
-    }
+    check_range("tolerance", options.tolerance, TOLERANCE_RANGE)?;
     check_at_least_one("max_iterations", options.max_iterations)
 }
 
 fn check_data(phi: &DMatrix<f64>, returns: &[f64]) -> Result<(), CRepsError> {
-    if phi.nrows() != returns.len() {
-        return Err(CRepsError::LengthMismatch {
-            first: "the number of phi rows",
-            first_len: phi.nrows(),
-            second: "the number of returns",
-            second_len: returns.len(),
-        });
-    }
+    check_len(
+        "the number of phi rows",
+        phi.nrows(),
+        "the number of returns",
+        returns.len(),
+    )?;
     if returns.is_empty() {
         return Err(CRepsError::NoSamples);
     }
@@ -414,17 +399,10 @@ impl Standardised {
         let mut steps = 0;
         let (eta, u) = self.start(eta_min);
         let mut current = self.evaluate(eta, u, &mut scratch);
-        loop {
+        let optimality = loop {
             let optimality = current.optimality(eta_min);
             if optimality <= attainable(options.tolerance, current.eta) || steps >= options.max_iterations {
-                return Newton {
-                    weights: scratch.softmax.p.clone(),
-                    eta: current.eta,
-                    u: current.u,
-                    value: current.value,
-                    optimality,
-                    iterations: steps,
-                };
+                break optimality;
             }
             steps += 1;
             // The scratch holds the evaluation of `current`: the start, or the step accepted last.
@@ -439,20 +417,23 @@ impl Standardised {
             let found = self
                 .search(&current, &newton, &mut scratch)
                 .or_else(|| self.search(&current, &descent(), &mut scratch));
-            let Some(next) = found else {
-                // No decrease along a descent direction: the optimum to rounding; the scratch
-                // holds the last trial, so evaluate the point again for its weights.
-                current = self.evaluate(current.eta, current.u, &mut scratch);
-                return Newton {
-                    weights: scratch.softmax.p.clone(),
-                    optimality: current.optimality(eta_min),
-                    eta: current.eta,
-                    u: current.u,
-                    value: current.value,
-                    iterations: steps,
-                };
-            };
-            current = next;
+            match found {
+                Some(next) => current = next,
+                None => {
+                    // No decrease along a descent direction: the optimum to rounding. The
+                    // scratch holds the last trial, so evaluate the point again for its weights.
+                    current = self.evaluate(current.eta, current.u, &mut scratch);
+                    break current.optimality(eta_min);
+                }
+            }
+        };
+        Newton {
+            weights: scratch.softmax.p.clone(),
+            eta: current.eta,
+            u: current.u,
+            value: current.value,
+            optimality,
+            iterations: steps,
         }
     }
 
@@ -622,13 +603,16 @@ impl Step {
         let k = point.u.len();
         let h_uu = hessian.view((1, 1), (k, k)).into_owned();
         let h_ue = hessian.view((1, 0), (k, 1)).column(0).into_owned();
-        let scale = 1.0 / eta;
-        let z = solve_regularised(&h_uu, point.gradient_u.clone(), scale).unwrap_or_else(|| point.gradient_u.clone());
+        let factor = factor_regularised(h_uu, 1.0 / eta);
+        // Without a factor (no shift made H_uu positive definite): steepest descent in u.
+        let z = factor
+            .as_ref()
+            .map_or_else(|| point.gradient_u.clone(), |f| f.solve(&point.gradient_u));
         let decrement = point.gradient_u.dot(&z);
         if decrement > CENTRING * eta || point.eta_held(eta_min) {
             return Self { eta, u: -z };
         }
-        let w = solve_regularised(&h_uu, h_ue.clone(), scale).unwrap_or_else(|| DVector::zeros(k));
+        let w = factor.map_or_else(|| DVector::zeros(k), |f| f.solve(&h_ue));
         let curvature = hessian[(0, 0)] - h_ue.dot(&w);
         let slope = point.gradient_eta - h_ue.dot(&z);
         let newton = if curvature > 0.0 {
@@ -646,24 +630,19 @@ impl Step {
     }
 }
 
-/// Solves `H x = rhs` by Cholesky, adding `1e-12 scale` to the diagonal, and more, tenfold,
-/// until `H` is positive definite (a Hessian whose weights sit on too few samples to span every
-/// direction); `scale` is the Hessian's natural size, `1/eta`.
-fn solve_regularised(hessian: &DMatrix<f64>, rhs: DVector<f64>, scale: f64) -> Option<DVector<f64>> {
-    if rhs.is_empty() {
-        return Some(rhs);
-    }
+/// The Cholesky factor of `H`, with `1e-12 scale` added to the diagonal, and more, tenfold, until
+/// `H` is positive definite with a finite factor (a Hessian whose weights sit on too few samples
+/// to span every direction); `scale` is the Hessian's natural size, `1/eta`.
+fn factor_regularised(hessian: DMatrix<f64>, scale: f64) -> Option<Cholesky<f64, Dyn>> {
     let mut shift = 0.0;
     for _ in 0..30 {
         let mut shifted = hessian.clone();
         for i in 0..shifted.nrows() {
             shifted[(i, i)] += shift;
         }
-        if let Some(factor) = Cholesky::new(shifted) {
-            let solution = factor.solve(&rhs);
-            if solution.iter().all(|x| x.is_finite()) {
-                return Some(solution);
-            }
+        let factor = Cholesky::new(shifted).filter(|f| f.l_dirty().iter().all(|x| x.is_finite()));
+        if factor.is_some() {
+            return factor;
         }
         shift = if shift == 0.0 { 1e-12 * scale } else { shift * 10.0 };
     }

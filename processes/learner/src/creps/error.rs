@@ -146,3 +146,31 @@ pub(crate) fn check_finite(name: &'static str, values: &[f64]) -> Result<(), CRe
         None => Ok(()),
     }
 }
+
+/// Two lengths that must agree.
+pub(crate) fn check_len(
+    first: &'static str,
+    first_len: usize,
+    second: &'static str,
+    second_len: usize,
+) -> Result<(), CRepsError> {
+    if first_len == second_len {
+        Ok(())
+    } else {
+        Err(CRepsError::LengthMismatch {
+            first,
+            first_len,
+            second,
+            second_len,
+        })
+    }
+}
+
+/// `value` must lie in `[low, high]` (NaN does not).
+pub(crate) fn check_range(name: &'static str, value: f64, (low, high): (f64, f64)) -> Result<(), CRepsError> {
+    if (low..=high).contains(&value) {
+        Ok(())
+    } else {
+        Err(CRepsError::OutOfRange { name, value, low, high })
+    }
+}

@@ -335,8 +335,8 @@ impl CReps {
         let thetas = stack_rows(samples.iter().map(|s| &s.theta), self.policy.n_params());
         let returns: Vec<f64> = samples.iter().map(|s| s.reward).collect();
         // The memory holds finite samples of this policy's widths and the settings were checked
-        // by `new`, so the batch and the update cannot fail.
-        let batch = Batch::new(features, thetas, returns).expect("the memory holds finite samples");
+        // by `new`, so the update cannot fail.
+        let batch = Batch::of_valid(features, thetas, returns);
         let (policy, report) = update(&self.policy, &batch, &self.update_settings())
             .expect("the memory fits the policy and the settings were checked");
         self.policy = policy;

@@ -5,7 +5,7 @@ use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
 use rand::RngCore;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::error::{CRepsError, check_finite, check_non_negative};
+use super::error::{CRepsError, check_finite, check_len, check_non_negative};
 use super::update::Rejection;
 
 /// A Gaussian over parameter vectors whose mean is linear in the context features.
@@ -219,19 +219,6 @@ fn scale_rows(m: &DMatrix<f64>, d: &DVector<f64>) -> DMatrix<f64> {
         row *= di;
     }
     scaled
-}
-
-fn check_len(first: &'static str, first_len: usize, second: &'static str, second_len: usize) -> Result<(), CRepsError> {
-    if first_len == second_len {
-        Ok(())
-    } else {
-        Err(CRepsError::LengthMismatch {
-            first,
-            first_len,
-            second,
-            second_len,
-        })
-    }
 }
 
 #[cfg(test)]

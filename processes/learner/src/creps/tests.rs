@@ -215,3 +215,83 @@ fn best_per_task_memory_bounds_the_update() {
     }
     assert_eq!(sizes, [6, 6, 6, 6]);
 }
+
+/// `Batch` and `update` refuse inconsistent or non-finite rollouts and bad settings with errors
+/// that name the argument and both sides or the range.
+#[test]
+fn bad_batches_and_settings_are_errors_naming_the_argument() {
+    let policy = LinearGaussianPolicy::new(DMatrix::zeros(2, 1), DMatrix::identity(1, 1)).unwrap();
+    let message = |result: Result<Batch, CRepsError>| result.unwrap_err().to_string();
+    let rows = |n| DMatrix::from_element(n, 1, 0.5);
+    assert_eq!(
+        message(Batch::new(DMatrix::zeros(3, 2), rows(3), vec![0.0; 2])),
+        "the number of feature rows (3) must equal the number of returns (2)"
+    );
+    assert_eq!(
+        message(Batch::new(DMatrix::zeros(2, 2), rows(3), vec![0.0; 2])),
+        "the number of theta rows (3) must equal the number of returns (2)"
+    );
+    assert_eq!(
+        message(Batch::new(DMatrix::zeros(0, 2), rows(0), vec![])),
+        CRepsError::NoSamples.to_string()
+    );
+    let mut thetas = rows(2);
+    thetas[(1, 0)] = f64::INFINITY;
+    assert_eq!(
+        message(Batch::new(DMatrix::zeros(2, 2), thetas, vec![0.0; 2])),
+        "thetas must be finite, got inf at index 1"
+    );
+    assert_eq!(
+        message(Batch::new(DMatrix::zeros(2, 2), rows(2), vec![0.0, f64::NAN])),
+        "returns must be finite, got NaN at index 1"
+    );
+
+    let contexts = |rows: &[&[f64]]| rows.iter().map(|r| r.to_vec()).collect::<Vec<_>>();
+    let from = |c: &[Vec<f64>], t: &[Vec<f64>], r: &[f64]| message(Batch::from_contexts(&FeatureMap::Affine, c, t, r));
+    let thetas = vec![vec![0.1], vec![0.2]];
+    assert_eq!(
+        from(&contexts(&[&[0.0], &[0.5, 1.0]]), &thetas, &[0.0, 1.0]),
+        "a context's length (2) must equal the first context's (1)"
+    );
+    assert_eq!(
+        from(&contexts(&[&[0.0], &[0.5]]), &[vec![0.1], vec![0.2, 0.3]], &[0.0, 1.0]),
+        "a theta's length (2) must equal the first theta's (1)"
+    );
+    assert_eq!(
+        from(&contexts(&[&[0.0], &[0.5], &[1.0]]), &thetas, &[0.0, 1.0]),
+        "the number of contexts (3) must equal the number of thetas (2)"
+    );
+    assert_eq!(
+        from(&contexts(&[&[0.0], &[f64::NAN]]), &thetas, &[0.0, 1.0]),
+        "contexts must be finite, got NaN at index 0"
+    );
+    assert!(from(&[vec![], vec![]], &thetas, &[0.0, 1.0]).contains("context_dim must be >= 1"));
+
+    // A batch that does not fit the policy, and settings out of range.
+    let batch = Batch::from_contexts(&FeatureMap::Affine, &contexts(&[&[0.0], &[0.5]]), &thetas, &[0.0, 1.0]).unwrap();
+    let wide = LinearGaussianPolicy::new(DMatrix::zeros(2, 2), DMatrix::identity(2, 2)).unwrap();
+    let update_error = |policy: &LinearGaussianPolicy, settings: UpdateSettings| {
+        update(policy, &batch, &settings).unwrap_err().to_string()
+    };
+    assert_eq!(
+        update_error(&wide, UpdateSettings::default()),
+        "the number of theta columns (1) must equal the policy's n_theta (2)"
+    );
+    let with = |change: fn(&mut UpdateSettings)| {
+        let mut settings = UpdateSettings::default();
+        change(&mut settings);
+        update_error(&policy, settings)
+    };
+    assert_eq!(with(|s| s.epsilon = 0.0), "epsilon must be finite and > 0, got 0");
+    assert_eq!(with(|s| s.ridge = f64::NAN), "ridge must be finite and >= 0, got NaN");
+    assert_eq!(
+        with(|s| s.eta_min = 1e-9),
+        "eta_min must be within [1e-8, 1e0], got 1e-9"
+    );
+    assert_eq!(
+        with(|s| s.dual.tolerance = 1.0),
+        "tolerance must be within [1e-14, 1e-3], got 1e0"
+    );
+    // The same batch with good settings updates.
+    assert!(update(&policy, &batch, &UpdateSettings::default()).is_ok());
+}

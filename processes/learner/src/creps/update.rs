@@ -3,8 +3,8 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::dual::{DualOptions, effective_sample_size, solve_dual};
-use super::error::{CRepsError, check_finite, check_non_negative, check_positive};
+use super::dual::{DualOptions, effective_sample_size, solve_valid};
+use super::error::{CRepsError, check_finite, check_len, check_non_negative, check_positive};
 use super::{FeatureMap, LinearGaussianPolicy};
 
 /// The settings of one update.
@@ -113,31 +113,31 @@ pub struct Batch {
 impl Batch {
     /// A batch from feature rows (N x n_phi), parameter rows (N x n_theta) and N returns.
     pub fn new(features: DMatrix<f64>, thetas: DMatrix<f64>, returns: Vec<f64>) -> Result<Self, CRepsError> {
-        let rows = [
-            ("the number of feature rows", features.nrows()),
-            ("the number of theta rows", thetas.nrows()),
-        ];
-        for (name, len) in rows {
-            if len != returns.len() {
-                return Err(CRepsError::LengthMismatch {
-                    first: name,
-                    first_len: len,
-                    second: "the number of returns",
-                    second_len: returns.len(),
-                });
-            }
-        }
+        let n = returns.len();
+        check_len(
+            "the number of feature rows",
+            features.nrows(),
+            "the number of returns",
+            n,
+        )?;
+        check_len("the number of theta rows", thetas.nrows(), "the number of returns", n)?;
         if returns.is_empty() {
             return Err(CRepsError::NoSamples);
         }
         check_finite("features", features.as_slice())?;
         check_finite("thetas", thetas.as_slice())?;
         check_finite("returns", &returns)?;
-        Ok(Self {
+        Ok(Self::of_valid(features, thetas, returns))
+    }
+
+    /// A batch of rows known to be consistent and finite (a C-REPS memory's: `record` keeps
+    /// non-finite rollouts out), without checking them again.
+    pub(crate) fn of_valid(features: DMatrix<f64>, thetas: DMatrix<f64>, returns: Vec<f64>) -> Self {
+        Self {
             features,
             thetas,
             returns,
-        })
+        }
     }
 
     /// A batch from contexts, mapped through `features`, with their parameters and returns.
@@ -149,16 +149,18 @@ impl Batch {
     ) -> Result<Self, CRepsError> {
         let context_dim = contexts.first().map_or(0, Vec::len);
         let n_theta = thetas.first().map_or(0, Vec::len);
-        check_rows("context", contexts, context_dim)?;
-        check_rows("theta", thetas, n_theta)?;
-        if contexts.len() != thetas.len() {
-            return Err(CRepsError::LengthMismatch {
-                first: "the number of contexts",
-                first_len: contexts.len(),
-                second: "the number of thetas",
-                second_len: thetas.len(),
-            });
+        for context in contexts {
+            check_len("a context's length", context.len(), "the first context's", context_dim)?;
         }
+        for theta in thetas {
+            check_len("a theta's length", theta.len(), "the first theta's", n_theta)?;
+        }
+        check_len(
+            "the number of contexts",
+            contexts.len(),
+            "the number of thetas",
+            thetas.len(),
+        )?;
         for context in contexts {
             check_finite("contexts", context)?;
         }
@@ -180,18 +182,6 @@ impl Batch {
     /// Always false: a batch has at least one rollout.
     pub fn is_empty(&self) -> bool {
         self.returns.is_empty()
-    }
-}
-
-fn check_rows(name: &'static str, rows: &[Vec<f64>], width: usize) -> Result<(), CRepsError> {
-    match rows.iter().find(|row| row.len() != width) {
-        Some(row) => Err(CRepsError::LengthMismatch {
-            first: name,
-            first_len: row.len(),
-            second: "the length of the first one",
-            second_len: width,
-        }),
-        None => Ok(()),
     }
 }
 
@@ -225,31 +215,19 @@ pub fn update(
 ) -> Result<(LinearGaussianPolicy, UpdateReport), CRepsError> {
     check_positive("epsilon", settings.epsilon)?;
     check_non_negative("ridge", settings.ridge)?;
-    let widths = [
-        (
-            "the number of feature columns",
-            batch.features.ncols(),
-            "the policy's n_phi",
-            policy.n_features(),
-        ),
-        (
-            "the number of theta columns",
-            batch.thetas.ncols(),
-            "the policy's n_theta",
-            policy.n_params(),
-        ),
-    ];
-    for (first, first_len, second, second_len) in widths {
-        if first_len != second_len {
-            return Err(CRepsError::LengthMismatch {
-                first,
-                first_len,
-                second,
-                second_len,
-            });
-        }
-    }
-    let dual = solve_dual(
+    check_len(
+        "the number of feature columns",
+        batch.features.ncols(),
+        "the policy's n_phi",
+        policy.n_features(),
+    )?;
+    check_len(
+        "the number of theta columns",
+        batch.thetas.ncols(),
+        "the policy's n_theta",
+        policy.n_params(),
+    )?;
+    let dual = solve_valid(
         &batch.features,
         &batch.returns,
         settings.epsilon,

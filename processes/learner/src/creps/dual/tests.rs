@@ -86,9 +86,15 @@ fn throwing(seed: u64) -> DataSet {
 }
 
 /// The Section 5.1 scale: N 50, 20 parameters, quadratic features of grid contexts in
-/// [-1, 1]^2, epsilon 2; returns of the contextual function `-||A theta - s|| ||s||^2 + sum s`.
+/// [-1, 1]^2, epsilon 2, exploration on a scale that varies per data set.
 fn function(seed: u64) -> DataSet {
-    function_n(seed, 50)
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let a = DMatrix::from_fn(2, 20, |_, _| rng.random_range(0.0..1.0));
+    let spread = 10f64.powf(rng.random_range(-2.0..0.0));
+    let grid = linspace(-1.0, 1.0, 5);
+    function_rollouts(&mut rng, &a, spread, 50, |rng, _| {
+        vec![grid[rng.random_range(0..5)], grid[rng.random_range(0..5)]]
+    })
 }
 
 /// The first update of every Section 5.1 run: one rollout of the initial policy (W = 0, Sigma
@@ -98,47 +104,34 @@ fn sweep(seed: u64) -> DataSet {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let a = DMatrix::from_fn(2, 20, |_, _| rng.random_range(0.0..1.0));
     let grid = linspace(-1.0, 1.0, 5);
-    let (mut contexts, mut thetas, mut returns) = (vec![], vec![], vec![]);
-    for &x in &grid {
-        for &y in &grid {
-            let s = DVector::from_vec(vec![x, y]);
-            let theta = DVector::from_fn(20, |_, _| rng.sample::<f64, _>(StandardNormal));
-            returns.push(-(&a * &theta - &s).norm() * s.norm_squared() + s.sum());
-            contexts.push(s.as_slice().to_vec());
-            thetas.push(theta.as_slice().to_vec());
-        }
-    }
-    DataSet {
-        features: FeatureMap::Quadratic,
-        contexts,
-        thetas,
-        returns,
-        epsilon: 2.0,
-        policy: LinearGaussianPolicy::new(DMatrix::zeros(6, 20), DMatrix::identity(20, 20)).unwrap(),
-    }
+    function_rollouts(&mut rng, &a, 1.0, 25, |_, i| vec![grid[i / 5], grid[i % 5]])
 }
 
-fn function_n(seed: u64, n: usize) -> DataSet {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let a = DMatrix::from_fn(2, 20, |_, _| rng.random_range(0.0..1.0));
-    let spread = 10f64.powf(rng.random_range(-2.0..0.0));
-    let grid = linspace(-1.0, 1.0, 5);
+/// `n` rollouts of the contextual function `-||A theta - s|| ||s||^2 + sum s` with
+/// `theta ~ N(0, spread^2 I)` at the contexts `context(rng, i)`.
+fn function_rollouts(
+    rng: &mut ChaCha8Rng,
+    a: &DMatrix<f64>,
+    spread: f64,
+    n: usize,
+    mut context: impl FnMut(&mut ChaCha8Rng, usize) -> Vec<f64>,
+) -> DataSet {
     let (mut contexts, mut thetas, mut returns) = (vec![], vec![], vec![]);
-    for _ in 0..n {
-        let s = DVector::from_vec(vec![grid[rng.random_range(0..5)], grid[rng.random_range(0..5)]]);
-        let theta = DVector::from_fn(20, |_, _| spread * rng.sample::<f64, _>(StandardNormal));
-        returns.push(-(&a * &theta - &s).norm() * s.norm_squared() + s.sum());
+    for i in 0..n {
+        let s = DVector::from_vec(context(rng, i));
+        let theta = DVector::from_fn(a.ncols(), |_, _| spread * rng.sample::<f64, _>(StandardNormal));
+        returns.push(-(a * &theta - &s).norm() * s.norm_squared() + s.sum());
         contexts.push(s.as_slice().to_vec());
         thetas.push(theta.as_slice().to_vec());
     }
-    let covariance = DMatrix::identity(20, 20) * spread * spread;
+    let covariance = DMatrix::identity(a.ncols(), a.ncols()) * spread * spread;
     DataSet {
         features: FeatureMap::Quadratic,
         contexts,
         thetas,
         returns,
         epsilon: 2.0,
-        policy: LinearGaussianPolicy::new(DMatrix::zeros(6, 20), covariance).unwrap(),
+        policy: LinearGaussianPolicy::new(DMatrix::zeros(6, a.ncols()), covariance).unwrap(),
     }
 }
 
