@@ -2,9 +2,10 @@
 //! (no wake-ups), by the number of connected workers: iceoryx2 looks for returned chunks on
 //! every connection's channels whenever the learner loans an answer.
 
-use acps_shared::ipc::{self, RunName};
-use acps_shared::wire::{Answer, EnvironmentSpec, Response, WireTask, WorkerMessage};
+use acps_shared::EnvironmentSpec;
 use acps_shared::{Task, TaskKind};
+use acps_wire::ipc::{self, RunName};
+use acps_wire::wire::{Answer, Response, WireTask, WorkerMessage};
 use criterion::{Criterion, criterion_group, criterion_main};
 
 fn round_trip(c: &mut Criterion) {

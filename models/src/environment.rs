@@ -8,7 +8,7 @@ use crate::robot::Robot;
 use crate::targets;
 use crate::throw::{PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
 use crate::{ModelError, check};
-use acps_shared::wire::EnvironmentSpec;
+use acps_shared::EnvironmentSpec;
 use acps_shared::{Environment, Outcome, Task};
 
 /// The environments a spec can name.

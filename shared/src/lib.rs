@@ -6,11 +6,11 @@
 mod context_space;
 mod problem;
 mod seed;
+mod spec;
 mod task;
 
 pub use context_space::{ContextSpace, ContextSpaceError, random_unit_vector};
 pub use problem::{Problem, ScoreAggregate};
 pub use seed::{Stream, derive_seed};
+pub use spec::EnvironmentSpec;
 pub use task::{Environment, Outcome, OutcomeStatus, Task, TaskKind};
-pub mod ipc;
-pub mod wire;

@@ -5,14 +5,14 @@
 //! to W times one thread (the ratio).
 
 use crate::paper::{self, Options, Sim};
-use crate::workers;
+use acps_fleet::processes as workers;
+use acps_fleet::{self as fleet, FleetError, FleetJob, ServeOptions};
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
-use acps_learner::fleet::{self, FleetError, FleetJob, ServeOptions};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
 use acps_models::environment::{self, TrivialEnvironment};
-use acps_shared::ipc::{self, RunName};
 use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
+use acps_wire::ipc::{self, RunName};
 use anyhow::Context;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -119,7 +119,7 @@ const IN_FLIGHT: usize = 64;
 
 struct Job {
     learner: Learner,
-    spec: acps_shared::wire::EnvironmentSpec,
+    spec: acps_shared::EnvironmentSpec,
     environment: Box<dyn Environment>,
 }
 

@@ -6,16 +6,16 @@
 
 use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::Progress;
+use acps_fleet::{self as fleet, FleetError, FleetJob, FleetProgress, ServeOptions};
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
-use acps_learner::fleet::{self, FleetError, FleetJob, FleetProgress, ServeOptions};
 use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
     run_in_process,
 };
-use acps_shared::ipc::RunName;
-use acps_shared::wire::EnvironmentSpec;
+use acps_shared::EnvironmentSpec;
 use acps_shared::{Environment, Problem};
+use acps_wire::ipc::RunName;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -33,7 +33,7 @@ pub struct Instance {
     pub optimal_score: Option<f64>,
     /// How a worker builds the same environment; `None` for environments that keep state between
     /// rollouts (the Section 4 model), which a fleet cannot serve.
-    pub spec: Option<acps_shared::wire::EnvironmentSpec>,
+    pub spec: Option<acps_shared::EnvironmentSpec>,
 }
 
 /// Builds the problem instance of a run from the run's seed.

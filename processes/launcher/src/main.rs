@@ -4,9 +4,10 @@ use acps::bench::BenchEvent;
 use acps::checkpoints::Checkpoints;
 use acps::config::{self, ExperimentFile, Job, LoadedFile, Plan};
 use acps::experiment::{Experiment, Summary};
+use acps::models::ModelFactory;
 use acps::progress::Progress;
-use acps_shared::ipc::{self, RunName};
-use acps_worker::{ModelFactory, WorkerExit, WorkerOptions};
+use acps_wire::ipc::{self, RunName};
+use acps_worker::{WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -198,7 +199,7 @@ struct WorkerNiceArg {
     /// Niceness of the started workers (0..=19; default: 10 when the workers and the learner
     /// outnumber the cores, else 0). The learner gates every worker, so it should get a core as
     /// soon as it wakes; 0 keeps the workers at full priority next to other programs.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=acps::workers::MAX_NICE as i64))]
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=acps_fleet::processes::MAX_NICE as i64))]
     worker_nice: Option<u8>,
 }
 
@@ -242,7 +243,7 @@ struct WorkerArgs {
     spin_us: u64,
     /// Lower this worker's priority to niceness N (0..=19), so that a learner sharing its
     /// cores gets the CPU first; a worker already at N or above keeps its niceness.
-    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=acps::workers::MAX_NICE as i64))]
+    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=acps_fleet::processes::MAX_NICE as i64))]
     nice: u8,
     /// Print nothing unless something goes wrong.
     #[arg(long, short)]
@@ -300,7 +301,7 @@ fn main() -> ExitCode {
 /// True when `error` is a fleet stopped by Ctrl-C.
 fn interrupted(error: &anyhow::Error) -> bool {
     use acps::experiment::RunError;
-    use acps_learner::fleet::FleetError;
+    use acps_fleet::FleetError;
     error.chain().any(|e| {
         matches!(
             e.downcast_ref::<RunError>(),
@@ -433,15 +434,15 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             let nice = args
                 .worker_nice
                 .worker_nice
-                .unwrap_or_else(|| acps::workers::default_nice(workers));
-            let mut children = acps::workers::spawn(&run, workers, args.worker_in_flight, nice)?;
+                .unwrap_or_else(|| acps_fleet::processes::default_nice(workers));
+            let mut children = acps_fleet::processes::spawn(&run, workers, args.worker_in_flight, nice)?;
             let progress = Progress::new(&experiment.name, args.experiment.quiet);
             let mut workers_lost = false;
             let checkpoints = checkpoints(&args.experiment, dir);
-            let spin = acps::workers::spin(workers);
+            let spin = acps_fleet::processes::spin(workers);
             let outcome = experiment.run_fleet(&run, spin, &stop, checkpoints.as_ref(), |p| {
                 // Ctrl-C stops the workers too; only workers gone on their own are lost.
-                if !stop.load(Ordering::Relaxed) && acps::workers::all_exited(&mut children) {
+                if !stop.load(Ordering::Relaxed) && acps_fleet::processes::all_exited(&mut children) {
                     workers_lost = true;
                     stop.store(true, Ordering::Relaxed);
                 }
@@ -451,7 +452,7 @@ fn fleet(args: RunArgs) -> anyhow::Result<()> {
             if workers_lost {
                 bail!("all {workers} workers of run '{run}' exited before the run was done (see their messages above)");
             }
-            let reaped = acps::workers::reap(&mut children);
+            let reaped = acps_fleet::processes::reap(&mut children);
             let (summary, report) =
                 outcome.with_context(|| format!("experiment {} on run '{run}'", experiment.name))?;
             reaped?;
@@ -537,7 +538,7 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
 
 fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     // Before the Ctrl-C handler's thread exists: Linux sets a niceness per thread.
-    acps::workers::lower_priority(args.nice)?;
+    acps_fleet::processes::lower_priority(args.nice)?;
     let run = RunName::new(&args.run)?;
     check_worker_in_flight("--in-flight", args.in_flight)?;
     if !(args.startup_timeout.is_finite() && args.startup_timeout >= 0.0) {

@@ -14,8 +14,8 @@ use acps_models::rapier_sim::RapierConfig;
 use acps_models::robot::Robot;
 use acps_models::targets::{Category, Field};
 use acps_models::throw::{INITIAL_LANDING, SpeedLimits, dartboard_problem, grid_problem};
+use acps_shared::EnvironmentSpec;
 use acps_shared::Problem;
-use acps_shared::wire::EnvironmentSpec;
 use serde_json::json;
 use std::collections::BTreeMap;
 

@@ -17,8 +17,8 @@
 
 use crate::experiment::{RunResult, Summary};
 use acps_learner::creps::{PolicySnapshot, Rejection, RestoredPolicy};
+use acps_shared::EnvironmentSpec;
 use acps_shared::Problem;
-use acps_shared::wire::EnvironmentSpec;
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;

@@ -1,12 +1,13 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
+use acps::models::ModelFactory;
 use acps::paper::{self, Options, Sim};
-use acps_learner::fleet::{self, FleetJob, ServeOptions};
+use acps_fleet::{self as fleet, FleetJob, ServeOptions};
 use acps_learner::{Method, run_in_process};
-use acps_shared::ipc::{self, RunName};
-use acps_shared::wire::{Answer, Response, WorkerMessage};
 use acps_shared::{Environment, Outcome, Task};
-use acps_worker::{ModelFactory, Single, WorkerExit, WorkerOptions};
+use acps_wire::ipc::{self, RunName};
+use acps_wire::wire::{Answer, Response, WorkerMessage};
+use acps_worker::{Single, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};

@@ -5,7 +5,6 @@
 
 pub mod checkpoint;
 pub mod creps;
-pub mod fleet;
 pub mod learner;
 pub mod method;
 pub mod selection;

@@ -9,12 +9,12 @@
 //! Embedding: call [`serve`] on any thread of your program with an [`EnvironmentFactory`] (for
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 
-use acps_shared::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
-use acps_shared::wire::{EnvironmentSpec, MAX_BATCH, PROTOCOL_VERSION, Response, WireOutcome, WireTask, WorkerMessage};
-use acps_shared::{Environment, Outcome};
+use acps_shared::{Environment, EnvironmentSpec, Outcome};
+use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
+use acps_wire::wire::{MAX_BATCH, PROTOCOL_VERSION, Response, WireOutcome, WireTask, WorkerMessage};
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -25,22 +25,6 @@ const JOIN_POLL: Duration = Duration::from_millis(2);
 pub trait EnvironmentFactory {
     /// The environment for `spec`, or why there is none.
     fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String>;
-}
-
-/// Builds environments with `acps_models::environment::build` and keeps them for later tasks.
-#[derive(Default)]
-pub struct ModelFactory {
-    cache: HashMap<EnvironmentSpec, Box<dyn Environment>>,
-}
-
-impl EnvironmentFactory for ModelFactory {
-    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
-        if !self.cache.contains_key(spec) {
-            let environment = acps_models::environment::build(spec).map_err(|e| e.to_string())?;
-            self.cache.insert(*spec, environment);
-        }
-        Ok(self.cache.get_mut(spec).expect("inserted above").as_mut())
-    }
 }
 
 /// One environment of your own, used for every task whatever its spec says.
@@ -321,13 +305,14 @@ pub fn serve(
         let next = if outbox_full { None } else { queue.pop_front() };
         if let Some(wire) = next {
             let task = wire.to_task();
-            let environment = factory
-                .environment(&wire.environment)
-                .map_err(|reason| WorkerError::Environment {
-                    job: wire.job,
-                    task_id: task.id,
-                    reason,
-                })?;
+            let environment =
+                factory
+                    .environment(&wire.environment.into())
+                    .map_err(|reason| WorkerError::Environment {
+                        job: wire.job,
+                        task_id: task.id,
+                        reason,
+                    })?;
             let started = Instant::now();
             let outcome = environment.rollout(&task);
             batching.observe(started.elapsed());

@@ -1,10 +1,28 @@
 //! A worker told by the learner that it belongs to another run stops with a message naming both.
 
-use acps_shared::ipc::{self, RunName};
-use acps_shared::wire::{Answer, Response};
-use acps_worker::{ModelFactory, WorkerError, WorkerOptions};
+use acps_shared::{Environment, Outcome, Task};
+use acps_wire::ipc::{self, RunName};
+use acps_wire::wire::{Answer, Response};
+use acps_worker::{Single, WorkerError, WorkerOptions};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
+
+/// Rollouts that return zero.
+struct Zero;
+
+impl Environment for Zero {
+    fn context_dim(&self) -> usize {
+        1
+    }
+
+    fn param_dim(&self) -> usize {
+        1
+    }
+
+    fn rollout(&mut self, task: &Task) -> Outcome {
+        Outcome::new(task.id, 0.0, 0.0)
+    }
+}
 
 #[test]
 fn a_refused_worker_stops_and_says_why() {
@@ -16,7 +34,7 @@ fn a_refused_worker_stops_and_says_why() {
                 name: "refused".into(),
                 ..WorkerOptions::default()
             };
-            acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false))
+            acps_worker::serve(&run, &options, &mut Single(Zero), &AtomicBool::new(false))
         })
     };
     {

@@ -12,9 +12,10 @@
 //! re-issued task is recognised as a duplicate and dropped. Workers of another build or run are
 //! refused.
 
-use crate::learner::{Learner, LearningProgress, TellError};
-use acps_shared::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
-use acps_shared::wire::{Answer, CapacityError, EnvironmentSpec, PROTOCOL_VERSION, Response, WireTask};
+use acps_learner::{Learner, LearningProgress, TellError};
+use acps_shared::EnvironmentSpec;
+use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
+use acps_wire::wire::{Answer, CapacityError, PROTOCOL_VERSION, Response, WireTask};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};

@@ -1,7 +1,6 @@
 //! Worker processes started by this program: `acps worker` children of the current executable.
 
-use acps_shared::ipc::RunName;
-use anyhow::Context;
+use acps_wire::ipc::RunName;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -32,12 +31,26 @@ pub fn default_nice(workers: usize) -> u8 {
 /// The largest niceness (the lowest priority) of Linux.
 pub const MAX_NICE: u8 = 19;
 
+/// The scheduling priority could not be lowered.
+#[derive(Debug, thiserror::Error)]
+pub enum PriorityError {
+    /// Beyond Linux's range.
+    #[error("niceness must be in 0..={MAX_NICE}, got {0}")]
+    OutOfRange(u8),
+    /// The kernel refused.
+    #[error("setting the niceness to {0}: {1}")]
+    Set(u8, std::io::Error),
+    /// The current niceness could not be read.
+    #[error("reading the niceness: {0}")]
+    Read(std::io::Error),
+}
+
 /// Lower this process's scheduling priority to niceness `nice` (0..=[`MAX_NICE`]) unless it
 /// already runs at that niceness or above (started under `nice`, say): raising a priority
 /// needs privileges. Call it before starting threads, which inherit it.
-pub fn lower_priority(nice: u8) -> anyhow::Result<()> {
+pub fn lower_priority(nice: u8) -> Result<(), PriorityError> {
     if nice > MAX_NICE {
-        anyhow::bail!("niceness must be in 0..={MAX_NICE}, got {nice}");
+        return Err(PriorityError::OutOfRange(nice));
     }
     if niceness()? >= i32::from(nice) {
         return Ok(());
@@ -45,13 +58,13 @@ pub fn lower_priority(nice: u8) -> anyhow::Result<()> {
     // SAFETY: setpriority only reads its integer arguments.
     let result = unsafe { libc::setpriority(libc::PRIO_PROCESS as _, 0, nice.into()) };
     if result != 0 {
-        return Err(std::io::Error::last_os_error()).with_context(|| format!("setting the niceness to {nice}"));
+        return Err(PriorityError::Set(nice, std::io::Error::last_os_error()));
     }
     Ok(())
 }
 
 /// The calling thread's niceness.
-fn niceness() -> anyhow::Result<i32> {
+fn niceness() -> Result<i32, PriorityError> {
     // getpriority returns -1 both for niceness -1 and for an error; errno tells them apart.
     // SAFETY: errno is this thread's; getpriority only reads its integer arguments.
     let nice = unsafe {
@@ -60,16 +73,16 @@ fn niceness() -> anyhow::Result<i32> {
     };
     let error = std::io::Error::last_os_error();
     if nice == -1 && error.raw_os_error() != Some(0) {
-        return Err(error).context("reading the niceness");
+        return Err(PriorityError::Read(error));
     }
     Ok(nice)
 }
 
 /// Start `workers` worker processes for `run`, each keeping `in_flight` tasks in flight, at
 /// niceness `nice`.
-pub fn spawn(run: &RunName, workers: usize, in_flight: usize, nice: u8) -> anyhow::Result<Vec<Child>> {
+pub fn spawn(run: &RunName, workers: usize, in_flight: usize, nice: u8) -> std::io::Result<Vec<Child>> {
     let spin = spin(workers).as_micros().to_string();
-    let exe = std::env::current_exe().context("locating the acps executable")?;
+    let exe = std::env::current_exe()?;
     (0..workers)
         .map(|i| {
             Command::new(&exe)
@@ -89,14 +102,13 @@ pub fn spawn(run: &RunName, workers: usize, in_flight: usize, nice: u8) -> anyho
                 ])
                 .stdin(Stdio::null())
                 .spawn()
-                .with_context(|| format!("starting worker {i}"))
         })
         .collect()
 }
 
 /// Wait for the workers to leave (they stop when the learner says the run is over or is gone);
 /// kill any that does not within a few seconds.
-pub fn reap(children: &mut [Child]) -> anyhow::Result<()> {
+pub fn reap(children: &mut [Child]) -> std::io::Result<()> {
     let deadline = Instant::now() + Duration::from_secs(5);
     for child in children.iter_mut() {
         loop {

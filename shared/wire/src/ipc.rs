@@ -367,14 +367,14 @@ mod tests {
     #[test]
     fn answers_carry_exactly_their_tasks() {
         use crate::wire::Response;
-        use crate::{Task, TaskKind};
+        use acps_shared::{Task, TaskKind};
         let run = RunName::new(&format!("test-answers-{}", std::process::id())).unwrap();
         {
             let node = node(&run, "test").unwrap();
             let services = open_services(&node).unwrap();
             let server = task_server(&run, &services.tasks).unwrap();
             let client = services.tasks.client_builder().create().unwrap();
-            let spec = crate::wire::EnvironmentSpec {
+            let spec = acps_shared::EnvironmentSpec {
                 model: 1,
                 options: [0; 3],
                 problem_seed: 0,

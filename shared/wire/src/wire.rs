@@ -10,7 +10,7 @@
 //! per batch instead of once per task. An answer is an [`Answer`] header over a slice of exactly
 //! the tasks it carries, written in place in shared memory.
 
-use crate::{Outcome, OutcomeStatus, Task, TaskKind};
+use acps_shared::{EnvironmentSpec, Outcome, OutcomeStatus, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
@@ -24,16 +24,36 @@ pub const MAX_DIAGNOSTICS: usize = 4;
 /// Most tasks one answer carries, and most outcomes one request carries.
 pub const MAX_BATCH: usize = 32;
 
-/// Which environment a task needs: workers build environments from this and cache them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+/// An [`EnvironmentSpec`] as it crosses the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
-pub struct EnvironmentSpec {
-    /// The model (see `acps_models::environment`).
+pub struct WireEnvironment {
+    /// [`EnvironmentSpec::model`].
     pub model: u32,
-    /// Model-specific small integers (for example the simulator, context dimension, n_theta).
+    /// [`EnvironmentSpec::options`].
     pub options: [u32; 3],
-    /// Seed of the problem instance (for example the contextual function's matrix A).
+    /// [`EnvironmentSpec::problem_seed`].
     pub problem_seed: u64,
+}
+
+impl From<EnvironmentSpec> for WireEnvironment {
+    fn from(spec: EnvironmentSpec) -> Self {
+        Self {
+            model: spec.model,
+            options: spec.options,
+            problem_seed: spec.problem_seed,
+        }
+    }
+}
+
+impl From<WireEnvironment> for EnvironmentSpec {
+    fn from(wire: WireEnvironment) -> Self {
+        Self {
+            model: wire.model,
+            options: wire.options,
+            problem_seed: wire.problem_seed,
+        }
+    }
 }
 
 /// What an answer to a worker means.
@@ -65,7 +85,7 @@ pub struct WireTask {
     /// Seed of everything random inside the rollout.
     pub seed: u64,
     /// The environment to perform it in.
-    pub environment: EnvironmentSpec,
+    pub environment: WireEnvironment,
     /// The context.
     pub context: [f64; MAX_CONTEXT],
     /// The parameters.
@@ -180,7 +200,7 @@ impl WireTask {
             theta_len,
             task_id: task.id,
             seed: task.seed,
-            environment,
+            environment: environment.into(),
             context,
             theta,
         })
@@ -324,7 +344,7 @@ mod tests {
             theta: (0..21).map(f64::from).collect(),
         };
         let wire = WireTask::new(5, &task, spec()).unwrap();
-        assert_eq!((wire.job, wire.environment), (5, spec()));
+        assert_eq!((wire.job, EnvironmentSpec::from(wire.environment)), (5, spec()));
         assert_eq!(wire.to_task(), task);
         let outcome = Outcome::new(42, -1.5, 12.0).with_diagnostics(vec![-3.4, -4.1]);
         let mut message = WorkerMessage::request(11, 4);

@@ -1,0 +1,11 @@
+//! The acps wire: what crosses shared memory between a learner and its workers, and how both
+//! sides open it.
+//!
+//! - [`wire`]: the fixed-size, `#[repr(C)]` payloads (tasks, outcomes, requests, answers), their
+//!   capacities and the protocol version.
+//! - [`ipc`]: run names, the iceoryx2 services every side opens with the same limits, and the
+//!   removal of what dead processes left.
+#![warn(missing_docs)]
+
+pub mod ipc;
+pub mod wire;
