@@ -126,6 +126,29 @@ pub trait Environment: Send {
     }
 }
 
+/// A boxed environment is one: a worker serves `Box<dyn Environment>` as it serves any other.
+impl<E: Environment + ?Sized> Environment for Box<E> {
+    fn context_dim(&self) -> usize {
+        (**self).context_dim()
+    }
+
+    fn param_dim(&self) -> usize {
+        (**self).param_dim()
+    }
+
+    fn rollout(&mut self, task: &Task) -> Outcome {
+        (**self).rollout(task)
+    }
+
+    fn save_state(&self) -> Vec<u8> {
+        (**self).save_state()
+    }
+
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), String> {
+        (**self).restore_state(state)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,11 +1,18 @@
 //! The acps fleet: learner cores served to worker processes over iceoryx2 shared memory.
 //!
-//! - [`server`]: serves any number of [`acps_learner::Learner`] cores to the workers of a run,
-//!   re-issuing the tasks of workers that die.
-//! - [`processes`]: worker processes this program starts, and their scheduling priority.
+//! - [`Fleet`]: one run's lifecycle: its name and identity, cleanup of what dead runs left,
+//!   the worker processes it starts, Ctrl-C, progress, and removal of its shared memory.
+//! - [`server`]: how tasks go out and outcomes come back, many learner cores at once; the
+//!   tasks of workers that die or hang are re-issued ([`Liveness`]).
+//! - [`processes`]: the scheduling priority of worker processes.
+//!
+//! Workers are `acps-worker`'s [`serve`](https://docs.rs/acps-worker) in any process; a
+//! fleet's results are bit for bit those of the same learners driven in-process.
 #![warn(missing_docs)]
 
+mod fleet;
 pub mod processes;
 pub mod server;
 
-pub use server::{FleetError, FleetJob, FleetProgress, ServeOptions, serve};
+pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};
+pub use server::{FleetError, FleetJob, FleetProgress, Liveness, Observer, ServeOptions};

@@ -1,7 +1,6 @@
-//! Worker processes started by this program: `acps worker` children of the current executable.
+//! Worker processes a fleet starts, and their scheduling priority.
 
-use acps_wire::ipc::RunName;
-use std::process::{Child, Command, Stdio};
+use std::process::Child;
 use std::time::{Duration, Instant};
 
 /// True when every process of a fleet of `workers` (the learner included) has a core of its own.
@@ -78,62 +77,28 @@ fn niceness() -> Result<i32, PriorityError> {
     Ok(nice)
 }
 
-/// Start `workers` worker processes for `run`, each keeping `in_flight` tasks in flight, at
-/// niceness `nice`.
-pub fn spawn(run: &RunName, workers: usize, in_flight: usize, nice: u8) -> std::io::Result<Vec<Child>> {
-    let spin = spin(workers).as_micros().to_string();
-    let exe = std::env::current_exe()?;
-    (0..workers)
-        .map(|i| {
-            Command::new(&exe)
-                .args([
-                    "worker",
-                    "--run",
-                    run.as_str(),
-                    "--in-flight",
-                    &in_flight.to_string(),
-                    "--spin-us",
-                    &spin,
-                    "--nice",
-                    &nice.to_string(),
-                    "--name",
-                    &format!("worker-{i}"),
-                    "-q",
-                ])
-                .stdin(Stdio::null())
-                .spawn()
-        })
-        .collect()
+/// How many of `children` are still running.
+pub fn running(children: &mut [Child]) -> usize {
+    children
+        .iter_mut()
+        .map(|child| matches!(child.try_wait(), Ok(None)))
+        .filter(|&running| running)
+        .count()
 }
 
 /// Wait for the workers to leave (they stop when the learner says the run is over or is gone);
-/// kill any that does not within a few seconds.
-pub fn reap(children: &mut [Child]) -> std::io::Result<()> {
+/// kill any that does not within a few seconds, or that cannot be waited for.
+pub fn reap(children: &mut [Child]) {
     let deadline = Instant::now() + Duration::from_secs(5);
     for child in children.iter_mut() {
-        loop {
-            if child.try_wait()?.is_some() {
-                break;
-            }
-            if Instant::now() > deadline {
-                let _ = child.kill();
-                let _ = child.wait();
-                break;
-            }
+        while matches!(child.try_wait(), Ok(None)) && Instant::now() < deadline {
             std::thread::sleep(Duration::from_millis(20));
         }
+        if !matches!(child.try_wait(), Ok(Some(_))) {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
     }
-    Ok(())
-}
-
-/// True when some child has exited.
-pub fn any_exited(children: &mut [Child]) -> bool {
-    children.iter_mut().any(|child| matches!(child.try_wait(), Ok(Some(_))))
-}
-
-/// True when every child has exited (a fleet without workers would wait forever).
-pub fn all_exited(children: &mut [Child]) -> bool {
-    !children.is_empty() && children.iter_mut().all(|child| matches!(child.try_wait(), Ok(Some(_))))
 }
 
 #[cfg(test)]

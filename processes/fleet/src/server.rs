@@ -6,11 +6,19 @@
 //! the cores that have one ready, so even P = 1 runs keep many workers busy, and every core's
 //! trajectory stays the one it has in-process.
 //!
-//! Faults: on a tick (50 ms) after which a connected worker has been silent, or a worker holding
-//! tasks is no longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live
-//! clients, and re-issues exactly the tasks held by clients that are gone. A late outcome of a
-//! re-issued task is recognised as a duplicate and dropped. Workers of another build or run are
-//! refused.
+//! Faults, looked for every tick (50 ms):
+//! - A worker that died: once a connected worker has been silent, or a worker holding tasks is no
+//!   longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live clients,
+//!   and re-issues exactly the tasks held by clients that are gone.
+//! - A worker that lives but says nothing (stopped, hung in a rollout): one that holds tasks and
+//!   has sent nothing for its deadline ([`Liveness`]) is treated as dead for those tasks, which
+//!   are re-issued; it gets no new tasks until it speaks again.
+//! - No worker at all: with no connected worker and no started one on its way for
+//!   [`Liveness::no_workers`], the run stops with [`FleetError::NoWorkers`].
+//!
+//! A late outcome of a re-issued task is recognised as a duplicate and dropped (or, arriving
+//! first, accepted: the rollout is seeded, so both copies carry the same bits). Workers of
+//! another build or run are refused.
 
 use acps_learner::{Learner, LearningProgress, TellError};
 use acps_shared::EnvironmentSpec;
@@ -20,7 +28,6 @@ use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::{HashMap, HashSet, VecDeque};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// How long the server tells queued outcomes before it looks for requests again.
@@ -43,6 +50,8 @@ pub struct FleetProgress {
     pub outcomes: u64,
     /// Connected workers.
     pub workers: usize,
+    /// Worker processes the fleet started that are still running (connected or not).
+    pub started_running: usize,
     /// Tasks re-issued because their worker died.
     pub reissued: u64,
     /// Outcomes dropped as duplicates (a re-issued task answered twice).
@@ -63,21 +72,71 @@ pub struct FleetProgress {
 /// A fleet run that could not complete.
 #[derive(Debug, thiserror::Error)]
 pub enum FleetError {
-    /// iceoryx2 failed.
+    /// iceoryx2 failed: creating the run's node, ports or services, or exchanging messages.
     #[error(transparent)]
     Ipc(#[from] IpcError),
-    /// Another learner already serves this run.
-    #[error("another learner already serves run '{0}'; choose another --run name")]
+    /// Another learner already serves this run name.
+    #[error("another learner already serves run '{0}'; choose another run name")]
     RunTaken(String),
     /// A task does not fit the wire.
     #[error(transparent)]
     Capacity(#[from] CapacityError),
-    /// The stop flag was set (Ctrl-C).
+    /// The stop flag was set (Ctrl-C, or the caller's [`Fleet::stop_flag`](crate::Fleet::stop_flag)).
     #[error("interrupted")]
     Interrupted,
-    /// The caller's `after_tell` hook failed (for example writing a checkpoint).
+    /// No worker was connected and none was on its way for the grace period
+    /// ([`Liveness::no_workers`]): every started worker exited, and no other joined.
+    #[error(
+        "no worker can go on with run '{run}': none connected for {waited:?}{started}",
+        started = if *started > 0 { format!(", and all {started} started worker processes exited (see their messages above)") } else { String::new() }
+    )]
+    NoWorkers {
+        /// The run.
+        run: String,
+        /// Worker processes the fleet started.
+        started: usize,
+        /// How long the run was without a worker.
+        waited: Duration,
+    },
+    /// A worker process could not be started.
+    #[error("starting worker process {program}: {error}")]
+    Spawn {
+        /// The program.
+        program: String,
+        /// The operating system's reason.
+        error: String,
+    },
+    /// The observer's [`Observer::told`] failed (for example writing a checkpoint).
     #[error(transparent)]
-    Hook(Box<dyn std::error::Error + Send + Sync>),
+    Observer(Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// When the server gives up on workers. The defaults suit rollouts of up to a second or so:
+/// a run whose rollouts are slower should raise [`silence`](Self::silence) above the first
+/// rollout's duration, or that rollout runs twice (once; results do not change).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Liveness {
+    /// A worker holding tasks that has sent nothing for this long, and for
+    /// [`rollout_factor`](Self::rollout_factor) times the slowest rollout any worker has
+    /// reported, is hung: its tasks are handed to others.
+    pub silence: Duration,
+    /// See [`silence`](Self::silence).
+    pub rollout_factor: u32,
+    /// Stop with [`FleetError::NoWorkers`] once no worker has been connected, and no started
+    /// worker process has been running, for this long; `None`: wait for workers forever (for a
+    /// fleet that starts none and waits for workers started by hand).
+    pub no_workers: Option<Duration>,
+}
+
+impl Default for Liveness {
+    /// 5 s of silence and 4 times the slowest rollout; 10 s without workers.
+    fn default() -> Self {
+        Self {
+            silence: Duration::from_secs(5),
+            rollout_factor: 4,
+            no_workers: Some(Duration::from_secs(10)),
+        }
+    }
 }
 
 /// How [`serve`] serves.
@@ -92,18 +151,47 @@ pub struct ServeOptions {
     /// once). A benchmark waits for its whole fleet, so that its clock measures every worker
     /// and no worker's start-up; a run should not wait, its first tasks are done sooner.
     pub start_with: usize,
+    /// When workers are given up on.
+    pub liveness: Liveness,
 }
 
-/// Serve `jobs` to the workers of `run` until every job is done. `after_tell` sees a job's
-/// learner after every outcome it accepted (the place to write checkpoints); an error it returns
-/// ends the run.
-pub fn serve(
+/// What a fleet run tells its caller while it serves.
+pub trait Observer {
+    /// The run's progress, every tick (50 ms) and once at the end.
+    fn progress(&mut self, progress: &FleetProgress) {
+        let _ = progress;
+    }
+
+    /// Job `job`'s learner after every outcome it accepted: the place to write checkpoints. An
+    /// error ends the run with [`FleetError::Observer`].
+    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        let _ = (job, learner);
+        Ok(())
+    }
+}
+
+/// A closure observes the progress.
+impl<F: FnMut(&FleetProgress)> Observer for F {
+    fn progress(&mut self, progress: &FleetProgress) {
+        self(progress)
+    }
+}
+
+/// What the server knows of a worker.
+struct Client {
+    /// When its last request arrived.
+    heard: Instant,
+}
+
+/// Serve `jobs` to the workers of `run` until every job is done. `started` says how many worker
+/// processes the caller started are still running (they count as workers on their way).
+pub(crate) fn serve(
     jobs: &mut [FleetJob],
     run: &RunName,
     options: ServeOptions,
-    stop: &AtomicBool,
-    mut observe: impl FnMut(&FleetProgress),
-    mut after_tell: impl FnMut(usize, &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
+    stop: &dyn Fn() -> bool,
+    observer: &mut dyn Observer,
+    started: &mut dyn FnMut() -> (usize, usize),
 ) -> Result<FleetProgress, FleetError> {
     let identity = options.identity;
     let node = ipc::node(run, "learner")?;
@@ -138,12 +226,22 @@ pub fn serve(
     // Workers that asked for tasks, until `start_with` have; then the time the first tasks went out.
     let mut waiting_for = HashSet::new();
     let mut serving_since = None;
+    let mut clients: HashMap<UniqueClientId, Client> = HashMap::new();
+    // Workers found hung: they get no tasks until they speak again.
+    let mut hung: HashSet<UniqueClientId> = HashSet::new();
+    let mut slowest_rollout = Duration::ZERO;
+    let mut without_workers: Option<Instant> = None;
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
             active_now = true;
             heard.insert(request.origin());
+            clients.insert(request.origin(), Client { heard: Instant::now() });
+            if hung.remove(&request.origin()) {
+                tracing::info!("run '{run}': a worker found hung speaks again");
+            }
             let message = request.payload();
+            slowest_rollout = slowest_rollout.max(message.slowest_rollout());
             if message.protocol != PROTOCOL_VERSION || (message.run != 0 && message.run != identity) {
                 progress.refused += 1;
                 if refused_clients.insert(request.origin()) {
@@ -181,7 +279,15 @@ pub fn serve(
         // workers get them without waiting for the C-REPS updates (a millisecond each) of the
         // outcomes queued before theirs.
         let answered = if serving_since.is_some() {
-            answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?
+            answer(
+                jobs,
+                &mut parked,
+                &hung,
+                &mut holders,
+                &mut next_job,
+                identity,
+                &mut progress,
+            )?
         } else {
             0
         };
@@ -209,7 +315,9 @@ pub fn serve(
             match told {
                 Some(Ok(())) => {
                     progress.outcomes += 1;
-                    after_tell(job as usize, &jobs[job as usize].learner).map_err(FleetError::Hook)?;
+                    observer
+                        .told(job as usize, &jobs[job as usize].learner)
+                        .map_err(FleetError::Observer)?;
                 }
                 Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
                     progress.duplicates += 1
@@ -228,11 +336,13 @@ pub fn serve(
             let _ = notifier.notify();
             progress.serving_seconds = serving();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
-            observe(&progress);
+            observer.progress(&progress);
             return Ok(progress);
         }
         if last_tick.elapsed() >= TICK {
             last_tick = Instant::now();
+            let (running, launched) = started();
+            progress.started_running = running;
             progress.serving_seconds = serving();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
             // Looking for dead workers lists the run's nodes, twice (about 0.3 ms each, 1% of
@@ -252,16 +362,36 @@ pub fn serve(
                 let Some(live) =
                     reissue_tasks_of_dead_workers(run, &services.tasks, jobs, &mut holders, &mut progress.reissued)
                 else {
-                    observe(&progress);
+                    observer.progress(&progress);
                     continue;
                 };
                 progress.workers = live;
             } else {
                 progress.workers = connected.len();
             }
-            observe(&progress);
+            let deadline = options
+                .liveness
+                .silence
+                .max(slowest_rollout * options.liveness.rollout_factor);
+            progress.reissued +=
+                reissue_tasks_of_silent_workers(run, jobs, &mut holders, &clients, &mut hung, deadline);
+            clients.retain(|client, _| connected.contains(client));
+            hung.retain(|client| connected.contains(client));
+            if progress.workers > 0 || progress.started_running > 0 {
+                without_workers = None;
+            } else if let Some(grace) = options.liveness.no_workers {
+                let since = *without_workers.get_or_insert_with(Instant::now);
+                if since.elapsed() >= grace {
+                    return Err(FleetError::NoWorkers {
+                        run: run.to_string(),
+                        started: launched,
+                        waited: since.elapsed(),
+                    });
+                }
+            }
+            observer.progress(&progress);
         }
-        if stop.load(Ordering::Relaxed) {
+        if stop() {
             return Err(FleetError::Interrupted);
         }
         if active_now || answered > 0 || told_any {
@@ -317,11 +447,40 @@ fn reissue_tasks_of_dead_workers(
     Some(live.len())
 }
 
+/// Give the tasks held by workers silent for longer than `deadline` back to their learners, and
+/// mark those workers hung. Returns how many tasks were re-issued.
+fn reissue_tasks_of_silent_workers(
+    run: &RunName,
+    jobs: &mut [FleetJob],
+    holders: &mut HashMap<(u32, u64), UniqueClientId>,
+    clients: &HashMap<UniqueClientId, Client>,
+    hung: &mut HashSet<UniqueClientId>,
+    deadline: Duration,
+) -> u64 {
+    let silent = |client: &UniqueClientId| clients.get(client).is_some_and(|c| c.heard.elapsed() > deadline);
+    let mut reissued = 0;
+    holders.retain(|&(job, task_id), client| {
+        if !silent(client) {
+            return true;
+        }
+        if hung.insert(*client) {
+            tracing::warn!(
+                "run '{run}': a worker holding tasks has sent nothing for {deadline:?}; its tasks go to other workers (raise the fleet's liveness deadline if rollouts take longer)"
+            );
+        }
+        reissued += u64::from(jobs[job as usize].learner.reissue(task_id));
+        false
+    });
+    reissued
+}
+
 /// Answer parked requests, each with as many ready tasks as it asks for (round robin over the
-/// jobs), as soon as at least one is ready; returns how many tasks went out.
+/// jobs), as soon as at least one is ready; returns how many tasks went out. Requests of hung
+/// workers stay parked.
 fn answer(
     jobs: &mut [FleetJob],
     parked: &mut VecDeque<(TaskRequest, usize)>,
+    hung: &HashSet<UniqueClientId>,
     holders: &mut HashMap<(u32, u64), UniqueClientId>,
     next_job: &mut usize,
     identity: u64,
@@ -330,8 +489,13 @@ fn answer(
     let mut answered = 0;
     // Allocated only when a request is waiting: most passes have none.
     let mut tasks = Vec::new();
+    let mut held_back = Vec::new();
     while let Some((request, want)) = parked.pop_front() {
         if !request.is_connected() {
+            continue;
+        }
+        if hung.contains(&request.origin()) {
+            held_back.push((request, want));
             continue;
         }
         tasks.clear();
@@ -352,6 +516,7 @@ fn answer(
         ipc::reply(&request, Answer::new(Response::Task, identity), &tasks)?;
         answered += tasks.len();
     }
+    parked.extend(held_back);
     Ok(answered)
 }
 

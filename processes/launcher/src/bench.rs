@@ -5,18 +5,15 @@
 //! to W times one thread (the ratio).
 
 use crate::paper::{self, Options, Sim};
-use acps_fleet::processes as workers;
-use acps_fleet::{self as fleet, FleetError, FleetJob, ServeOptions};
+use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress};
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
 use acps_models::environment::{self, TrivialEnvironment};
 use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
-use acps_wire::ipc::{self, RunName};
 use anyhow::Context;
 use rayon::prelude::*;
 use serde::Serialize;
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 /// One measurement.
@@ -62,7 +59,7 @@ impl Row {
 
 /// What a fleet row measures beyond the rate.
 #[derive(Clone, Copy)]
-struct Fleet {
+struct FleetCost {
     learner_seconds: f64,
     startup_seconds: f64,
 }
@@ -248,7 +245,7 @@ impl Mode {
 struct Measurement {
     rollouts: u64,
     seconds: f64,
-    fleet: Option<Fleet>,
+    fleet: Option<FleetCost>,
 }
 
 impl Measurement {
@@ -358,7 +355,7 @@ fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<
 
 /// The jobs of `workload` served to a fleet of `workers` processes started for it.
 fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::Result<Measurement> {
-    let run = RunName::new(&format!("bench-{}-{}-{workers}", std::process::id(), workload.name()))?;
+    let name = format!("bench-{}-{}-{workers}", std::process::id(), workload.name());
     let mut fleet_jobs: Vec<FleetJob> = jobs(workload, options.scale)?
         .into_iter()
         .map(|j| FleetJob {
@@ -366,48 +363,38 @@ fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::
             environment: j.spec,
         })
         .collect();
-    let nice = options.worker_nice.unwrap_or_else(|| workers::default_nice(workers));
-    let mut children = workers::spawn(&run, workers, options.worker_in_flight, nice)?;
+    let mut builder = Fleet::builder(name)
+        .identity(0x0bec_4000 + workers as u64)
+        .spawn_workers(workers, crate::workers::command(options.worker_in_flight, workers))
+        // The clock starts with the whole fleet at work, not with its first worker.
+        .start_with(workers);
+    if let Some(nice) = options.worker_nice {
+        builder = builder.worker_niceness(nice);
+    }
+    let mut fleet = builder.start()?;
+    let stop = fleet.stop_flag();
+    let mut worker_died = false;
     let start = Instant::now();
-    let stop = AtomicBool::new(false);
-    let served = fleet::serve(
-        &mut fleet_jobs,
-        &run,
-        ServeOptions {
-            identity: 0x0bec_4000 + workers as u64,
-            spin: workers::spin(workers),
-            // The clock starts with the whole fleet at work, not with its first worker.
-            start_with: workers,
-        },
-        &stop,
-        |_| {
-            // Workers leave only once the learner is done: one gone means a broken fleet,
-            // which would also keep the fleet from starting.
-            if workers::any_exited(&mut children) {
-                stop.store(true, std::sync::atomic::Ordering::Relaxed);
-            }
-        },
-        |_, _| Ok(()),
-    );
+    let served = fleet.serve(&mut fleet_jobs, &mut |progress: &FleetProgress| {
+        // Workers leave only once the learner is done: one gone means a broken fleet, which
+        // would also keep the fleet from starting.
+        if progress.started_running < workers {
+            worker_died = true;
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    });
     let total_seconds = start.elapsed().as_secs_f64();
-    // Checked before the reaping, which waits for every worker to leave: a worker that died
-    // explains a failure, for example one that died while creating the run's services.
-    let worker_died = workers::any_exited(&mut children);
-    let reaped = workers::reap(&mut children);
-    let cleaned = ipc::remove_run_files(&run);
     let context = || format!("fleet of {workers} on {}", workload.name());
     let died = || format!("{}: a worker exited before the bench was done", context());
     let progress = match served {
-        Err(FleetError::Interrupted) => anyhow::bail!(died()),
+        Err(FleetError::Interrupted) if worker_died => anyhow::bail!(died()),
         Err(error) if worker_died => return Err(anyhow::Error::new(error).context(died())),
         served => served.with_context(context)?,
     };
-    reaped?;
-    cleaned?;
     Ok(Measurement {
         rollouts: progress.outcomes,
         seconds: progress.serving_seconds,
-        fleet: Some(Fleet {
+        fleet: Some(FleetCost {
             learner_seconds: progress.learner_seconds,
             startup_seconds: total_seconds - progress.serving_seconds,
         }),

@@ -6,7 +6,7 @@
 
 use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::Progress;
-use acps_fleet::{self as fleet, FleetError, FleetJob, FleetProgress, ServeOptions};
+use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress, Observer};
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::{
@@ -15,12 +15,10 @@ use acps_learner::{
 };
 use acps_shared::EnvironmentSpec;
 use acps_shared::{Environment, Problem};
-use acps_wire::ipc::RunName;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
 use std::sync::{Mutex, PoisonError};
 
 /// One problem instance: what the learner sees, the environment, and a known optimal score.
@@ -206,6 +204,28 @@ impl BestPolicy {
             }
         }
         best
+    }
+}
+
+/// A fleet run's observer: shows the progress and writes every job's checkpoints.
+struct Checkpointing<F> {
+    writers: Vec<Option<Writer>>,
+    environments: Vec<Box<dyn Environment>>,
+    observe: F,
+}
+
+impl<F: FnMut(&FleetProgress)> Observer for Checkpointing<F> {
+    fn progress(&mut self, progress: &FleetProgress) {
+        (self.observe)(progress)
+    }
+
+    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        match &mut self.writers[job] {
+            Some(writer) => writer
+                .after_tell(learner, self.environments[job].as_ref())
+                .map_err(Into::into),
+            None => Ok(()),
+        }
     }
 }
 
@@ -404,19 +424,17 @@ impl Experiment {
         Ok(job.result())
     }
 
-    /// Serve every (method, run) learner to the workers of `run` and summarise; `observe` sees
-    /// the fleet's progress every tick. With `checkpoints`, jobs continue from their checkpoints
+    /// Serve every (method, run) learner through `fleet` and summarise; `observe` sees the
+    /// fleet's progress every tick. With `checkpoints`, jobs continue from their checkpoints
     /// when resuming and write checkpoints between outcomes, and every unfinished job writes one
     /// when the run is interrupted.
     pub fn run_fleet(
         &self,
-        run: &RunName,
-        spin: std::time::Duration,
-        stop: &AtomicBool,
+        fleet: &mut Fleet,
         checkpoints: Option<&Checkpoints>,
         observe: impl FnMut(&FleetProgress),
     ) -> Result<(Summary, FleetProgress), RunError> {
-        let (jobs, mut writers): (Vec<Job>, Vec<Option<Writer>>) = match checkpoints {
+        let (jobs, writers): (Vec<Job>, Vec<Option<Writer>>) = match checkpoints {
             Some(checkpoints) => self
                 .resumed_jobs(checkpoints)?
                 .into_iter()
@@ -438,23 +456,15 @@ impl Experiment {
             ));
         }
         let (mut learners, environments): (Vec<FleetJob>, Vec<_>) = fleet_jobs.into_iter().unzip();
-        let served = fleet::serve(
-            &mut learners,
-            run,
-            ServeOptions {
-                identity: self.identity(),
-                spin,
-                start_with: 0,
-            },
-            stop,
+        let mut observer = Checkpointing {
+            writers,
+            environments,
             observe,
-            |job, learner| match &mut writers[job] {
-                Some(writer) => writer
-                    .after_tell(learner, environments[job].as_ref())
-                    .map_err(Into::into),
-                None => Ok(()),
-            },
-        );
+        };
+        let served = fleet.serve(&mut learners, &mut observer);
+        let Checkpointing {
+            writers, environments, ..
+        } = observer;
         if let Err(FleetError::Interrupted) = served {
             // Tasks out with workers are handed out again after a restore, so nothing is lost.
             for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {

@@ -4,8 +4,9 @@ use acps::bench::BenchEvent;
 use acps::checkpoints::Checkpoints;
 use acps::config::{self, ExperimentFile, Job, LoadedFile, Plan};
 use acps::experiment::{Experiment, Summary};
-use acps::models::ModelFactory;
 use acps::progress::Progress;
+use acps::workers::ModelFactory;
+use acps_fleet::Fleet;
 use acps_wire::ipc::{self, RunName};
 use acps_worker::{WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
@@ -99,13 +100,6 @@ struct EvaluateArgs {
     render: Option<PathBuf>,
 }
 
-/// `acps run`'s arguments on their own, to parse the command `acps learn` stands for.
-#[derive(Parser)]
-struct RunCommand {
-    #[command(flatten)]
-    args: RunArgs,
-}
-
 #[derive(clap::Args)]
 struct LearnArgs {
     /// Worker processes (default: the number of cores).
@@ -132,37 +126,32 @@ struct LearnArgs {
 }
 
 impl LearnArgs {
-    /// The arguments of the `acps run` command this stands for.
-    fn run_command(&self) -> Vec<String> {
-        let sim = match self.sim {
-            config::SimName::Analytic => "analytic",
-            config::SimName::Rapier => "rapier",
+    /// The `acps run` this stands for.
+    fn run_args(self) -> RunArgs {
+        let settings = ExperimentFile {
+            experiment: Some(config::ExperimentName::Grid),
+            sim: Some(self.sim),
+            runs: Some(self.runs),
+            episodes: Some(self.episodes),
+            in_flight: Some(8),
+            methods: Some(vec![acps_learner::Method::MonotonicProgress]),
+            ..ExperimentFile::default()
         };
-        let mut args: Vec<String> = [
-            "acps run",
-            "grid",
-            "--sim",
-            sim,
-            "--method",
-            "monotonic-progress",
-            "--in-flight",
-            "8",
-        ]
-        .map(String::from)
-        .into();
-        args.extend(["--runs".into(), self.runs.to_string()]);
-        args.extend(["--episodes".into(), self.episodes.to_string()]);
-        args.extend(["--out".into(), self.out.display().to_string()]);
-        if let Some(workers) = self.workers {
-            args.extend(["--workers".into(), workers.to_string()]);
+        RunArgs {
+            experiment: ExperimentArgs {
+                config: None,
+                settings,
+                save_config: None,
+                out: Some(self.out),
+                checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
+                resume: None,
+                quiet: self.quiet,
+            },
+            workers: self.workers,
+            worker_in_flight: DEFAULT_WORKER_IN_FLIGHT,
+            worker_nice: WorkerNiceArg { worker_nice: None },
+            run: self.run,
         }
-        if let Some(run) = &self.run {
-            args.extend(["--run".into(), run.clone()]);
-        }
-        if self.quiet {
-            args.push("--quiet".into());
-        }
-        args
     }
 }
 
@@ -212,21 +201,22 @@ struct RunArgs {
     workers: Option<usize>,
     /// Tasks each started worker keeps in flight, asked for or queued (1..=128; at most 8 of
     /// rollouts slower than a batch's 800 us, which travel alone).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = DEFAULT_WORKER_IN_FLIGHT)]
     worker_in_flight: usize,
     #[command(flatten)]
     worker_nice: WorkerNiceArg,
-    /// The run's name: its shared-memory prefix, and how workers started by hand join it
-    /// (default: EXPERIMENT-PID).
+    /// The run's name (letters, digits and '-'): its shared-memory prefix, and how workers
+    /// started by hand join it (default: EXPERIMENT-PID).
     #[arg(long)]
     run: Option<String>,
 }
 
 #[derive(clap::Args)]
 struct WorkerArgs {
-    /// The run to join (the learner's --run).
+    /// The run to join (the learner's --run) [default: the ACPS_RUN environment variable, which
+    /// a learner sets for the workers it starts].
     #[arg(long)]
-    run: String,
+    run: Option<String>,
     /// Tasks kept in flight, asked for or queued (1..=128): more hides the wake-up latency
     /// between processes; cheap rollouts travel in batches of up to half of them, and at most 8
     /// of rollouts slower than a batch's 800 us, which travel alone, are in flight.
@@ -268,7 +258,7 @@ struct ExperimentArgs {
     /// Write each (method, run) job's checkpoint to DIR/checkpoints after every N learning
     /// rounds (C-REPS updates; evaluations for the toy model, which has no policy) and when the
     /// job ends; 0: no checkpoints. A run started without --resume removes old checkpoints there.
-    #[arg(long, value_name = "N", default_value_t = 10)]
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CHECKPOINT_EVERY)]
     checkpoint_every: u64,
     /// Continue the run whose output directory is DIR from its checkpoints, after a crash, a
     /// kill or Ctrl-C; give the arguments the run was started with. The result is bit for bit
@@ -279,6 +269,11 @@ struct ExperimentArgs {
     #[arg(long, short)]
     quiet: bool,
 }
+
+/// Default of `acps run --worker-in-flight`.
+const DEFAULT_WORKER_IN_FLIGHT: usize = 4;
+/// Default of `--checkpoint-every`.
+const DEFAULT_CHECKPOINT_EVERY: u64 = 10;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -313,7 +308,7 @@ fn interrupted(error: &anyhow::Error) -> bool {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Experiment(args) => experiment(args),
-        Command::Learn(args) => fleet(RunCommand::try_parse_from(args.run_command())?.args),
+        Command::Learn(args) => fleet(args.run_args()),
         Command::Run(args) => fleet(args),
         Command::Worker(args) => worker(args),
         Command::Bench(args) => bench(args),
@@ -392,9 +387,6 @@ fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Run the experiments through a fleet: this process serves the learners, `--workers` worker
-/// processes simulate. Shared memory of the run is cleaned before and after, also on errors
-/// and Ctrl-C.
 /// Refuse a per-worker window the task service cannot hold.
 fn check_worker_in_flight(option: &str, value: usize) -> anyhow::Result<()> {
     if !(1..=ipc::MAX_IN_FLIGHT_PER_WORKER).contains(&value) {
@@ -403,85 +395,58 @@ fn check_worker_in_flight(option: &str, value: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Run the experiments through a fleet: this process serves the learners, `--workers` worker
+/// processes simulate. The fleet removes the run's shared memory when it ends, also on errors
+/// and Ctrl-C.
 fn fleet(args: RunArgs) -> anyhow::Result<()> {
     check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
     let Some(jobs) = jobs(&args.experiment)? else {
         return Ok(());
     };
     check_resumable(&args.experiment, &jobs)?;
-    let run = RunName::new(
-        &args
-            .run
-            .clone()
-            .unwrap_or_else(|| format!("{}-{}", jobs[0].experiment.name, std::process::id())),
-    )?;
-    // A crashed earlier run of the same name may have left resources behind; workers started by
-    // hand may already be waiting, so only dead nodes are cleaned while anything is alive.
-    clean_up(&run, false);
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
+    let name = args
+        .run
+        .clone()
+        .unwrap_or_else(|| format!("{}-{}", jobs[0].experiment.name, std::process::id()));
     let workers = args
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let result = (|| -> anyhow::Result<()> {
-        for Job {
-            experiment,
-            dir,
-            config,
-        } in &jobs
-        {
-            let nice = args
-                .worker_nice
-                .worker_nice
-                .unwrap_or_else(|| acps_fleet::processes::default_nice(workers));
-            let mut children = acps_fleet::processes::spawn(&run, workers, args.worker_in_flight, nice)?;
-            let progress = Progress::new(&experiment.name, args.experiment.quiet);
-            let mut workers_lost = false;
-            let checkpoints = checkpoints(&args.experiment, dir);
-            let spin = acps_fleet::processes::spin(workers);
-            let outcome = experiment.run_fleet(&run, spin, &stop, checkpoints.as_ref(), |p| {
-                // Ctrl-C stops the workers too; only workers gone on their own are lost.
-                if !stop.load(Ordering::Relaxed) && acps_fleet::processes::all_exited(&mut children) {
-                    workers_lost = true;
-                    stop.store(true, Ordering::Relaxed);
-                }
-                progress.show(&p.learning, p.outcomes, Some(p.workers));
-            });
-            progress.finish();
-            if workers_lost {
-                bail!("all {workers} workers of run '{run}' exited before the run was done (see their messages above)");
+    for Job {
+        experiment,
+        dir,
+        config,
+    } in &jobs
+    {
+        let mut builder = Fleet::builder(name.as_str())
+            .identity(experiment.identity())
+            .ctrl_c(true);
+        if workers > 0 {
+            builder = builder.spawn_workers(workers, acps::workers::command(args.worker_in_flight, workers));
+            if let Some(nice) = args.worker_nice.worker_nice {
+                builder = builder.worker_niceness(nice);
             }
-            let reaped = acps_fleet::processes::reap(&mut children);
-            let (summary, report) =
-                outcome.with_context(|| format!("experiment {} on run '{run}'", experiment.name))?;
-            reaped?;
-            if !args.experiment.quiet {
-                println!(
-                    "{} on {workers} workers: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
-                    experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
-                );
-            }
-            write(experiment, &summary, dir, config, args.experiment.quiet)?;
         }
-        Ok(())
-    })();
-    clean_up(&run, true);
-    result
-}
-
-/// Remove the run's shared memory, or, while nodes started elsewhere (workers started by hand,
-/// embedding programs) are alive, only what dead nodes left: the last one out leaves a
-/// management file that the next run of the same name removes. A node may appear at any moment
-/// (a worker joining), which only means the files stay.
-fn clean_up(run: &RunName, at_end: bool) {
-    // Listing nodes can fail while one is being created or removed; then there is nothing
-    // certain to remove, and the next start of the run looks again.
-    let _ = ipc::clean_stale(run);
-    let removed = ipc::live_nodes(run).is_ok_and(|alive| alive == 0) && ipc::remove_run_files(run).is_ok();
-    if !removed && at_end {
-        eprintln!("run '{run}': nodes started elsewhere are still alive; their shared memory stays until they exit");
+        let mut fleet = builder.start().with_context(|| format!("--run {name}"))?;
+        let run = fleet.run().clone();
+        if workers == 0 {
+            eprintln!("run '{run}' waits for workers: start them with `acps worker --run {run}`");
+        }
+        let progress = Progress::new(&experiment.name, args.experiment.quiet);
+        let checkpoints = checkpoints(&args.experiment, dir);
+        let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), |p| {
+            progress.show(&p.learning, p.outcomes, Some(p.workers));
+        });
+        progress.finish();
+        let (summary, report) = outcome.with_context(|| format!("experiment {} on run '{run}'", experiment.name))?;
+        if !args.experiment.quiet {
+            println!(
+                "{} on {workers} workers: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
+                experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
+            );
+        }
+        write(experiment, &summary, dir, config, args.experiment.quiet)?;
     }
+    Ok(())
 }
 
 fn bench(args: BenchArgs) -> anyhow::Result<()> {
@@ -539,7 +504,15 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
 fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     // Before the Ctrl-C handler's thread exists: Linux sets a niceness per thread.
     acps_fleet::processes::lower_priority(args.nice)?;
-    let run = RunName::new(&args.run)?;
+    let run = match args.run {
+        Some(name) => RunName::new(&name)?,
+        None => RunName::from_env()?.with_context(|| {
+            format!(
+                "--run is missing: name the run to join (the learner's --run), or set {}",
+                ipc::RUN_ENV
+            )
+        })?,
+    };
     check_worker_in_flight("--in-flight", args.in_flight)?;
     if !(args.startup_timeout.is_finite() && args.startup_timeout >= 0.0) {
         bail!(
@@ -556,7 +529,8 @@ fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
         spin: Duration::from_micros(args.spin_us),
     };
-    let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop)?;
+    let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop)
+        .with_context(|| format!("joining run '{run}' (its learner: `acps run ... --run {run}`)"))?;
     if !args.quiet || report.exit == WorkerExit::LearnerGone {
         eprintln!(
             "worker {}: {:?} after {} rollouts",

@@ -1,13 +1,13 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
-use acps::models::ModelFactory;
 use acps::paper::{self, Options, Sim};
-use acps_fleet::{self as fleet, FleetJob, ServeOptions};
+use acps::workers::ModelFactory;
+use acps_fleet::{Fleet, FleetJob, FleetProgress, Liveness};
 use acps_learner::{Method, run_in_process};
 use acps_shared::{Environment, Outcome, Task};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, Response, WorkerMessage};
-use acps_worker::{Single, WorkerExit, WorkerOptions};
+use acps_worker::{EnvironmentFactory, Single, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -153,6 +153,31 @@ fn learn_is_the_fleet_run_of_monotonic_progress_it_documents() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// Wait until `condition` holds, polling; panics naming `what` after `limit` (a watchdog, not a
+/// timing claim).
+fn wait_until(what: &str, limit: Duration, mut condition: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !condition() {
+        assert!(start.elapsed() < limit, "waited {limit:?} for {what}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// True once `dir` holds a file.
+fn has_files(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|mut entries| entries.next().is_some())
+}
+
+/// The number R of "..., N outcomes, R re-issued, ..." that a fleet run prints.
+fn reissued(stdout: &str) -> u64 {
+    stdout
+        .split(" re-issued")
+        .next()
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0)
+}
+
 /// Wait for `child` to exit, at most `limit`.
 fn wait_for(child: &mut Child, limit: Duration) -> Option<Duration> {
     let start = Instant::now();
@@ -229,20 +254,17 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
         .args(["worker", "--run", run.as_str(), "--name", "victim", "-q"])
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(600));
+    // The learner, its worker and the victim are in, and learning has begun.
+    wait_until("the victim to join a learning run", Duration::from_secs(60), || {
+        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&out.join("checkpoints"))
+    });
     assert!(victim.try_wait().unwrap().is_none(), "the victim must still be working");
     kill(&mut victim);
     let output = learner.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     // "grid on 1 workers: N outcomes, R re-issued, ...": the victim held tasks when it died.
-    let reissued: u64 = stdout
-        .split(" re-issued")
-        .next()
-        .and_then(|s| s.rsplit(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or(0);
-    assert!(reissued >= 1, "{stdout}");
+    assert!(reissued(&stdout) >= 1, "{stdout}");
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
     let _ = std::fs::remove_dir_all(dir);
@@ -316,7 +338,9 @@ fn ctrl_c_stops_a_fleet_run_and_resume_finishes_it() {
             .unwrap()
     };
     let learner = fleet(&[]);
-    std::thread::sleep(Duration::from_millis(400));
+    wait_until("a first checkpoint", Duration::from_secs(60), || {
+        has_files(&out.join("checkpoints"))
+    });
     // Ctrl-C in a shell signals the whole foreground group.
     signal_group("-INT", learner.id());
     let output = learner.wait_with_output().unwrap();
@@ -356,7 +380,9 @@ fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
                 .unwrap()
         })
         .collect();
-    std::thread::sleep(Duration::from_millis(800));
+    wait_until("both workers to join a learning run", Duration::from_secs(60), || {
+        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&dir.join("a").join("checkpoints"))
+    });
     kill(&mut learner);
     for worker in &mut workers {
         let waited = wait_for(worker, Duration::from_secs(10));
@@ -615,12 +641,13 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
 }
 
 /// How the tests serve in-process jobs: no polling, a fixed run identity.
-fn serve_options(start_with: usize) -> ServeOptions {
-    ServeOptions {
-        identity: 7,
-        spin: Duration::ZERO,
-        start_with,
-    }
+fn test_fleet(run: &RunName, start_with: usize) -> Fleet {
+    Fleet::builder(run.as_str())
+        .identity(7)
+        .spin(Duration::ZERO)
+        .start_with(start_with)
+        .start()
+        .unwrap()
 }
 
 /// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`), its jobs ready for a
@@ -696,21 +723,16 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
             acps_worker::serve(&run, &options, &mut Single(environment), &AtomicBool::new(false))
         });
         // A deadlock fails the test instead of hanging it.
-        let stop = AtomicBool::new(false);
+        let mut fleet = test_fleet(&run, 0);
+        let stop = fleet.stop_flag();
         let started = Instant::now();
-        let progress = fleet::serve(
-            &mut jobs,
-            &run,
-            serve_options(0),
-            &stop,
-            |_| {
+        let progress = fleet
+            .serve(&mut jobs, &mut |_: &FleetProgress| {
                 if started.elapsed() > Duration::from_secs(60) {
                     stop.store(true, std::sync::atomic::Ordering::Relaxed);
                 }
-            },
-            |_, _| Ok(()),
-        )
-        .expect("the run finishes within a minute");
+            })
+            .expect("the run finishes within a minute");
         assert_eq!(worker.join().unwrap().unwrap().exit, WorkerExit::Finished);
         progress
     });
@@ -747,14 +769,11 @@ fn a_fleet_told_to_start_with_two_workers_gives_the_first_nothing_until_the_seco
             }
             None
         });
-        let stop = AtomicBool::new(false);
+        let mut fleet = test_fleet(&run, 2);
+        let stop = fleet.stop_flag();
         let mut first_seen: Option<Instant> = None;
-        let progress = fleet::serve(
-            &mut jobs,
-            &run,
-            serve_options(2),
-            &stop,
-            |progress| {
+        let progress = fleet
+            .serve(&mut jobs, &mut |progress: &FleetProgress| {
                 // Several ticks after the first worker connected, it has asked and waits.
                 if progress.workers >= 1 && outcomes_before_second.is_none() {
                     let seen = *first_seen.get_or_insert_with(Instant::now);
@@ -766,10 +785,8 @@ fn a_fleet_told_to_start_with_two_workers_gives_the_first_nothing_until_the_seco
                 if serve_started.elapsed() > Duration::from_secs(60) {
                     stop.store(true, std::sync::atomic::Ordering::Relaxed);
                 }
-            },
-            |_, _| Ok(()),
-        )
-        .expect("the run finishes within a minute");
+            })
+            .expect("the run finishes within a minute");
         served.store(true, std::sync::atomic::Ordering::Relaxed);
         assert_eq!(first.join().unwrap().unwrap().exit, WorkerExit::Finished);
         if let Some(second) = second.join().unwrap() {
@@ -839,4 +856,223 @@ fn a_bench_whose_worker_dies_stops_with_an_error_instead_of_a_row() {
     assert!(!dir.join("bench.json").exists(), "no table of a broken fleet");
     assert_clean(&RunName::new(&format!("bench-{acps}-rapier-1")).unwrap());
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Blocks in its first rollout until released: a worker that lives but says nothing, as one
+/// stopped with SIGSTOP or hung in a simulator.
+struct Stuck<'a> {
+    inner: Box<dyn Environment>,
+    release: &'a AtomicBool,
+    stuck_once: bool,
+}
+
+impl Environment for Stuck<'_> {
+    fn context_dim(&self) -> usize {
+        self.inner.context_dim()
+    }
+
+    fn param_dim(&self) -> usize {
+        self.inner.param_dim()
+    }
+
+    fn rollout(&mut self, task: &Task) -> Outcome {
+        if !self.stuck_once {
+            self.stuck_once = true;
+            wait_until("the test to release the stuck worker", Duration::from_secs(120), || {
+                self.release.load(std::sync::atomic::Ordering::Relaxed)
+            });
+        }
+        self.inner.rollout(task)
+    }
+}
+
+#[test]
+fn a_hung_worker_s_tasks_go_to_another_and_the_result_is_unchanged() {
+    let (experiment, mut jobs, reference) = short_grid(4);
+    let run = run_name("hung");
+    let release = AtomicBool::new(false);
+    let environment = || experiment.jobs().unwrap().remove(0).environment;
+    let joined = AtomicBool::new(false);
+    let worker = |name: &str, environment: &mut dyn EnvironmentFactory| {
+        let options = WorkerOptions {
+            name: name.into(),
+            ..WorkerOptions::default()
+        };
+        acps_worker::serve(&run, &options, environment, &AtomicBool::new(false))
+    };
+    let progress = std::thread::scope(|scope| {
+        // The stuck worker asks first, so the first tasks are its (the fleet starts with both).
+        let stuck = scope.spawn(|| {
+            let mut factory = Single(Stuck {
+                inner: environment(),
+                release: &release,
+                stuck_once: false,
+            });
+            worker("stuck", &mut factory)
+        });
+        let healthy = scope.spawn(|| {
+            wait_until("the stuck worker to join", Duration::from_secs(60), || {
+                joined.load(std::sync::atomic::Ordering::Relaxed)
+            });
+            worker("healthy", &mut Single(environment()))
+        });
+        let mut fleet = Fleet::builder(run.as_str())
+            .identity(7)
+            .spin(Duration::ZERO)
+            .start_with(2)
+            .liveness(Liveness {
+                silence: Duration::from_millis(300),
+                ..Liveness::default()
+            })
+            .start()
+            .unwrap();
+        let progress = fleet
+            .serve(&mut jobs, &mut |progress: &FleetProgress| {
+                if progress.workers >= 1 {
+                    joined.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            })
+            .expect("the healthy worker finishes the run");
+        release.store(true, std::sync::atomic::Ordering::Relaxed);
+        assert_eq!(healthy.join().unwrap().unwrap().exit, WorkerExit::Finished);
+        // Released after the run, it finds the learner done or gone.
+        let exit = stuck.join().unwrap().unwrap().exit;
+        assert!(
+            matches!(exit, WorkerExit::Finished | WorkerExit::LearnerGone),
+            "{exit:?}"
+        );
+        progress
+    });
+    assert!(progress.reissued >= 1, "{progress:?}");
+    assert_eq!(episodes(&jobs), reference);
+    assert_clean(&run);
+}
+
+#[test]
+fn a_fleet_whose_workers_all_exit_stops_with_an_error_naming_the_run() {
+    let (_, mut jobs, _) = short_grid(4);
+    let run = run_name("no-workers");
+    // Worker processes that exit at once, as a broken worker command would.
+    let mut fleet = Fleet::builder(run.as_str())
+        .spawn_workers(2, |_| Command::new("true"))
+        .liveness(Liveness {
+            no_workers: Some(Duration::from_millis(200)),
+            ..Liveness::default()
+        })
+        .start()
+        .unwrap();
+    let error = fleet
+        .serve(&mut jobs, &mut |_: &FleetProgress| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.starts_with(&format!("no worker can go on with run '{run}': none connected for")),
+        "{error}"
+    );
+    assert!(error.contains("all 2 started worker processes exited"), "{error}");
+    drop(fleet);
+    assert_clean(&run);
+}
+
+/// The pids of `pid`'s children.
+fn children_of(pid: u32) -> Vec<u32> {
+    std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children"))
+        .unwrap_or_default()
+        .split_whitespace()
+        .filter_map(|p| p.parse().ok())
+        .collect()
+}
+
+#[test]
+fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
+    let SlowRun {
+        dir,
+        reference,
+        run,
+        out,
+    } = slow_run("hand-worker");
+    let learner = acps()
+        .arg("run")
+        .args(SLOW)
+        .args(["--workers", "1", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut hand = acps()
+        .args(["worker", "--run", run.as_str(), "--name", "by-hand", "-q"])
+        .spawn()
+        .unwrap();
+    wait_until("the hand-started worker to join", Duration::from_secs(60), || {
+        ipc::live_nodes(&run).unwrap_or(0) >= 3
+    });
+    // Kill the worker the learner started: the one it serves by hand goes on.
+    let started = children_of(learner.id());
+    assert_eq!(started.len(), 1, "{started:?}");
+    let status = Command::new("kill")
+        .args(["-KILL", &started[0].to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let output = learner.wait_with_output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert!(
+        wait_for(&mut hand, Duration::from_secs(20)).is_some(),
+        "the hand worker left"
+    );
+    assert_clean(&run);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_left() {
+    let dir = temp_dir("kill-all");
+    let run = run_name("kill-all");
+    let mut learner = acps()
+        .arg("run")
+        .args(SLOW)
+        .args(["--workers", "2", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&dir)
+        .process_group(0)
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    wait_until("a learning run with both workers", Duration::from_secs(60), || {
+        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&dir.join("checkpoints"))
+    });
+    let workers = children_of(learner.id());
+    signal_group("-KILL", learner.id());
+    learner.wait().unwrap();
+    wait_until("the killed workers to be gone", Duration::from_secs(20), || {
+        workers.iter().all(|pid| {
+            std::fs::read_to_string(format!("/proc/{pid}/stat")).map_or(true, |stat| {
+                stat.rsplit_once(')')
+                    .is_some_and(|(_, rest)| rest.trim_start().starts_with('Z'))
+            })
+        })
+    });
+    assert!(!ipc::leftover_files(&run).is_empty(), "a kill -9 leaves files");
+    // The next fleet, of another name, removes them when it starts.
+    let other = run_name("kill-all-next");
+    let fleet = Fleet::builder(other.as_str()).start().unwrap();
+    assert!(ipc::leftover_files(&run).is_empty(), "{:?}", ipc::leftover_files(&run));
+    drop(fleet);
+    assert_clean(&other);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_worker_that_gives_up_waiting_leaves_nothing_behind() {
+    let run = run_name("gives-up");
+    let output = acps()
+        .args(["worker", "--run", run.as_str(), "--startup-timeout", "0.2"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success());
+    assert!(stderr.contains(&format!("no learner serves run '{run}'")), "{stderr}");
+    assert_clean(&run);
 }

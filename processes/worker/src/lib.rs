@@ -101,7 +101,7 @@ pub enum WorkerError {
     #[error(transparent)]
     Ipc(#[from] IpcError),
     /// No learner serves the run.
-    #[error("no learner serves run '{run}' (waited {waited:?}); start it with `acps run ... --run {run}`")]
+    #[error("no learner serves run '{run}' (waited {waited:?})")]
     NoLearner {
         /// The run.
         run: String,
@@ -165,9 +165,17 @@ pub fn serve(
             });
         }
         if started.elapsed() > options.startup_timeout {
+            let waited = started.elapsed();
+            drop(services);
+            drop(node);
+            // No learner came: this worker may have created the run's files, and nobody else
+            // would remove them before the next fleet starts.
+            if ipc::live_nodes(run).is_ok_and(|alive| alive == 0) {
+                let _ = ipc::remove_run_files(run);
+            }
             return Err(WorkerError::NoLearner {
                 run: run.to_string(),
-                waited: started.elapsed(),
+                waited,
             });
         }
         // Spawned workers usually start before the learner serves; a short poll lets them join
@@ -201,6 +209,8 @@ pub fn serve(
     // Outcomes not yet sent.
     let mut outbox = WorkerMessage::request(identity, 1);
     let mut batching = Batching::new(options.in_flight);
+    // Told to the learner, which then waits for this worker at least a few times as long.
+    let mut slowest = Duration::ZERO;
     let mut rollouts = 0;
     let mut idle_since = None;
     // Requests sent since the learner was last woken.
@@ -239,6 +249,7 @@ pub fn serve(
             };
             outbox.run = identity;
             outbox.want = want as u32;
+            outbox.observe_rollout(slowest);
             let request = client
                 .send_copy(outbox)
                 .map_err(|e| IpcError::new("sending a request", e))?;
@@ -315,7 +326,9 @@ pub fn serve(
                     })?;
             let started = Instant::now();
             let outcome = environment.rollout(&task);
-            batching.observe(started.elapsed());
+            let took = started.elapsed();
+            batching.observe(took);
+            slowest = slowest.max(took);
             rollouts += 1;
             // An outcome the wire cannot carry is reported as failed rather than cut.
             let wire_outcome = WireOutcome::new(wire.job, &outcome)

@@ -56,25 +56,46 @@ impl IpcError {
     }
 }
 
+/// The environment variable that names the run a started worker process joins.
+pub const RUN_ENV: &str = "ACPS_RUN";
+
+/// How long a process waits for another to finish creating a service of the run.
+const CREATION_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// What the files of every acps run start with.
+const PREFIX: &str = "acps_";
+
 /// A run's name: it names the run's shared-memory prefix, and workers join a run by it.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct RunName(String);
 
 impl RunName {
-    /// A validated run name: 1 to 40 characters of `[A-Za-z0-9_-]`.
+    /// A validated run name: 1 to 40 characters of `[A-Za-z0-9-]`. No `_`: the run's files are
+    /// named `acps_<run>_...`, so a name without one can be read back from any of them (see
+    /// [`clean_dead_runs`]).
     pub fn new(name: &str) -> Result<Self, IpcError> {
-        let valid = (1..=40).contains(&name.len())
-            && name
-                .bytes()
-                .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+        let valid = (1..=40).contains(&name.len()) && name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-');
         if valid {
             Ok(Self(name.to_string()))
         } else {
             Err(IpcError::new(
                 "run name",
-                format!("'{name}' must be 1 to 40 characters of letters, digits, '-' and '_'"),
+                format!("'{name}' must be 1 to 40 characters of letters, digits and '-'"),
             ))
         }
+    }
+
+    /// The run a file of `/dev/shm` or `/tmp/iceoryx2` belongs to, if it is an acps run's.
+    fn of_file(file: &str) -> Option<Self> {
+        let rest = file.strip_prefix(PREFIX)?;
+        let (name, _) = rest.split_once('_')?;
+        Self::new(name).ok()
+    }
+
+    /// The run named by the [`RUN_ENV`] environment variable, which a fleet sets for the
+    /// worker processes it starts; `None` when it is not set.
+    pub fn from_env() -> Result<Option<Self>, IpcError> {
+        std::env::var(RUN_ENV).ok().map(|name| Self::new(&name)).transpose()
     }
 
     /// The name.
@@ -84,7 +105,7 @@ impl RunName {
 
     /// The iceoryx2 file prefix of the run's resources in /dev/shm and /tmp/iceoryx2.
     pub fn prefix(&self) -> String {
-        format!("acps_{}_", self.0)
+        format!("{PREFIX}{}_", self.0)
     }
 
     /// The iceoryx2 configuration of the run.
@@ -92,6 +113,10 @@ impl RunName {
         let mut config = Config::default();
         config.global.prefix =
             FileName::new(self.prefix().as_bytes()).map_err(|e| IpcError::new("the run's iceoryx2 prefix", e))?;
+        // iceoryx2 waits this long for another process to finish creating a service (1 s by
+        // default). A loaded machine starting many processes at once can take longer; only a
+        // creator that died makes everyone wait the whole time.
+        config.global.creation_timeout = CREATION_TIMEOUT;
         Ok(config)
     }
 }
@@ -281,6 +306,15 @@ pub fn live_nodes(run: &RunName) -> Result<usize, IpcError> {
 /// Files of `run` in /dev/shm and /tmp/iceoryx2 (recursively).
 pub fn leftover_files(run: &RunName) -> Vec<std::path::PathBuf> {
     let prefix = run.prefix();
+    acps_files()
+        .into_iter()
+        .filter(|(name, _)| name.starts_with(&prefix))
+        .map(|(_, path)| path)
+        .collect()
+}
+
+/// Every file of any acps run in /dev/shm and /tmp/iceoryx2 (recursively), with its name.
+fn acps_files() -> Vec<(String, std::path::PathBuf)> {
     let mut found = Vec::new();
     let mut stack = vec![
         std::path::PathBuf::from("/dev/shm"),
@@ -290,15 +324,87 @@ pub fn leftover_files(run: &RunName) -> Vec<std::path::PathBuf> {
         let Ok(entries) = std::fs::read_dir(&dir) else { continue };
         for entry in entries.flatten() {
             let path = entry.path();
-            let name = entry.file_name();
-            if name.to_string_lossy().starts_with(&prefix) {
-                found.push(path);
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with(PREFIX) {
+                found.push((name, path));
             } else if path.is_dir() {
                 stack.push(path);
             }
         }
     }
     found
+}
+
+/// A run whose files are younger than this and that has no node yet may be starting: iceoryx2
+/// creates a run's first files and its first node within milliseconds.
+const STARTING_AGE: Duration = Duration::from_secs(2);
+
+/// Remove everything that runs whose every node is dead left in /dev/shm and /tmp/iceoryx2,
+/// whatever their names: after a `kill -9` of a learner and its workers nothing else would
+/// ever remove it. A run with a live node, a node in creation, or no node and files younger than
+/// a few seconds (a run that is starting) is left alone. Returns the runs cleaned.
+pub fn clean_dead_runs() -> Vec<RunName> {
+    let mut runs: std::collections::BTreeMap<String, (RunName, bool)> = std::collections::BTreeMap::new();
+    for (name, path) in acps_files() {
+        let Some(run) = RunName::of_file(&name) else { continue };
+        let young = std::fs::metadata(&path)
+            .and_then(|m| m.modified())
+            .map_or(true, |modified| {
+                modified.elapsed().map_or(true, |age| age < STARTING_AGE)
+            });
+        runs.entry(run.as_str().to_string())
+            .and_modify(|(_, any_young)| *any_young |= young)
+            .or_insert((run, young));
+    }
+    let mut cleaned = Vec::new();
+    for (_, (run, young)) in runs {
+        let Ok(nodes) = node_states(&run) else { continue };
+        let dead = nodes.dead > 0 && nodes.other == 0;
+        let abandoned = nodes.dead == 0 && nodes.other == 0 && !young;
+        if (dead || abandoned) && remove_run_files(&run).is_ok() {
+            cleaned.push(run);
+        }
+    }
+    cleaned
+}
+
+/// Whether process `pid` runs: it exists and is not a zombie (whose parent died too, and whose
+/// new parent may never reap it).
+fn process_exists(pid: i32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+        // "pid (comm) state ...": comm may hold spaces and parentheses, so read after the last ')'.
+        stat.rsplit_once(')')
+            .is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
+    })
+}
+
+/// How many nodes of a run are dead, and how many are alive or in an undefined state (being
+/// created or removed). A node iceoryx2 reports dead whose process still exists counts as
+/// alive: a node in creation has no lock on its monitor yet, nor its details.
+struct NodeStates {
+    dead: usize,
+    other: usize,
+}
+
+fn node_states(run: &RunName) -> Result<NodeStates, IpcError> {
+    let mut states = NodeStates { dead: 0, other: 0 };
+    Node::<ipc::Service>::list(&run.config()?, |state| {
+        use iceoryx2::node::NodeView;
+        match state {
+            NodeState::Dead(view)
+                if view
+                    .details()
+                    .as_ref()
+                    .is_some_and(|details| !process_exists(details.process_id().value())) =>
+            {
+                states.dead += 1
+            }
+            _ => states.other += 1,
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
+    Ok(states)
 }
 
 /// After the last node of a run is gone: clean stale nodes, then remove the files iceoryx2 keeps
@@ -412,6 +518,27 @@ mod tests {
         }
         remove_run_files(&run).unwrap();
         assert!(leftover_files(&run).is_empty());
+    }
+
+    #[test]
+    fn runs_without_nodes_are_removed_once_their_files_are_old() {
+        let file = |run: &str| std::path::PathBuf::from(format!("/dev/shm/acps_{run}-{}_fake", std::process::id()));
+        let (old, young) = (file("old"), file("young"));
+        std::fs::write(&old, b"").unwrap();
+        std::fs::write(&young, b"").unwrap();
+        let long_ago = std::time::SystemTime::now() - 2 * STARTING_AGE;
+        std::fs::File::options()
+            .write(true)
+            .open(&old)
+            .unwrap()
+            .set_modified(long_ago)
+            .unwrap();
+        let cleaned = clean_dead_runs();
+        let name = |path: &std::path::Path| RunName::of_file(&path.file_name().unwrap().to_string_lossy()).unwrap();
+        assert!(cleaned.contains(&name(&old)), "{cleaned:?}");
+        assert!(!old.exists());
+        assert!(young.exists(), "a run that may be starting is left alone");
+        std::fs::remove_file(young).unwrap();
     }
 
     #[test]

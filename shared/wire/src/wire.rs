@@ -12,9 +12,10 @@
 
 use acps_shared::{EnvironmentSpec, Outcome, OutcomeStatus, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
+use std::time::Duration;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 5;
+pub const PROTOCOL_VERSION: u32 = 6;
 /// Largest context a task can carry.
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -144,8 +145,9 @@ pub struct WorkerMessage {
     pub run: u64,
     /// Number of valid entries of `outcomes`.
     pub count: u32,
-    /// Padding, always 0.
-    pub reserved: u32,
+    /// The worker's slowest rollout so far, in microseconds (saturating): the learner waits at
+    /// least a few times this long for a silent worker before it hands its tasks to others.
+    pub slowest_rollout_us: u32,
     /// The outcomes.
     pub outcomes: [WireOutcome; MAX_BATCH],
 }
@@ -296,7 +298,7 @@ impl WorkerMessage {
             want: want.min(MAX_BATCH) as u32,
             run,
             count: 0,
-            reserved: 0,
+            slowest_rollout_us: 0,
             outcomes: [EMPTY; MAX_BATCH],
         }
     }
@@ -319,6 +321,17 @@ impl WorkerMessage {
     /// Tasks asked for, at most [`MAX_BATCH`].
     pub fn wanted(&self) -> usize {
         (self.want as usize).min(MAX_BATCH)
+    }
+
+    /// The worker's slowest rollout so far.
+    pub fn slowest_rollout(&self) -> Duration {
+        Duration::from_micros(self.slowest_rollout_us.into())
+    }
+
+    /// Record `rollout` if it is the slowest so far.
+    pub fn observe_rollout(&mut self, rollout: Duration) {
+        let us = u32::try_from(rollout.as_micros()).unwrap_or(u32::MAX);
+        self.slowest_rollout_us = self.slowest_rollout_us.max(us);
     }
 }
 

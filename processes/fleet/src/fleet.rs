@@ -1,0 +1,325 @@
+//! [`Fleet`]: one run's lifecycle around the server, for `acps run`, `acps bench` and any program
+//! that serves its own learners.
+//!
+//! A fleet owns the run's name and identity; when it starts, it removes what dead runs left in
+//! shared memory (under any name); when it serves, it starts the worker processes it was asked
+//! to, stops when the run is done or cannot go on (no worker for a grace period, Ctrl-C, the
+//! caller's stop flag), and reaps them; when it is dropped, also on an error or Ctrl-C, it
+//! removes the run's shared memory.
+
+use crate::processes;
+use crate::server::{self, FleetError, FleetJob, FleetProgress, Liveness, Observer, ServeOptions};
+use acps_wire::ipc::{self, IpcError, RunName};
+use std::os::unix::process::CommandExt as _;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
+
+/// The environment variable that tells a worker process the fleet started which run to join
+/// (read it with [`RunName::from_env`]).
+pub use acps_wire::ipc::RUN_ENV;
+
+/// Set by the Ctrl-C handler of [`FleetBuilder::ctrl_c`]; one per process, as the handler is.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+/// Whether the handler could be installed (once per process).
+static CTRL_C: OnceLock<Result<(), String>> = OnceLock::new();
+
+/// Builds the command of worker process `index` (from 0). The fleet adds [`RUN_ENV`], a null
+/// stdin and the niceness.
+type WorkerCommand = Box<dyn Fn(usize) -> Command>;
+
+/// The worker processes a fleet starts for every [`Fleet::serve`].
+struct Spawn {
+    count: usize,
+    command: WorkerCommand,
+    nice: Option<u8>,
+}
+
+/// Configures a [`Fleet`]; [`start`](Self::start) starts it.
+///
+/// ```no_run
+/// use acps_fleet::Fleet;
+/// use std::process::Command;
+///
+/// let fleet = Fleet::builder("cannon")
+///     // Two processes of this very program, which serve as workers when told to.
+///     .spawn_workers(2, |_| {
+///         let mut command = Command::new(std::env::current_exe().expect("this program"));
+///         command.arg("--worker");
+///         command
+///     })
+///     .ctrl_c(true)
+///     .start()?;
+/// # Ok::<(), acps_fleet::FleetStartError>(())
+/// ```
+#[must_use]
+pub struct FleetBuilder {
+    name: String,
+    identity: Option<u64>,
+    spawn: Option<Spawn>,
+    liveness: Option<Liveness>,
+    spin: Option<Duration>,
+    start_with: usize,
+    ctrl_c: bool,
+}
+
+/// A fleet that could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum FleetStartError {
+    /// The run name is not valid.
+    #[error(transparent)]
+    Name(IpcError),
+    /// The Ctrl-C handler could not be installed: the program installed its own. Leave
+    /// [`FleetBuilder::ctrl_c`] off and set [`Fleet::stop_flag`] from your handler instead.
+    #[error("installing the Ctrl-C handler: {0}")]
+    CtrlC(String),
+}
+
+impl FleetBuilder {
+    /// The run's identity, which workers learn from the learner and which refuses workers of
+    /// an earlier run of the same name. Default: a hash of the jobs' problems, environments
+    /// and seeds.
+    pub fn identity(mut self, identity: u64) -> Self {
+        self.identity = Some(identity);
+        self
+    }
+
+    /// Start `count` worker processes for every [`Fleet::serve`], each from `command(index)`.
+    /// The fleet tells them the run in the [`RUN_ENV`] environment variable, gives them a null
+    /// stdin, and lowers their priority (see [`worker_niceness`](Self::worker_niceness)). Without
+    /// this the fleet starts none and serves the workers that join (then it waits for them,
+    /// unless [`Liveness::no_workers`] is set).
+    pub fn spawn_workers(mut self, count: usize, command: impl Fn(usize) -> Command + 'static) -> Self {
+        self.spawn = Some(Spawn {
+            count,
+            command: Box::new(command),
+            nice: None,
+        });
+        self
+    }
+
+    /// The niceness (0..=19) of started workers. Default: 10 when the workers and the learner
+    /// outnumber the cores, else 0. Every worker waits for the learner's answers, so the learner
+    /// should get a core as soon as it wakes.
+    pub fn worker_niceness(mut self, nice: u8) -> Self {
+        if let Some(spawn) = &mut self.spawn {
+            spawn.nice = Some(nice.min(processes::MAX_NICE));
+        }
+        self
+    }
+
+    /// When workers are given up on. Default: [`Liveness::default`] when the fleet starts
+    /// workers; when it starts none, the same but waiting for workers forever.
+    pub fn liveness(mut self, liveness: Liveness) -> Self {
+        self.liveness = Some(liveness);
+        self
+    }
+
+    /// How long the server polls before it blocks when idle. Default: 50 us when every process
+    /// of the fleet has a core of its own, else 0.
+    pub fn spin(mut self, spin: Duration) -> Self {
+        self.spin = Some(spin);
+        self
+    }
+
+    /// Hand out the first tasks only once `workers` workers have asked for them (a benchmark's
+    /// clock then measures the whole fleet). Default 0: at once.
+    pub fn start_with(mut self, workers: usize) -> Self {
+        self.start_with = workers;
+        self
+    }
+
+    /// Stop serving on Ctrl-C (SIGINT, SIGTERM, SIGHUP), with [`FleetError::Interrupted`].
+    /// Installs a handler for the whole process, once. Default: off.
+    pub fn ctrl_c(mut self, on: bool) -> Self {
+        self.ctrl_c = on;
+        self
+    }
+
+    /// Start the fleet: validate the name, install the Ctrl-C handler if asked, and remove what
+    /// dead runs left in shared memory: those of any name whose every node is dead, and the dead
+    /// nodes of this run (workers started by hand may already wait for it).
+    pub fn start(self) -> Result<Fleet, FleetStartError> {
+        let run = RunName::new(&self.name).map_err(FleetStartError::Name)?;
+        if self.ctrl_c {
+            CTRL_C
+                .get_or_init(|| {
+                    ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())
+                })
+                .clone()
+                .map_err(FleetStartError::CtrlC)?;
+        }
+        let cleaned = ipc::clean_dead_runs();
+        if !cleaned.is_empty() {
+            tracing::info!("removed the shared memory of {} dead runs", cleaned.len());
+        }
+        // Listing nodes can fail while one is being created or removed; the next start looks
+        // again.
+        let _ = ipc::clean_stale(&run);
+        let workers = self.spawn.as_ref().map_or(0, |s| s.count);
+        let liveness = self.liveness.unwrap_or(Liveness {
+            no_workers: (workers > 0).then_some(Liveness::default().no_workers).flatten(),
+            ..Liveness::default()
+        });
+        Ok(Fleet {
+            run,
+            identity: self.identity,
+            spin: self.spin.unwrap_or_else(|| processes::spin(workers)),
+            spawn: self.spawn,
+            liveness,
+            start_with: self.start_with,
+            ctrl_c: self.ctrl_c,
+            stop: Arc::new(AtomicBool::new(false)),
+        })
+    }
+}
+
+/// One run of learners served to worker processes: see the [module](self).
+///
+/// ```no_run
+/// use acps_fleet::{Fleet, FleetJob};
+/// # fn jobs() -> Vec<FleetJob> { unimplemented!() }
+///
+/// let mut jobs: Vec<FleetJob> = jobs();
+/// let mut fleet = Fleet::builder("cannon").ctrl_c(true).start()?;
+/// println!("start workers with ACPS_RUN={}", fleet.run());
+/// let report = fleet.serve(&mut jobs, &mut |progress: &acps_fleet::FleetProgress| {
+///     eprintln!("{} outcomes from {} workers", progress.outcomes, progress.workers);
+/// })?;
+/// println!("{} outcomes, {} tasks re-issued", report.outcomes, report.reissued);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub struct Fleet {
+    run: RunName,
+    identity: Option<u64>,
+    spawn: Option<Spawn>,
+    liveness: Liveness,
+    spin: Duration,
+    start_with: usize,
+    ctrl_c: bool,
+    stop: Arc<AtomicBool>,
+}
+
+impl Fleet {
+    /// A fleet for the run named `name` (1 to 40 letters, digits and '-'): its shared-memory
+    /// prefix, and how workers started by hand join it.
+    pub fn builder(name: impl Into<String>) -> FleetBuilder {
+        FleetBuilder {
+            name: name.into(),
+            identity: None,
+            spawn: None,
+            liveness: None,
+            spin: None,
+            start_with: 0,
+            ctrl_c: false,
+        }
+    }
+
+    /// The run's name.
+    pub fn run(&self) -> &RunName {
+        &self.run
+    }
+
+    /// A flag that stops [`serve`](Self::serve) with [`FleetError::Interrupted`] when set, from
+    /// any thread.
+    pub fn stop_flag(&self) -> Arc<AtomicBool> {
+        self.stop.clone()
+    }
+
+    /// When workers are given up on.
+    pub fn liveness(&self) -> Liveness {
+        self.liveness
+    }
+
+    /// Serve `jobs` until every one is done: start the worker processes, if any, hand out
+    /// tasks, re-issue those of workers that die or hang, and reap the processes. `observer`
+    /// sees the progress every tick and every job's learner after each accepted outcome.
+    pub fn serve(&mut self, jobs: &mut [FleetJob], observer: &mut dyn Observer) -> Result<FleetProgress, FleetError> {
+        let identity = self.identity.unwrap_or_else(|| identity_of(jobs));
+        let mut children = match &self.spawn {
+            Some(spawn) => start_workers(&self.run, spawn)?,
+            None => Vec::new(),
+        };
+        let launched = children.len();
+        let stop = || self.stop.load(Ordering::Relaxed) || (self.ctrl_c && INTERRUPTED.load(Ordering::Relaxed));
+        let served = server::serve(
+            jobs,
+            &self.run,
+            ServeOptions {
+                identity,
+                spin: self.spin,
+                start_with: self.start_with,
+                liveness: self.liveness,
+            },
+            &stop,
+            observer,
+            &mut || (processes::running(&mut children), launched),
+        );
+        processes::reap(&mut children);
+        served
+    }
+}
+
+impl Drop for Fleet {
+    /// Remove the run's shared memory, or, while nodes started elsewhere (workers started by
+    /// hand) are alive, only what dead nodes left: the last one out, or the next fleet to start,
+    /// removes the rest.
+    fn drop(&mut self) {
+        let _ = ipc::clean_stale(&self.run);
+        if ipc::live_nodes(&self.run).is_ok_and(|alive| alive == 0) {
+            let _ = ipc::remove_run_files(&self.run);
+        } else {
+            tracing::info!(
+                "run '{}': nodes started elsewhere are still alive; their shared memory stays until they exit",
+                self.run
+            );
+        }
+    }
+}
+
+/// Start `spawn`'s worker processes for `run`.
+fn start_workers(run: &RunName, spawn: &Spawn) -> Result<Vec<Child>, FleetError> {
+    let nice = spawn.nice.unwrap_or_else(|| processes::default_nice(spawn.count));
+    let mut children = Vec::with_capacity(spawn.count);
+    for index in 0..spawn.count {
+        let mut command = (spawn.command)(index);
+        command.env(RUN_ENV, run.as_str()).stdin(Stdio::null());
+        // SAFETY: the closure runs in the child between fork and exec, and only makes a
+        // syscall (setpriority is async-signal-safe); its failure leaves the niceness as is.
+        unsafe {
+            command.pre_exec(move || {
+                libc::setpriority(libc::PRIO_PROCESS as _, 0, nice.into());
+                Ok(())
+            });
+        }
+        match command.spawn() {
+            Ok(child) => children.push(child),
+            Err(error) => {
+                processes::reap(&mut children);
+                return Err(FleetError::Spawn {
+                    program: format!("{:?}", command.get_program()),
+                    error: error.to_string(),
+                });
+            }
+        }
+    }
+    Ok(children)
+}
+
+/// A hash of the jobs' problems, environments and seeds (FNV-1a, stable across builds).
+fn identity_of(jobs: &[FleetJob]) -> u64 {
+    let mut hash = 0xcbf2_9ce4_8422_2325u64;
+    for job in jobs {
+        let description = format!(
+            "{:?} {:?} {}",
+            job.learner.problem(),
+            job.environment,
+            job.learner.seed()
+        );
+        for byte in description.bytes() {
+            hash = (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    hash
+}

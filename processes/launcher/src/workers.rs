@@ -1,0 +1,47 @@
+//! The acps binary's workers: the project's models plugged into `acps-worker`, and the command
+//! a fleet starts them with.
+
+use acps_shared::{Environment, EnvironmentSpec};
+use acps_worker::EnvironmentFactory;
+use std::collections::HashMap;
+use std::path::Path;
+use std::process::Command;
+
+/// Builds environments with `acps_models::environment::build` and keeps them for later tasks.
+#[derive(Default)]
+pub struct ModelFactory {
+    cache: HashMap<EnvironmentSpec, Box<dyn Environment>>,
+}
+
+impl EnvironmentFactory for ModelFactory {
+    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+        if !self.cache.contains_key(spec) {
+            let environment = acps_models::environment::build(spec).map_err(|e| e.to_string())?;
+            self.cache.insert(*spec, environment);
+        }
+        Ok(self.cache.get_mut(spec).expect("inserted above").as_mut())
+    }
+}
+
+/// The command of started worker `index`: `acps worker` of this executable, keeping
+/// `in_flight` tasks, which joins the run the fleet names in its environment. `workers` is the
+/// size of the fleet, which decides whether workers poll before they block.
+pub fn command(in_flight: usize, workers: usize) -> impl Fn(usize) -> Command {
+    let exe = std::env::current_exe();
+    let spin = acps_fleet::processes::spin(workers).as_micros().to_string();
+    move |index| {
+        // A missing executable fails the spawn, which names it.
+        let mut command = Command::new(exe.as_deref().unwrap_or(Path::new("acps")));
+        command.args([
+            "worker",
+            "--in-flight",
+            &in_flight.to_string(),
+            "--spin-us",
+            &spin,
+            "--name",
+            &format!("worker-{index}"),
+            "-q",
+        ]);
+        command
+    }
+}
