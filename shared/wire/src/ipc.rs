@@ -234,19 +234,45 @@ pub fn reply(request: &TaskRequest, answer: Answer, tasks: &[WireTask]) -> Resul
 /// Remove what dead processes of `run` left behind (crashed learners or workers). Returns the
 /// number of dead nodes cleaned up.
 pub fn clean_stale(run: &RunName) -> Result<usize, IpcError> {
-    let config = run.config()?;
-    let mut cleaned = 0;
-    Node::<ipc::Service>::list(&config, |state| {
+    let cleaned = list_nodes(run, 0, |cleaned, state| {
         if let NodeState::Dead(view) = state
             && view.try_remove_stale_resources().is_ok()
         {
-            cleaned += 1;
+            *cleaned += 1;
         }
-        CallbackProgression::Continue
-    })
-    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
+    })?;
     remove_orphaned_node_dirs(Path::new(NODES_DIR), ORPHAN_AGE);
     Ok(cleaned)
+}
+
+/// Attempts at listing a run's nodes: a listing fails when a node of any run is created or
+/// removed while it reads the shared node directory, which concurrent runs do all the time.
+const LIST_ATTEMPTS: usize = 50;
+
+/// Visit the nodes of `run`, starting from `initial` each attempt; retried while the listing
+/// fails.
+fn list_nodes<T: Clone>(
+    run: &RunName,
+    initial: T,
+    mut visit: impl FnMut(&mut T, NodeState<ipc::Service>),
+) -> Result<T, IpcError> {
+    let config = run.config()?;
+    let mut attempt = 0;
+    loop {
+        let mut value = initial.clone();
+        let listed = Node::<ipc::Service>::list(&config, |state| {
+            visit(&mut value, state);
+            CallbackProgression::Continue
+        });
+        attempt += 1;
+        match listed {
+            Ok(()) => return Ok(value),
+            Err(error) if attempt == LIST_ATTEMPTS => {
+                return Err(IpcError::new(format!("listing the nodes of run '{run}'"), error));
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(1)),
+        }
+    }
 }
 
 /// Where iceoryx2 keeps a directory per node, `<id>/`, holding files named by the run's prefix.
@@ -279,28 +305,20 @@ fn remove_orphaned_node_dirs(nodes: &Path, age: Duration) {
 /// by a concurrent one can leave a dead node's ports listed).
 pub fn alive_nodes(run: &RunName) -> Result<std::collections::HashSet<iceoryx2::identifiers::UniqueNodeId>, IpcError> {
     use iceoryx2::node::NodeView;
-    let mut alive = std::collections::HashSet::new();
-    Node::<ipc::Service>::list(&run.config()?, |state| {
+    list_nodes(run, std::collections::HashSet::new(), |alive, state| {
         if let NodeState::Alive(view) = state {
             alive.insert(*view.id());
         }
-        CallbackProgression::Continue
     })
-    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
-    Ok(alive)
 }
 
 /// Number of live nodes of `run`.
 pub fn live_nodes(run: &RunName) -> Result<usize, IpcError> {
-    let mut alive = 0;
-    Node::<ipc::Service>::list(&run.config()?, |state| {
+    list_nodes(run, 0, |alive, state| {
         if let NodeState::Alive(_) = state {
-            alive += 1;
+            *alive += 1;
         }
-        CallbackProgression::Continue
     })
-    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
-    Ok(alive)
 }
 
 /// Files of `run` in /dev/shm and /tmp/iceoryx2 (recursively).
@@ -381,14 +399,14 @@ fn process_exists(pid: i32) -> bool {
 /// How many nodes of a run are dead, and how many are alive or in an undefined state (being
 /// created or removed). A node iceoryx2 reports dead whose process still exists counts as
 /// alive: a node in creation has no lock on its monitor yet, nor its details.
+#[derive(Clone)]
 struct NodeStates {
     dead: usize,
     other: usize,
 }
 
 fn node_states(run: &RunName) -> Result<NodeStates, IpcError> {
-    let mut states = NodeStates { dead: 0, other: 0 };
-    Node::<ipc::Service>::list(&run.config()?, |state| {
+    list_nodes(run, NodeStates { dead: 0, other: 0 }, |states, state| {
         use iceoryx2::node::NodeView;
         match state {
             NodeState::Dead(view)
@@ -401,10 +419,7 @@ fn node_states(run: &RunName) -> Result<NodeStates, IpcError> {
             }
             _ => states.other += 1,
         }
-        CallbackProgression::Continue
     })
-    .map_err(|e| IpcError::new(format!("listing the nodes of run '{run}'"), e))?;
-    Ok(states)
 }
 
 /// After the last node of a run is gone: clean stale nodes, then remove the files iceoryx2 keeps
