@@ -4,12 +4,14 @@
 #![warn(missing_docs)]
 
 mod context_space;
+mod fnv;
 mod problem;
 mod seed;
 mod spec;
 mod task;
 
 pub use context_space::{ContextSpace, ContextSpaceError, random_unit_vector};
+pub use fnv::{FNV_OFFSET, fnv1a};
 pub use problem::{Problem, ScoreAggregate};
 pub use seed::{Stream, derive_seed};
 pub use spec::EnvironmentSpec;

@@ -494,10 +494,7 @@ impl Experiment {
             "settings": self.settings,
         })
         .to_string();
-        // FNV-1a: stable across builds and platforms, unlike std's hasher.
-        description.bytes().fold(0xcbf2_9ce4_8422_2325u64, |hash, byte| {
-            (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3)
-        })
+        acps_shared::fnv1a(acps_shared::FNV_OFFSET, description.as_bytes())
     }
 
     fn summary(&self, jobs: &[Job]) -> Summary {

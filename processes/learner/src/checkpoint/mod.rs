@@ -22,7 +22,7 @@
 //! so a process killed during a write leaves the previous checkpoint intact.
 
 use crate::learner::{Learner, LearnerSnapshot, RestoreError};
-use acps_shared::Environment;
+use acps_shared::{Environment, FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -139,15 +139,6 @@ pub enum ErrorKind {
     #[error("environment state: {0}")]
     Environment(String),
 }
-
-/// FNV-1a, 64 bit: any single changed byte changes it.
-fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
-    bytes.iter().fold(hash, |hash, &byte| {
-        (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3)
-    })
-}
-
-const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 fn config() -> bincode::config::Configuration {
     bincode::config::standard()
