@@ -9,7 +9,8 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 
 fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) -> (Learner, ContextualFunction) {
-    let problem = ContextualFunction::grid_problem(6, seed);
+    let function = ContextualFunction::new(2, 6, seed).unwrap();
+    let problem = function.grid_problem().unwrap();
     let selector = SelectorConfig {
         method,
         ducb: DUcbConfig {
@@ -38,10 +39,7 @@ fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) 
         eval_every: 50,
         creps: Some(creps),
     };
-    (
-        Learner::new(config, problem, selector).unwrap(),
-        ContextualFunction::new(2, 6, seed).unwrap(),
-    )
+    (Learner::new(config, problem, selector).unwrap(), function)
 }
 
 /// Everything observable about a finished run, as bits.
@@ -208,7 +206,7 @@ fn reissued_tasks_come_out_again_unchanged() {
 
 #[test]
 fn bad_configs_are_refused_with_the_field_name() {
-    let problem = ContextualFunction::grid_problem(6, 0);
+    let problem = ContextualFunction::new(2, 6, 0).unwrap().grid_problem().unwrap();
     let selector = || {
         SelectorConfig {
             method: Method::Random,

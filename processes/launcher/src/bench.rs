@@ -10,7 +10,7 @@ use acps_fleet::{self as fleet, FleetError, FleetJob, ServeOptions};
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
-use acps_models::environment::{self, TrivialEnvironment};
+use acps_models::environment::TrivialEnvironment;
 use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
 use acps_wire::ipc::{self, RunName};
 use anyhow::Context;
@@ -119,7 +119,6 @@ const IN_FLIGHT: usize = 64;
 
 struct Job {
     learner: Learner,
-    spec: acps_shared::EnvironmentSpec,
     environment: Box<dyn Environment>,
 }
 
@@ -130,6 +129,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
             .map(|seed| {
                 // One context, one parameter, no evaluation: the learner's cost stays small so
                 // that the fleet rows measure the transport.
+                let environment = TrivialEnvironment::new();
                 let problem = Problem {
                     name: "trivial".into(),
                     training_contexts: vec![vec![0.0]],
@@ -138,6 +138,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                     theta0: vec![1.0],
                     score: ScoreAggregate::Mean,
                     metric: "none".into(),
+                    environment: environment.spec(),
                 };
                 let creps = CRepsConfig {
                     epsilon: 1.0,
@@ -158,8 +159,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                 let selector = Box::new(RoundRobin::all(problem.training_contexts.clone())?);
                 Ok(Job {
                     learner: Learner::new(config, problem, selector)?,
-                    spec: environment::trivial(),
-                    environment: Box::new(TrivialEnvironment),
+                    environment: Box::new(environment),
                 })
             })
             .collect(),
@@ -172,17 +172,14 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                 methods: Some(vec![Method::MonotonicProgress]),
                 ..Options::default()
             };
-            paper::grid(sim, &options)
+            Ok(paper::grid(sim, &options)
                 .jobs()?
                 .into_iter()
-                .map(|job| {
-                    Ok(Job {
-                        spec: job.spec.context("grid jobs have specs")?,
-                        learner: job.learner,
-                        environment: job.environment,
-                    })
+                .map(|job| Job {
+                    learner: job.learner,
+                    environment: job.environment,
                 })
-                .collect()
+                .collect())
         }
     }
 }
@@ -362,8 +359,8 @@ fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::
     let mut fleet_jobs: Vec<FleetJob> = jobs(workload, options.scale)?
         .into_iter()
         .map(|j| FleetJob {
+            environment: j.learner.problem().environment,
             learner: j.learner,
-            environment: j.spec,
         })
         .collect();
     let nice = options.worker_nice.unwrap_or_else(|| workers::default_nice(workers));

@@ -13,8 +13,7 @@ use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
     run_in_process,
 };
-use acps_shared::EnvironmentSpec;
-use acps_shared::{Environment, Problem};
+use acps_shared::{Environment, EnvironmentMatchError, Problem};
 use acps_wire::ipc::RunName;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -31,9 +30,9 @@ pub struct Instance {
     pub environment: Box<dyn Environment>,
     /// The best achievable score, when the problem knows it (the Section 4 model's J_opt).
     pub optimal_score: Option<f64>,
-    /// How a worker builds the same environment; `None` for environments that keep state between
-    /// rollouts (the Section 4 model), which a fleet cannot serve.
-    pub spec: Option<acps_shared::EnvironmentSpec>,
+    /// Whether the environment keeps state between rollouts (the Section 4 model): a fleet cannot
+    /// serve it, since a rollout would depend on which worker performed the ones before.
+    pub keeps_state: bool,
 }
 
 /// Builds the problem instance of a run from the run's seed.
@@ -73,10 +72,8 @@ pub struct Experiment {
 pub struct RunResult {
     /// The run's seed (problem instance and learner).
     pub seed: u64,
-    /// The problem the run learned.
+    /// The problem the run learned, with the environment it is defined for.
     pub problem: Problem,
-    /// How to build its environment again, if it can be built from a spec.
-    pub spec: Option<EnvironmentSpec>,
     /// The final upper-level policy, if the problem has policy parameters.
     pub policy: Option<PolicySnapshot>,
     /// Episodes at which the policy was evaluated.
@@ -222,8 +219,8 @@ pub struct Job {
     pub learner: Learner,
     /// Its environment, for in-process runs.
     pub environment: Box<dyn Environment>,
-    /// How a worker builds the same environment, if it can.
-    pub spec: Option<EnvironmentSpec>,
+    /// Whether the environment keeps state between rollouts.
+    pub keeps_state: bool,
     /// The instance's optimal score, if known.
     pub optimal_score: Option<f64>,
 }
@@ -234,7 +231,6 @@ impl Job {
         RunResult {
             seed: learner.seed(),
             problem: learner.problem().clone(),
-            spec: self.spec,
             policy: learner.policy().and_then(|p| p.snapshot()),
             eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
             scores: learner.evaluations().iter().map(|e| e.score).collect(),
@@ -257,6 +253,9 @@ pub enum RunError {
     /// A learner refused its configuration.
     #[error(transparent)]
     Learner(#[from] LearnerError),
+    /// An instance's environment is not the one its problem is defined for.
+    #[error(transparent)]
+    Environment(#[from] EnvironmentMatchError),
     /// Checkpoints could not be written or resumed from.
     #[error(transparent)]
     Checkpoints(#[from] CheckpointsError),
@@ -272,20 +271,21 @@ pub enum RunError {
 
 impl Experiment {
     /// Every (method, run) learner of the experiment, method-major.
-    pub fn jobs(&self) -> Result<Vec<Job>, LearnerError> {
+    pub fn jobs(&self) -> Result<Vec<Job>, RunError> {
         (0..self.methods.len())
             .flat_map(|m| (0..self.runs).map(move |r| (m, r)))
             .map(|(method, run)| self.job(&self.methods[method], self.base_seed + run as u64))
             .collect()
     }
 
-    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, LearnerError> {
+    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, RunError> {
         let Instance {
             problem,
             environment,
             optimal_score,
-            spec,
+            keeps_state,
         } = (self.instance)(seed);
+        problem.check_environment(environment.as_ref())?;
         let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
             problem: problem.name.clone(),
             reason: e.to_string(),
@@ -301,7 +301,7 @@ impl Experiment {
         Ok(Job {
             learner,
             environment,
-            spec,
+            keeps_state,
             optimal_score,
         })
     }
@@ -398,7 +398,7 @@ impl Experiment {
     }
 
     /// One learner run of `selector` with `seed`, in this thread.
-    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, LearnerError> {
+    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, RunError> {
         let mut job = self.job(selector, seed)?;
         run_in_process(&mut job.learner, job.environment.as_mut());
         Ok(job.result())
@@ -427,12 +427,14 @@ impl Experiment {
         let mut fleet_jobs = Vec::with_capacity(jobs.len());
         let mut optimal = Vec::with_capacity(jobs.len());
         for job in jobs {
-            let environment = job.spec.ok_or_else(|| RunError::Stateful(self.name.clone()))?;
+            if job.keeps_state {
+                return Err(RunError::Stateful(self.name.clone()));
+            }
             optimal.push(job.optimal_score);
             fleet_jobs.push((
                 FleetJob {
+                    environment: job.learner.problem().environment,
                     learner: job.learner,
-                    environment,
                 },
                 job.environment,
             ));
@@ -473,7 +475,7 @@ impl Experiment {
             .map(|((fleet_job, environment), optimal_score)| Job {
                 learner: fleet_job.learner,
                 environment,
-                spec: Some(fleet_job.environment),
+                keeps_state: false,
                 optimal_score,
             })
             .collect();

@@ -4,7 +4,7 @@ use acps::models::ModelFactory;
 use acps::paper::{self, Options, Sim};
 use acps_fleet::{self as fleet, FleetJob, ServeOptions};
 use acps_learner::{Method, run_in_process};
-use acps_shared::{Environment, Outcome, Task};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, Response, WorkerMessage};
 use acps_worker::{Single, WorkerExit, WorkerOptions};
@@ -648,7 +648,7 @@ fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>,
         .unwrap()
         .into_iter()
         .map(|job| FleetJob {
-            environment: job.spec.unwrap(),
+            environment: job.learner.problem().environment,
             learner: job.learner,
         })
         .collect();
@@ -665,6 +665,10 @@ fn episodes(jobs: &[FleetJob]) -> Vec<String> {
 struct Sleepy(Box<dyn Environment>);
 
 impl Environment for Sleepy {
+    fn spec(&self) -> EnvironmentSpec {
+        self.0.spec()
+    }
+
     fn context_dim(&self) -> usize {
         self.0.context_dim()
     }

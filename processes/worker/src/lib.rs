@@ -305,14 +305,13 @@ pub fn serve(
         let next = if outbox_full { None } else { queue.pop_front() };
         if let Some(wire) = next {
             let task = wire.to_task();
-            let environment =
-                factory
-                    .environment(&wire.environment.into())
-                    .map_err(|reason| WorkerError::Environment {
-                        job: wire.job,
-                        task_id: task.id,
-                        reason,
-                    })?;
+            let no_environment = |reason: String| WorkerError::Environment {
+                job: wire.job,
+                task_id: task.id,
+                reason,
+            };
+            let spec = EnvironmentSpec::try_from(wire.environment).map_err(|e| no_environment(e.to_string()))?;
+            let environment = factory.environment(&spec).map_err(no_environment)?;
             let started = Instant::now();
             let outcome = environment.rollout(&task);
             batching.observe(started.elapsed());

@@ -1,6 +1,6 @@
 //! A worker told by the learner that it belongs to another run stops with a message naming both.
 
-use acps_shared::{Environment, Outcome, Task};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, Response};
 use acps_worker::{Single, WorkerError, WorkerOptions};
@@ -11,6 +11,10 @@ use std::time::{Duration, Instant};
 struct Zero;
 
 impl Environment for Zero {
+    fn spec(&self) -> EnvironmentSpec {
+        EnvironmentSpec::new("zero", [0; 3], &()).unwrap()
+    }
+
     fn context_dim(&self) -> usize {
         1
     }

@@ -374,11 +374,7 @@ mod tests {
             let services = open_services(&node).unwrap();
             let server = task_server(&run, &services.tasks).unwrap();
             let client = services.tasks.client_builder().create().unwrap();
-            let spec = acps_shared::EnvironmentSpec {
-                model: 1,
-                options: [0; 3],
-                problem_seed: 0,
-            };
+            let spec = acps_shared::EnvironmentSpec::new("test", [0; 3], &()).unwrap();
             let task = |id: u64| {
                 let task = Task {
                     id,

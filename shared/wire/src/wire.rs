@@ -10,11 +10,11 @@
 //! per batch instead of once per task. An answer is an [`Answer`] header over a slice of exactly
 //! the tasks it carries, written in place in shared memory.
 
-use acps_shared::{EnvironmentSpec, Outcome, OutcomeStatus, Task, TaskKind};
+use acps_shared::{EnvironmentSpec, MAX_NAME, Outcome, OutcomeStatus, SpecBuildError, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 5;
+pub const PROTOCOL_VERSION: u32 = 6;
 /// Largest context a task can carry.
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -28,31 +28,30 @@ pub const MAX_BATCH: usize = 32;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
 pub struct WireEnvironment {
-    /// [`EnvironmentSpec::model`].
-    pub model: u32,
-    /// [`EnvironmentSpec::options`].
-    pub options: [u32; 3],
-    /// [`EnvironmentSpec::problem_seed`].
-    pub problem_seed: u64,
+    /// [`EnvironmentSpec::name`], padded with zeros.
+    pub name: [u8; MAX_NAME],
+    /// [`EnvironmentSpec::settings`].
+    pub settings: u64,
+    /// [`EnvironmentSpec::parameters`].
+    pub parameters: [u64; 3],
 }
 
 impl From<EnvironmentSpec> for WireEnvironment {
     fn from(spec: EnvironmentSpec) -> Self {
         Self {
-            model: spec.model,
-            options: spec.options,
-            problem_seed: spec.problem_seed,
+            name: spec.padded_name(),
+            settings: spec.settings(),
+            parameters: spec.parameters(),
         }
     }
 }
 
-impl From<WireEnvironment> for EnvironmentSpec {
-    fn from(wire: WireEnvironment) -> Self {
-        Self {
-            model: wire.model,
-            options: wire.options,
-            problem_seed: wire.problem_seed,
-        }
+impl TryFrom<WireEnvironment> for EnvironmentSpec {
+    type Error = SpecBuildError;
+
+    /// The spec, unless the name is not one (a corrupt message).
+    fn try_from(wire: WireEnvironment) -> Result<Self, SpecBuildError> {
+        EnvironmentSpec::from_parts(&wire.name, wire.settings, wire.parameters)
     }
 }
 
@@ -327,11 +326,7 @@ mod tests {
     use super::*;
 
     fn spec() -> EnvironmentSpec {
-        EnvironmentSpec {
-            model: 3,
-            options: [1, 0, 0],
-            problem_seed: 9,
-        }
+        EnvironmentSpec::new("throw-grid", [1, 0, 0], &0.008).unwrap()
     }
 
     #[test]
@@ -344,7 +339,7 @@ mod tests {
             theta: (0..21).map(f64::from).collect(),
         };
         let wire = WireTask::new(5, &task, spec()).unwrap();
-        assert_eq!((wire.job, EnvironmentSpec::from(wire.environment)), (5, spec()));
+        assert_eq!((wire.job, EnvironmentSpec::try_from(wire.environment)), (5, Ok(spec())));
         assert_eq!(wire.to_task(), task);
         let outcome = Outcome::new(42, -1.5, 12.0).with_diagnostics(vec![-3.4, -4.1]);
         let mut message = WorkerMessage::request(11, 4);
