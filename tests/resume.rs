@@ -191,13 +191,13 @@ fn interrupted(setup: Setup, cuts: &[usize], shuffled: Option<u64>) -> Vec<u8> {
             "{setup:?}: restore is exact"
         );
     }
-    run_in_process(&mut learner, environment.as_mut());
+    run_in_process(&mut learner, environment.as_mut()).unwrap();
     bits(&learner, environment.as_ref())
 }
 
 fn uninterrupted(setup: Setup) -> Vec<u8> {
     let (mut learner, mut environment) = setup.build();
-    run_in_process(&mut learner, environment.as_mut());
+    run_in_process(&mut learner, environment.as_mut()).unwrap();
     assert!(learner.is_done());
     bits(&learner, environment.as_ref())
 }
@@ -275,7 +275,7 @@ fn the_interrupted_runs_did_fail_retry_and_update() {
         per_task: false,
     }
     .build();
-    run_in_process(&mut learner, environment.as_mut());
+    run_in_process(&mut learner, environment.as_mut()).unwrap();
     let stats = learner.stats();
     assert!(
         stats.retries > 0 && stats.failed_episodes > 0 && stats.updates > 0,

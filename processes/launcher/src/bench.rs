@@ -342,9 +342,9 @@ fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<
     let start = Instant::now();
     let run = |job: &mut Job| run_in_process(&mut job.learner, job.environment.as_mut());
     if parallel {
-        jobs.par_iter_mut().for_each(run);
+        jobs.par_iter_mut().try_for_each(run)?;
     } else {
-        jobs.iter_mut().for_each(run);
+        jobs.iter_mut().try_for_each(run)?;
     }
     Ok(Measurement {
         seconds: start.elapsed().as_secs_f64(),

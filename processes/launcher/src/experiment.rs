@@ -400,7 +400,7 @@ impl Experiment {
     /// One learner run of `selector` with `seed`, in this thread.
     pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, RunError> {
         let mut job = self.job(selector, seed)?;
-        run_in_process(&mut job.learner, job.environment.as_mut());
+        run_in_process(&mut job.learner, job.environment.as_mut())?;
         Ok(job.result())
     }
 
@@ -617,6 +617,32 @@ pub fn standard_error(values: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use acps_models::contextual_function::ContextualFunction;
+
+    #[test]
+    fn an_instance_whose_environment_is_not_its_problems_is_refused_in_process() {
+        let options = crate::paper::Options {
+            runs: 1,
+            episodes: Some(10),
+            ..Default::default()
+        };
+        let mut experiment = crate::paper::function(&options);
+        // The problem of seed s with the function of seed s + 1, as a user's wiring might do.
+        experiment.instance = Box::new(|seed| Instance {
+            problem: ContextualFunction::new(2, 20, seed).unwrap().grid_problem().unwrap(),
+            environment: Box::new(ContextualFunction::new(2, 20, seed + 1).unwrap()),
+            optimal_score: None,
+            keeps_state: false,
+        });
+        let expected = ContextualFunction::new(2, 20, 0).unwrap().spec();
+        let found = ContextualFunction::new(2, 20, 1).unwrap().spec();
+        let error = experiment.run(&Progress::new("function", true)).unwrap_err();
+        assert!(matches!(error, RunError::Environment(_)), "{error}");
+        assert_eq!(
+            error.to_string(),
+            format!("problem 'function' is defined for environment {expected}, not for {found}")
+        );
+    }
 
     #[test]
     fn standard_error_matches_the_textbook_formula() {

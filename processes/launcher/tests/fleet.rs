@@ -639,7 +639,7 @@ fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>,
         .unwrap()
         .into_iter()
         .map(|mut job| {
-            run_in_process(&mut job.learner, job.environment.as_mut());
+            run_in_process(&mut job.learner, job.environment.as_mut()).unwrap();
             format!("{:?}", job.learner.episodes())
         })
         .collect();

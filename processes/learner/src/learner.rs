@@ -32,7 +32,7 @@
 
 use crate::creps::{CReps, CRepsConfig, CRepsError, CRepsState, Rejection, UpdateReport};
 use crate::selection::{Choice, ContextSelector, SelectionError, SelectorState};
-use acps_shared::{EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed};
+use acps_shared::{EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -802,8 +802,13 @@ fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
         .unwrap_or(0)
 }
 
-/// Drive `learner` to the end with `environment` in this thread.
-pub fn run_in_process(learner: &mut Learner, environment: &mut dyn acps_shared::Environment) {
+/// Drive `learner` to the end with `environment` in this thread; an environment other than the
+/// one the learner's problem is defined for is refused before any rollout.
+pub fn run_in_process(
+    learner: &mut Learner,
+    environment: &mut dyn acps_shared::Environment,
+) -> Result<(), EnvironmentMatchError> {
+    learner.problem.check_environment(environment)?;
     while let Some(task) = learner.ask() {
         let outcome = environment.rollout(&task);
         learner
@@ -811,4 +816,5 @@ pub fn run_in_process(learner: &mut Learner, environment: &mut dyn acps_shared::
             .expect("the outcome answers a task just handed out");
     }
     debug_assert!(learner.is_done());
+    Ok(())
 }

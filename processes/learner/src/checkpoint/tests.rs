@@ -115,8 +115,8 @@ fn a_restored_learner_finishes_like_the_original() {
     let saved = decode(&encode(STAMP, &Checkpoint::take(&original, &environment)), STAMP).unwrap();
     let mut restored = learner(7, 60);
     saved.apply(&mut restored, &mut Quadratic).unwrap();
-    run_in_process(&mut original, &mut environment);
-    run_in_process(&mut restored, &mut Quadratic);
+    run_in_process(&mut original, &mut environment).unwrap();
+    run_in_process(&mut restored, &mut Quadratic).unwrap();
     assert!(restored.stats().updates > 0);
     let final_bytes = |l: &Learner| encode(STAMP, &Checkpoint::take(l, &Quadratic));
     assert_eq!(final_bytes(&restored), final_bytes(&original));
