@@ -31,7 +31,9 @@ fn round_trip(c: &mut Criterion) {
             c.bench_function(&format!("task_round_trip_{workers}_workers"), |b| {
                 b.iter(|| {
                     next = (next + 1) % workers;
-                    let pending = clients[next].send_copy(WorkerMessage::request(0, 1)).unwrap();
+                    let pending = clients[next]
+                        .send_copy(WorkerMessage::request(0, 1, acps_shared::Serves::Any))
+                        .unwrap();
                     let request = server.receive().unwrap().unwrap();
                     ipc::reply(&request, Answer::new(Response::Task, 0), &tasks).unwrap();
                     drop(request);

@@ -4,10 +4,14 @@ use acps::models::ModelFactory;
 use acps::paper::{self, Options, Sim};
 use acps_fleet::{self as fleet, FleetJob, ServeOptions};
 use acps_learner::{Method, run_in_process};
-use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
+use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
+use acps_models::environment;
+use acps_models::robot::Robot;
+use acps_models::throw::{Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, Response, WorkerMessage};
-use acps_worker::{Single, WorkerExit, WorkerOptions};
+use acps_worker::{EnvironmentFactory, Single, WorkerError, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -381,7 +385,7 @@ fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
 }
 
 #[test]
-fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
+fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worker_serves() {
     let dir = temp_dir("refuse");
     let run = run_name("refuse");
     let out = dir.join("fleet");
@@ -428,10 +432,10 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         };
         let wrong_protocol = WorkerMessage {
             protocol: 99,
-            ..WorkerMessage::request(0, 1)
+            ..WorkerMessage::request(0, 1, Serves::Any)
         };
         assert_eq!(ask(wrong_protocol).response(), Some(Response::Refused));
-        let wrong_run = WorkerMessage::request(0x1234_5678, 1);
+        let wrong_run = WorkerMessage::request(0x1234_5678, 1, Serves::Any);
         let answer = ask(wrong_run);
         assert_eq!(answer.response(), Some(Response::Refused));
         assert_ne!(answer.run, 0x1234_5678, "the refusal carries the learner's identity");
@@ -443,6 +447,25 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         name: "embedded".into(),
         ..WorkerOptions::default()
     };
+    // Before it, one whose arm follows trajectories sampled at another control period: the
+    // same model with other settings, refused when it first asks.
+    let policy = ThrowPolicy::new(ThrowDesign::pa10(), 0.25).unwrap();
+    let other = ThrowingEnvironment::new(
+        Robot::pa10(),
+        policy,
+        Simulator::Analytic,
+        Targets::Grid,
+        SpeedLimits::Ignore,
+    );
+    let (theirs, ours) = (other.spec(), environment::grid(Sim::Analytic).unwrap().spec());
+    assert_ne!(theirs, ours);
+    let error = acps_worker::serve(&run, &options, &mut Single(other), &AtomicBool::new(false)).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        format!(
+            "the learner of run '{run}' refused this worker: this worker serves {theirs}; the run's jobs need {ours}"
+        )
+    );
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false)).unwrap();
     assert_eq!(report.exit, WorkerExit::Finished);
     assert!(report.rollouts >= 2 * 2 * 300);
@@ -451,6 +474,11 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
     assert!(output.status.success(), "{stderr}");
     assert!(
         stderr.contains("refused a worker") && stderr.contains("protocol 99"),
+        "{stderr}"
+    );
+    // The learner names both environments too.
+    assert!(
+        stderr.contains(&format!("it serves environment {theirs}; the jobs need {ours}")),
         "{stderr}"
     );
     assert_eq!(
@@ -623,8 +651,8 @@ fn serve_options(start_with: usize) -> ServeOptions {
     }
 }
 
-/// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`), its jobs ready for a
-/// fleet, and each job's episodes when run in-process (as text: the bits, NaN included).
+/// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`) with
+/// [`served_and_in_process`]'s jobs and episodes.
 fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>, Vec<String>) {
     let options = Options {
         runs: 2,
@@ -634,6 +662,13 @@ fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>,
         ..Options::default()
     };
     let experiment = paper::grid(Sim::Analytic, &options);
+    let (jobs, reference) = served_and_in_process(&experiment);
+    (experiment, jobs, reference)
+}
+
+/// `experiment`'s jobs ready for a fleet, and each job's episodes when run in-process (as text:
+/// the bits, NaN included).
+fn served_and_in_process(experiment: &acps::experiment::Experiment) -> (Vec<FleetJob>, Vec<String>) {
     let reference = experiment
         .jobs()
         .unwrap()
@@ -652,10 +687,10 @@ fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>,
             learner: job.learner,
         })
         .collect();
-    (experiment, jobs, reference)
+    (jobs, reference)
 }
 
-/// Each fleet job's episodes, as [`short_grid`] gives the in-process ones.
+/// Each fleet job's episodes, as [`served_and_in_process`] gives the in-process ones.
 fn episodes(jobs: &[FleetJob]) -> Vec<String> {
     jobs.iter().map(|job| format!("{:?}", job.learner.episodes())).collect()
 }
@@ -843,4 +878,94 @@ fn a_bench_whose_worker_dies_stops_with_an_error_instead_of_a_row() {
     assert!(!dir.join("bench.json").exists(), "no table of a broken fleet");
     assert_clean(&RunName::new(&format!("bench-{acps}-rapier-1")).unwrap());
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// A factory that says it serves any environment, but provides the one it holds for every task,
+/// as a worker whose build configures the project's models differently would.
+struct Liar(ContextualFunction);
+
+impl EnvironmentFactory for Liar {
+    fn serves(&self) -> Serves {
+        Serves::Any
+    }
+
+    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+        Ok(&mut self.0)
+    }
+}
+
+#[test]
+fn workers_of_other_environments_are_refused_and_the_result_stays_the_in_process_one() {
+    // Two runs of the function experiment: two problem instances (seeds 0 and 1), so two
+    // environments.
+    let options = Options {
+        runs: 2,
+        episodes: Some(100),
+        in_flight: 2,
+        methods: Some(vec![Method::MonotonicProgress]),
+        ..Options::default()
+    };
+    let (mut jobs, reference) = served_and_in_process(&paper::function(&options));
+    let function = |seed| ContextualFunction::new(2, DEFAULT_N_THETA, seed).unwrap();
+    let run = run_name("environments");
+    let worker = |name: &str, factory: &mut dyn EnvironmentFactory| {
+        let options = WorkerOptions {
+            name: name.into(),
+            startup_timeout: Duration::from_secs(60),
+            ..WorkerOptions::default()
+        };
+        acps_worker::serve(&run, &options, factory, &AtomicBool::new(false))
+    };
+    let (progress, (refused, liar, zero, one)) = std::thread::scope(|scope| {
+        let workers = scope.spawn(|| {
+            // The function of another problem seed: refused when it first asks.
+            let refused = worker("seed-7", &mut Single(function(7)));
+            // Takes tasks as any worker, and refuses the first: the learner re-issues them.
+            let liar = worker("liar", &mut Liar(function(7)));
+            // One worker per instance, each handed only its own instance's tasks.
+            let zero = scope.spawn(|| worker("seed-0", &mut Single(function(0))));
+            let one = worker("seed-1", &mut Single(function(1)));
+            (refused, liar, zero.join().unwrap(), one)
+        });
+        let stop = AtomicBool::new(false);
+        let started = Instant::now();
+        let progress = fleet::serve(
+            &mut jobs,
+            &run,
+            serve_options(0),
+            &stop,
+            |_| {
+                if started.elapsed() > Duration::from_secs(120) {
+                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            },
+            |_, _| Ok(()),
+        )
+        .expect("the run finishes within two minutes");
+        (progress, workers.join().unwrap())
+    });
+    let [seed0, seed1, seed7] = [0, 1, 7].map(|seed| function(seed).spec());
+    match refused {
+        Err(WorkerError::Refused { reason, .. }) => assert_eq!(
+            reason,
+            format!("this worker serves {seed7}; the run's jobs need {seed0} and 1 other")
+        ),
+        other => panic!("expected a refusal at the handshake, got {other:?}"),
+    }
+    match liar {
+        Err(WorkerError::TaskRefused { needed, provided, .. }) => {
+            assert!(
+                [seed0, seed1].contains(&needed) && *provided == seed7,
+                "{needed} {provided}"
+            )
+        }
+        other => panic!("expected a refused task, got {other:?}"),
+    }
+    for served in [zero, one] {
+        assert_eq!(served.unwrap().exit, WorkerExit::Finished);
+    }
+    assert!(progress.refused >= 1 && progress.reissued >= 1, "{progress:?}");
+    assert_eq!(episodes(&jobs), reference);
+    ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
 }

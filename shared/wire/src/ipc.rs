@@ -386,7 +386,9 @@ mod tests {
                 WireTask::new(2, &task, spec).unwrap()
             };
             let answered = |tasks: &[WireTask]| {
-                let pending = client.send_copy(WorkerMessage::request(0, tasks.len())).unwrap();
+                let pending = client
+                    .send_copy(WorkerMessage::request(0, tasks.len(), acps_shared::Serves::Any))
+                    .unwrap();
                 let request = server.receive().unwrap().expect("the request arrived");
                 let sent = reply(&request, Answer::new(Response::Task, 5), tasks);
                 drop(request);

@@ -10,7 +10,7 @@
 //! per batch instead of once per task. An answer is an [`Answer`] header over a slice of exactly
 //! the tasks it carries, written in place in shared memory.
 
-use acps_shared::{EnvironmentSpec, MAX_NAME, Outcome, OutcomeStatus, SpecBuildError, Task, TaskKind};
+use acps_shared::{EnvironmentSpec, MAX_NAME, Outcome, OutcomeStatus, Serves, SpecBuildError, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
@@ -24,8 +24,8 @@ pub const MAX_DIAGNOSTICS: usize = 4;
 /// Most tasks one answer carries, and most outcomes one request carries.
 pub const MAX_BATCH: usize = 32;
 
-/// An [`EnvironmentSpec`] as it crosses the wire.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+/// An [`EnvironmentSpec`] as it crosses the wire (all zeros: none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct WireEnvironment {
     /// [`EnvironmentSpec::name`], padded with zeros.
@@ -63,8 +63,21 @@ pub enum Response {
     Task = 1,
     /// The run is over: stop.
     Stop = 2,
-    /// The worker belongs to another run or build: stop and say why.
+    /// The worker belongs to another run or build, or serves none of the run's environments:
+    /// stop and say why.
     Refused = 3,
+}
+
+/// Why the learner refused a worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Refusal {
+    /// Another protocol version: another build.
+    Protocol = 1,
+    /// Another run identity.
+    Run = 2,
+    /// The worker serves none of the environments the run's jobs need.
+    Environment = 3,
 }
 
 /// One task of an answer.
@@ -104,6 +117,12 @@ pub struct Answer {
     pub protocol: u32,
     /// The learner's run identity.
     pub run: u64,
+    /// For `Refused`, a [`Refusal`]; else 0.
+    pub refusal: u32,
+    /// How many environments the learner's jobs need.
+    pub environments: u32,
+    /// For `Refused`, one of them: the first with the worker's environment's name, if any.
+    pub environment: WireEnvironment,
 }
 
 /// One outcome of a [`WorkerMessage`].
@@ -143,8 +162,10 @@ pub struct WorkerMessage {
     pub run: u64,
     /// Number of valid entries of `outcomes`.
     pub count: u32,
-    /// Padding, always 0.
-    pub reserved: u32,
+    /// 1: the worker serves `environment` only; 0: any environment its factory builds.
+    pub serves_one: u32,
+    /// The environment a worker that serves one serves (zeros otherwise).
+    pub environment: WireEnvironment,
     /// The outcomes.
     pub outcomes: [WireOutcome; MAX_BATCH],
 }
@@ -230,6 +251,44 @@ impl Answer {
             response: response as u32,
             protocol: PROTOCOL_VERSION,
             run,
+            ..Self::default()
+        }
+    }
+
+    /// A refusal for `refusal` by the learner of run identity `run`, whose jobs need
+    /// `environments` environments, `environment` among them (`None` when they need none).
+    pub fn refused(refusal: Refusal, run: u64, environment: Option<EnvironmentSpec>, environments: usize) -> Self {
+        Self {
+            refusal: refusal as u32,
+            environments: u32::try_from(environments).unwrap_or(u32::MAX),
+            environment: environment.map(WireEnvironment::from).unwrap_or_default(),
+            ..Self::new(Response::Refused, run)
+        }
+    }
+
+    /// Why the learner refused, `None` for an unknown code (or no refusal).
+    pub fn refusal(&self) -> Option<Refusal> {
+        match self.refusal {
+            1 => Some(Refusal::Protocol),
+            2 => Some(Refusal::Run),
+            3 => Some(Refusal::Environment),
+            _ => None,
+        }
+    }
+
+    /// The environment a refusal names, `None` when the learner named none.
+    pub fn environment(&self) -> Option<EnvironmentSpec> {
+        EnvironmentSpec::try_from(self.environment).ok()
+    }
+
+    /// What a refusal says the learner's jobs need, in words: the environment it names and how
+    /// many others.
+    pub fn needs(&self) -> String {
+        match (self.environment(), self.environments) {
+            (None, _) => "no environment".to_string(),
+            (Some(spec), 0 | 1) => spec.to_string(),
+            (Some(spec), 2) => format!("{spec} and 1 other"),
+            (Some(spec), n) => format!("{spec} and {} others", n - 1),
         }
     }
 
@@ -278,8 +337,8 @@ impl WireOutcome {
 
 impl WorkerMessage {
     /// A request for `want` tasks (at most [`MAX_BATCH`]) without outcomes, from a worker that
-    /// means to join `run` (0: whatever runs).
-    pub fn request(run: u64, want: usize) -> Self {
+    /// means to join `run` (0: whatever runs) and `serves` these environments.
+    pub fn request(run: u64, want: usize, serves: Serves) -> Self {
         const EMPTY: WireOutcome = WireOutcome {
             job: 0,
             ok: 0,
@@ -295,8 +354,20 @@ impl WorkerMessage {
             want: want.min(MAX_BATCH) as u32,
             run,
             count: 0,
-            reserved: 0,
+            serves_one: u32::from(matches!(serves, Serves::One(_))),
+            environment: match serves {
+                Serves::One(spec) => spec.into(),
+                Serves::Any => WireEnvironment::default(),
+            },
             outcomes: [EMPTY; MAX_BATCH],
+        }
+    }
+
+    /// The environments the worker serves, or why its message does not say.
+    pub fn serves(&self) -> Result<Serves, SpecBuildError> {
+        match self.serves_one {
+            0 => Ok(Serves::Any),
+            _ => EnvironmentSpec::try_from(self.environment).map(Serves::One),
         }
     }
 
@@ -342,7 +413,8 @@ mod tests {
         assert_eq!((wire.job, EnvironmentSpec::try_from(wire.environment)), (5, Ok(spec())));
         assert_eq!(wire.to_task(), task);
         let outcome = Outcome::new(42, -1.5, 12.0).with_diagnostics(vec![-3.4, -4.1]);
-        let mut message = WorkerMessage::request(11, 4);
+        let mut message = WorkerMessage::request(11, 4, Serves::One(spec()));
+        assert_eq!(message.serves(), Ok(Serves::One(spec())));
         assert_eq!(message.outcomes().count(), 0);
         message.push(WireOutcome::new(5, &outcome).unwrap()).unwrap();
         message
@@ -359,9 +431,10 @@ mod tests {
 
     #[test]
     fn batches_are_bounded_and_clamped() {
-        let mut message = WorkerMessage::request(0, 0);
+        let mut message = WorkerMessage::request(0, 0, Serves::Any);
+        assert_eq!(message.serves(), Ok(Serves::Any));
         assert_eq!(message.wanted(), 0, "a request may only deliver outcomes");
-        assert_eq!(WorkerMessage::request(0, 1000).wanted(), MAX_BATCH);
+        assert_eq!(WorkerMessage::request(0, 1000, Serves::Any).wanted(), MAX_BATCH);
         for id in 0..MAX_BATCH as u64 {
             message
                 .push(WireOutcome::new(0, &Outcome::new(id, 0.0, 0.0)).unwrap())
@@ -386,6 +459,29 @@ mod tests {
             ..Answer::new(Response::Task, 7)
         };
         assert_eq!(unknown.response(), None);
+    }
+
+    #[test]
+    fn refusals_say_why_and_name_an_environment() {
+        let answer = Answer::refused(Refusal::Environment, 7, Some(spec()), 3);
+        assert_eq!(
+            (
+                answer.response(),
+                answer.refusal(),
+                answer.environment(),
+                answer.environments
+            ),
+            (Some(Response::Refused), Some(Refusal::Environment), Some(spec()), 3)
+        );
+        assert_eq!(answer.needs(), format!("{} and 2 others", spec()));
+        let none = Answer::refused(Refusal::Run, 7, None, 0);
+        assert_eq!((none.refusal(), none.environment()), (Some(Refusal::Run), None));
+        assert_eq!(none.needs(), "no environment");
+        assert_eq!(Answer::new(Response::Task, 7).refusal(), None);
+        // A name that is none (a corrupt message) is an error, not a spec.
+        let mut message = WorkerMessage::request(0, 1, Serves::One(spec()));
+        message.environment.name[0] = b' ';
+        assert!(message.serves().is_err());
     }
 
     #[test]
