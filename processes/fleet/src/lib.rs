@@ -8,4 +8,4 @@
 pub mod processes;
 pub mod server;
 
-pub use server::{FleetError, FleetJob, FleetProgress, ServeOptions, serve};
+pub use server::{FleetError, FleetJob, FleetJobBuildError, FleetProgress, ServeOptions, serve};

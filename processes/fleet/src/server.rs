@@ -16,7 +16,9 @@
 use acps_learner::{Learner, LearningProgress, TellError};
 use acps_shared::{EnvironmentSpec, Serves, SpecBuildError};
 use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
-use acps_wire::wire::{Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, WireTask, WorkerMessage};
+use acps_wire::wire::{
+    Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, WireTask, WorkerMessage, check_task_sizes,
+};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -27,12 +29,48 @@ use std::time::{Duration, Instant};
 /// How long the server tells queued outcomes before it looks for requests again.
 const TELL_BUDGET: Duration = Duration::from_micros(50);
 
-/// One learner and the environment its tasks run in.
+/// A learner whose tasks the wire carries, ready to be served: its problem's environment is
+/// what workers must serve to perform its tasks.
 pub struct FleetJob {
+    learner: Learner,
+}
+
+/// A learner a fleet cannot serve.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("problem '{problem}' cannot be served to workers: {capacity}")]
+pub struct FleetJobBuildError {
+    /// The learner's problem.
+    pub problem: String,
+    /// What its tasks would carry beyond the wire's capacity.
+    pub capacity: CapacityError,
+}
+
+impl FleetJob {
+    /// A job of `learner`, refused when its tasks' contexts or parameters exceed what the wire
+    /// carries: before the run starts rather than when a task would be handed out.
+    pub fn new(learner: Learner) -> Result<Self, FleetJobBuildError> {
+        let problem = learner.problem();
+        check_task_sizes(problem.context_dim(), problem.theta0.len()).map_err(|capacity| FleetJobBuildError {
+            problem: problem.name.clone(),
+            capacity,
+        })?;
+        Ok(Self { learner })
+    }
+
     /// The learner core.
-    pub learner: Learner,
-    /// What workers build to perform its tasks.
-    pub environment: EnvironmentSpec,
+    pub fn learner(&self) -> &Learner {
+        &self.learner
+    }
+
+    /// The learner core, once served.
+    pub fn into_learner(self) -> Learner {
+        self.learner
+    }
+
+    /// The environment the job's tasks need.
+    fn environment(&self) -> &EnvironmentSpec {
+        &self.learner.problem().environment
+    }
 }
 
 /// Progress of a fleet run, reported every tick.
@@ -70,7 +108,7 @@ pub enum FleetError {
     /// Another learner already serves this run.
     #[error("another learner already serves run '{0}'; choose another --run name")]
     RunTaken(String),
-    /// A task does not fit the wire.
+    /// A task does not fit the wire (a job's checked sizes prevent it).
     #[error(transparent)]
     Capacity(#[from] CapacityError),
     /// The stop flag was set (Ctrl-C).
@@ -341,7 +379,7 @@ fn admit(message: &WorkerMessage, identity: u64, jobs: &[FleetJob]) -> Result<Se
     }
     let serves = message.serves().map_err(Mismatch::Unreadable)?;
     match serves {
-        Serves::One(spec) if !jobs.iter().any(|job| job.environment == spec) => Err(Mismatch::Environment(spec)),
+        Serves::One(spec) if !jobs.iter().any(|job| *job.environment() == spec) => Err(Mismatch::Environment(spec)),
         serves => Ok(serves),
     }
 }
@@ -352,8 +390,8 @@ fn admit(message: &WorkerMessage, identity: u64, jobs: &[FleetJob]) -> Result<Se
 fn refusal(mismatch: &Mismatch, identity: u64, jobs: &[FleetJob]) -> (Answer, String) {
     let mut needed: Vec<EnvironmentSpec> = Vec::new();
     for job in jobs {
-        if !needed.contains(&job.environment) {
-            needed.push(job.environment);
+        if !needed.contains(job.environment()) {
+            needed.push(*job.environment());
         }
     }
     let closest = match mismatch {
@@ -415,7 +453,7 @@ fn answer(
             let Some((job, task)) = next_task(jobs, next_job, &serves) else {
                 break;
             };
-            tasks.push(WireTask::new(job as u32, &task, jobs[job].environment)?);
+            tasks.push(WireTask::new(job as u32, &task, *jobs[job].environment())?);
             holders.insert((job as u32, task.id), request.origin());
         }
         progress.learner_seconds += started.elapsed().as_secs_f64();
@@ -440,7 +478,7 @@ fn next_task(jobs: &mut [FleetJob], next_job: &mut usize, serves: &Serves) -> Op
     let n = jobs.len();
     for offset in 0..n {
         let job = (*next_job + offset) % n;
-        if !serves.includes(&jobs[job].environment) {
+        if !serves.includes(jobs[job].environment()) {
             continue;
         }
         if let Some(task) = jobs[job].learner.ask() {

@@ -356,13 +356,10 @@ fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<
 /// The jobs of `workload` served to a fleet of `workers` processes started for it.
 fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::Result<Measurement> {
     let run = RunName::new(&format!("bench-{}-{}-{workers}", std::process::id(), workload.name()))?;
-    let mut fleet_jobs: Vec<FleetJob> = jobs(workload, options.scale)?
+    let mut fleet_jobs = jobs(workload, options.scale)?
         .into_iter()
-        .map(|j| FleetJob {
-            environment: j.learner.problem().environment,
-            learner: j.learner,
-        })
-        .collect();
+        .map(|j| FleetJob::new(j.learner))
+        .collect::<Result<Vec<_>, _>>()?;
     let nice = options.worker_nice.unwrap_or_else(|| workers::default_nice(workers));
     let mut children = workers::spawn(&run, workers, options.worker_in_flight, nice)?;
     let start = Instant::now();

@@ -6,7 +6,7 @@
 
 use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::Progress;
-use acps_fleet::{self as fleet, FleetError, FleetJob, FleetProgress, ServeOptions};
+use acps_fleet::{self as fleet, FleetError, FleetJob, FleetJobBuildError, FleetProgress, ServeOptions};
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::{
@@ -259,6 +259,9 @@ pub enum RunError {
     /// Checkpoints could not be written or resumed from.
     #[error(transparent)]
     Checkpoints(#[from] CheckpointsError),
+    /// A learner's tasks do not fit the fleet's wire.
+    #[error(transparent)]
+    FleetJob(#[from] FleetJobBuildError),
     /// The fleet failed.
     #[error(transparent)]
     Fleet(#[from] FleetError),
@@ -431,13 +434,7 @@ impl Experiment {
                 return Err(RunError::Stateful(self.name.clone()));
             }
             optimal.push(job.optimal_score);
-            fleet_jobs.push((
-                FleetJob {
-                    environment: job.learner.problem().environment,
-                    learner: job.learner,
-                },
-                job.environment,
-            ));
+            fleet_jobs.push((FleetJob::new(job.learner)?, job.environment));
         }
         let (mut learners, environments): (Vec<FleetJob>, Vec<_>) = fleet_jobs.into_iter().unzip();
         let served = fleet::serve(
@@ -460,9 +457,9 @@ impl Experiment {
         if let Err(FleetError::Interrupted) = served {
             // Tasks out with workers are handed out again after a restore, so nothing is lost.
             for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {
-                if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner.is_done()) {
+                if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner().is_done()) {
                     writer
-                        .write(&job.learner, environment.as_ref())
+                        .write(job.learner(), environment.as_ref())
                         .map_err(CheckpointsError::from)?;
                 }
             }
@@ -473,7 +470,7 @@ impl Experiment {
             .zip(environments)
             .zip(optimal)
             .map(|((fleet_job, environment), optimal_score)| Job {
-                learner: fleet_job.learner,
+                learner: fleet_job.into_learner(),
                 environment,
                 keeps_state: false,
                 optimal_score,

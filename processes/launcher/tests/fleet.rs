@@ -682,17 +682,16 @@ fn served_and_in_process(experiment: &acps::experiment::Experiment) -> (Vec<Flee
         .jobs()
         .unwrap()
         .into_iter()
-        .map(|job| FleetJob {
-            environment: job.learner.problem().environment,
-            learner: job.learner,
-        })
+        .map(|job| FleetJob::new(job.learner).unwrap())
         .collect();
     (jobs, reference)
 }
 
 /// Each fleet job's episodes, as [`served_and_in_process`] gives the in-process ones.
 fn episodes(jobs: &[FleetJob]) -> Vec<String> {
-    jobs.iter().map(|job| format!("{:?}", job.learner.episodes())).collect()
+    jobs.iter()
+        .map(|job| format!("{:?}", job.learner().episodes()))
+        .collect()
 }
 
 /// Every rollout of the wrapped environment takes a millisecond, longer than a batch's worth of
@@ -967,5 +966,32 @@ fn workers_of_other_environments_are_refused_and_the_result_stays_the_in_process
     assert!(progress.refused >= 1 && progress.reissued >= 1, "{progress:?}");
     assert_eq!(episodes(&jobs), reference);
     ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
+}
+
+#[test]
+fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serving() {
+    // Section 5.1.3's problem in 9 dimensions: it runs in-process, and its contexts are one value
+    // more than a task on the wire carries.
+    let options = Options {
+        runs: 1,
+        episodes: Some(20),
+        methods: Some(vec![Method::Random]),
+        ..Options::default()
+    };
+    let experiment = paper::dims(9, &options);
+    let summary = experiment.run(&acps::progress::Progress::new("dims", true)).unwrap();
+    assert_eq!(summary.methods["random"].episodes, [0, 20]);
+    let run = run_name("too-large");
+    let error = experiment
+        .run_fleet(&run, Duration::ZERO, &AtomicBool::new(false), None, |_| {
+            panic!("nothing is served")
+        })
+        .err()
+        .unwrap();
+    assert_eq!(
+        error.to_string(),
+        "problem 'dims-9' cannot be served to workers: a task's context has 9 values, the wire carries at most 8 (MAX_CONTEXT)"
+    );
     assert_clean(&run);
 }

@@ -15,9 +15,11 @@
 //! Embedding: call [`serve`] on any thread of your program with an [`EnvironmentFactory`] (for
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 
-use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves};
+use acps_shared::{Environment, EnvironmentSpec, Serves};
 use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
-use acps_wire::wire::{Answer, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireOutcome, WireTask, WorkerMessage};
+use acps_wire::wire::{
+    Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireOutcome, WireTask, WorkerMessage,
+};
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::VecDeque;
@@ -129,6 +131,16 @@ pub enum WorkerError {
         run: String,
         /// Why, naming both sides' protocol versions, run identities or environments.
         reason: String,
+    },
+    /// The environment returned an outcome the wire cannot carry (too many diagnostics).
+    #[error("task {task_id} of job {job}: the outcome cannot be sent: {capacity}")]
+    OutcomeTooLarge {
+        /// The job.
+        job: u32,
+        /// The task.
+        task_id: u64,
+        /// What exceeds which capacity.
+        capacity: CapacityError,
     },
     /// A task needs another environment than the one the factory provided for it (for example
     /// one the learner's build configures differently).
@@ -344,10 +356,14 @@ pub fn serve(
             let outcome = environment.rollout(&task);
             batching.observe(started.elapsed());
             rollouts += 1;
-            // An outcome the wire cannot carry is reported as failed rather than cut.
-            let wire_outcome = WireOutcome::new(wire.job, &outcome)
-                .or_else(|_| WireOutcome::new(wire.job, &Outcome::failed(task.id)))
-                .expect("a failed outcome has no diagnostics");
+            // An outcome the wire cannot carry stops the worker: reported as failed, it would
+            // read as the environment's failure and change the run's result.
+            let wire_outcome =
+                WireOutcome::new(wire.job, &outcome).map_err(|capacity| WorkerError::OutcomeTooLarge {
+                    job: wire.job,
+                    task_id: task.id,
+                    capacity,
+                })?;
             outbox
                 .push(wire_outcome)
                 .expect("a full outbox stops the simulation until it is sent");

@@ -1,14 +1,15 @@
-//! A worker refused by the learner, or refusing a task, stops with a message naming both sides.
+//! A worker refused by the learner, or refusing a task, stops with a message naming both sides;
+//! one whose environment returns more than the wire carries stops naming the limit.
 
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Task, TaskKind};
 use acps_wire::ipc::{self, RunName};
-use acps_wire::wire::{Answer, Refusal, Response, WireTask, WorkerMessage};
+use acps_wire::wire::{Answer, MAX_DIAGNOSTICS, Refusal, Response, WireTask, WorkerMessage};
 use acps_worker::{Single, WorkerError, WorkerOptions, WorkerReport};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-/// Rollouts that return zero.
-struct Zero(EnvironmentSpec);
+/// Rollouts that return zero, with as many diagnostics as `.1` says.
+struct Zero(EnvironmentSpec, usize);
 
 /// The spec of an environment that differs from others of its name by `setting`.
 fn spec(setting: f64) -> EnvironmentSpec {
@@ -29,7 +30,7 @@ impl Environment for Zero {
     }
 
     fn rollout(&mut self, task: &Task) -> Outcome {
-        Outcome::new(task.id, 0.0, 0.0)
+        Outcome::new(task.id, 0.0, 0.0).with_diagnostics(vec![0.0; self.1])
     }
 }
 
@@ -75,7 +76,7 @@ fn against_stand_in(
 #[test]
 fn a_worker_of_another_run_stops_and_says_why() {
     let refuse = |_: &WorkerMessage| (Answer::refused(Refusal::Run, 42, Some(spec(1.0)), 1), vec![]);
-    match against_stand_in("refused-run", Zero(spec(1.0)), refuse) {
+    match against_stand_in("refused-run", Zero(spec(1.0), 0), refuse) {
         Err(WorkerError::Refused { reason, .. }) => assert!(reason.contains("000000000000002a"), "{reason}"),
         other => panic!("expected a refusal, got {other:?}"),
     }
@@ -87,7 +88,7 @@ fn a_worker_serving_an_environment_no_job_needs_names_both() {
         assert_eq!(message.serves(), Ok(acps_shared::Serves::One(spec(2.0))));
         (Answer::refused(Refusal::Environment, 42, Some(spec(1.0)), 2), vec![])
     };
-    match against_stand_in("refused-environment", Zero(spec(2.0)), refuse) {
+    match against_stand_in("refused-environment", Zero(spec(2.0), 0), refuse) {
         Err(WorkerError::Refused { reason, .. }) => assert_eq!(
             reason,
             format!(
@@ -115,7 +116,7 @@ fn task_in(environment: EnvironmentSpec) -> WireTask {
 #[test]
 fn single_refuses_a_task_of_another_environment() {
     let hand_out = |_: &WorkerMessage| (Answer::new(Response::Task, 42), vec![task_in(spec(1.0))]);
-    let error = against_stand_in("refused-task", Zero(spec(2.0)), hand_out).unwrap_err();
+    let error = against_stand_in("refused-task", Zero(spec(2.0), 0), hand_out).unwrap_err();
     assert_eq!(
         error,
         WorkerError::TaskRefused {
@@ -129,5 +130,22 @@ fn single_refuses_a_task_of_another_environment() {
     assert!(
         message.contains(&spec(1.0).to_string()) && message.contains(&spec(2.0).to_string()),
         "{message}"
+    );
+}
+
+#[test]
+fn an_outcome_with_more_diagnostics_than_the_wire_carries_stops_the_worker() {
+    let hand_out = |_: &WorkerMessage| (Answer::new(Response::Task, 42), vec![task_in(spec(1.0))]);
+    let error = against_stand_in("diagnostics", Zero(spec(1.0), MAX_DIAGNOSTICS + 1), hand_out).unwrap_err();
+    assert!(
+        matches!(error, WorkerError::OutcomeTooLarge { job: 3, task_id: 9, .. }),
+        "{error}"
+    );
+    assert_eq!(
+        error.to_string(),
+        format!(
+            "task 9 of job 3: the outcome cannot be sent: an outcome's diagnostics has {} values, the wire carries at most {MAX_DIAGNOSTICS} (MAX_DIAGNOSTICS)",
+            MAX_DIAGNOSTICS + 1
+        )
     );
 }

@@ -15,12 +15,12 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
 pub const PROTOCOL_VERSION: u32 = 6;
-/// Largest context a task can carry.
+/// Largest context a task can carry (docs/CHOICES.md: why 8).
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
 pub const MAX_THETA: usize = 64;
-/// Largest diagnostics vector an outcome can carry.
-pub const MAX_DIAGNOSTICS: usize = 4;
+/// Largest diagnostics vector an outcome can carry (docs/CHOICES.md: why 16).
+pub const MAX_DIAGNOSTICS: usize = 16;
 /// Most tasks one answer carries, and most outcomes one request carries.
 pub const MAX_BATCH: usize = 32;
 
@@ -172,7 +172,7 @@ pub struct WorkerMessage {
 
 /// A task or outcome that does not fit the fixed capacities.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{what} has {len} values, the wire carries at most {max}")]
+#[error("{what} has {len} values, the wire carries at most {max} ({limit})")]
 pub struct CapacityError {
     /// What overflowed.
     pub what: &'static str,
@@ -180,19 +180,54 @@ pub struct CapacityError {
     pub len: usize,
     /// The capacity.
     pub max: usize,
+    /// The capacity's name in this module.
+    pub limit: &'static str,
 }
 
-fn fit<const N: usize>(what: &'static str, values: &[f64]) -> Result<([f64; N], u32), CapacityError> {
-    if values.len() > N {
+/// A part of a task or an outcome with a capacity: what it is, and the capacity's name.
+struct Part {
+    what: &'static str,
+    limit: &'static str,
+}
+
+const CONTEXT: Part = Part {
+    what: "a task's context",
+    limit: "MAX_CONTEXT",
+};
+const THETA: Part = Part {
+    what: "a task's theta",
+    limit: "MAX_THETA",
+};
+const DIAGNOSTICS: Part = Part {
+    what: "an outcome's diagnostics",
+    limit: "MAX_DIAGNOSTICS",
+};
+
+/// Refuse `len` values of `part` beyond its capacity `max`.
+fn check_capacity(part: Part, len: usize, max: usize) -> Result<(), CapacityError> {
+    if len > max {
         return Err(CapacityError {
-            what,
-            len: values.len(),
-            max: N,
+            what: part.what,
+            len,
+            max,
+            limit: part.limit,
         });
     }
+    Ok(())
+}
+
+fn fit<const N: usize>(part: Part, values: &[f64]) -> Result<([f64; N], u32), CapacityError> {
+    check_capacity(part, values.len(), N)?;
     let mut array = [0.0; N];
     array[..values.len()].copy_from_slice(values);
     Ok((array, values.len() as u32))
+}
+
+/// Refuse tasks with contexts of `context` values or parameters of `theta` values when the wire
+/// cannot carry them: the check a learner's tasks pass before any is handed out.
+pub fn check_task_sizes(context: usize, theta: usize) -> Result<(), CapacityError> {
+    check_capacity(CONTEXT, context, MAX_CONTEXT)?;
+    check_capacity(THETA, theta, MAX_THETA)
 }
 
 fn kind_code(kind: TaskKind) -> u32 {
@@ -211,8 +246,8 @@ pub struct BatchFull;
 impl WireTask {
     /// A task of `job` to perform in `environment`.
     pub fn new(job: u32, task: &Task, environment: EnvironmentSpec) -> Result<Self, CapacityError> {
-        let (context, context_len) = fit::<MAX_CONTEXT>("a task's context", &task.context)?;
-        let (theta, theta_len) = fit::<MAX_THETA>("a task's theta", &task.theta)?;
+        let (context, context_len) = fit::<MAX_CONTEXT>(CONTEXT, &task.context)?;
+        let (theta, theta_len) = fit::<MAX_THETA>(THETA, &task.theta)?;
         Ok(Self {
             kind: kind_code(task.kind),
             job,
@@ -306,7 +341,7 @@ impl Answer {
 impl WireOutcome {
     /// `job`'s outcome. Diagnostics beyond the capacity are an error rather than silently cut.
     pub fn new(job: u32, outcome: &Outcome) -> Result<Self, CapacityError> {
-        let (diagnostics, diagnostics_len) = fit::<MAX_DIAGNOSTICS>("an outcome's diagnostics", &outcome.diagnostics)?;
+        let (diagnostics, diagnostics_len) = fit::<MAX_DIAGNOSTICS>(DIAGNOSTICS, &outcome.diagnostics)?;
         Ok(Self {
             job,
             ok: u32::from(outcome.is_ok()),
@@ -496,13 +531,35 @@ mod tests {
         let error = WireTask::new(0, &task, spec()).unwrap_err();
         assert_eq!(
             error.to_string(),
-            "a task's context has 9 values, the wire carries at most 8"
+            "a task's context has 9 values, the wire carries at most 8 (MAX_CONTEXT)"
+        );
+        assert_eq!(check_task_sizes(MAX_CONTEXT, MAX_THETA), Ok(()));
+        assert_eq!(check_task_sizes(MAX_CONTEXT + 1, 0), Err(error));
+        let error = check_task_sizes(1, MAX_THETA + 1).unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "a task's theta has 65 values, the wire carries at most 64 (MAX_THETA)"
         );
         let mut wire = WireOutcome::new(0, &Outcome::new(3, 1.0, 1.0)).unwrap();
         wire.reward = f64::NAN;
         assert!(!wire.to_outcome().1.is_ok());
         assert!(!WireOutcome::new(0, &Outcome::failed(4)).unwrap().to_outcome().1.is_ok());
+        let most = Outcome::new(5, 0.0, 0.0).with_diagnostics((0..MAX_DIAGNOSTICS).map(|d| d as f64).collect());
+        assert_eq!(WireOutcome::new(0, &most).unwrap().to_outcome().1, most);
         let too_many = Outcome::new(5, 0.0, 0.0).with_diagnostics(vec![0.0; MAX_DIAGNOSTICS + 1]);
-        assert!(WireOutcome::new(0, &too_many).is_err());
+        assert_eq!(
+            WireOutcome::new(0, &too_many).unwrap_err().to_string(),
+            "an outcome's diagnostics has 17 values, the wire carries at most 16 (MAX_DIAGNOSTICS)"
+        );
+    }
+
+    #[test]
+    fn the_payloads_have_the_sizes_docs_choices_gives() {
+        use std::mem::size_of;
+        assert_eq!(size_of::<WireEnvironment>(), 64);
+        assert_eq!(size_of::<WireTask>(), 672);
+        assert_eq!(size_of::<WireOutcome>(), 168);
+        assert_eq!(size_of::<WorkerMessage>(), 5464);
+        assert_eq!(size_of::<Answer>(), 88);
     }
 }
