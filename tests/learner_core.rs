@@ -9,7 +9,8 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 
 fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) -> (Learner, ContextualFunction) {
-    let problem = ContextualFunction::grid_problem(6, seed);
+    let function = ContextualFunction::new(2, 6, seed).unwrap();
+    let problem = function.grid_problem().unwrap();
     let selector = SelectorConfig {
         method,
         ducb: DUcbConfig {
@@ -38,10 +39,7 @@ fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) 
         eval_every: 50,
         creps: Some(creps),
     };
-    (
-        Learner::new(config, problem, selector).unwrap(),
-        ContextualFunction::new(2, 6, seed).unwrap(),
-    )
+    (Learner::new(config, problem, selector).unwrap(), function)
 }
 
 /// Everything observable about a finished run, as bits.
@@ -79,11 +77,11 @@ fn same_seed_gives_the_same_bits() {
     for method in [Method::MonotonicProgress, Method::Random, Method::RandomContinuous] {
         let (mut a, mut env_a) = function_learner(method, 5, 1, 300);
         let (mut b, mut env_b) = function_learner(method, 5, 1, 300);
-        acps_learner::run_in_process(&mut a, &mut env_a);
-        acps_learner::run_in_process(&mut b, &mut env_b);
+        acps_learner::run_in_process(&mut a, &mut env_a).unwrap();
+        acps_learner::run_in_process(&mut b, &mut env_b).unwrap();
         assert_eq!(fingerprint(&a), fingerprint(&b), "{method}");
         let (mut c, mut env_c) = function_learner(method, 6, 1, 300);
-        acps_learner::run_in_process(&mut c, &mut env_c);
+        acps_learner::run_in_process(&mut c, &mut env_c).unwrap();
         assert_ne!(
             fingerprint(&a),
             fingerprint(&c),
@@ -96,7 +94,7 @@ fn same_seed_gives_the_same_bits() {
 fn outcome_order_does_not_change_the_run() {
     for in_flight in [1, 4, 16] {
         let (mut reference, mut env) = function_learner(Method::MonotonicProgress, 3, in_flight, 400);
-        acps_learner::run_in_process(&mut reference, &mut env);
+        acps_learner::run_in_process(&mut reference, &mut env).unwrap();
         for order_seed in 0..3 {
             let (mut shuffled, mut env) = function_learner(Method::MonotonicProgress, 3, in_flight, 400);
             run_shuffled(&mut shuffled, &mut env, order_seed);
@@ -137,9 +135,9 @@ fn the_window_holds_exactly_p_training_tasks() {
 #[test]
 fn in_flight_one_matches_the_sequential_algorithm_and_larger_p_differs() {
     let (mut sequential, mut env) = function_learner(Method::MonotonicProgress, 2, 1, 300);
-    acps_learner::run_in_process(&mut sequential, &mut env);
+    acps_learner::run_in_process(&mut sequential, &mut env).unwrap();
     let (mut batched, mut env) = function_learner(Method::MonotonicProgress, 2, 8, 300);
-    acps_learner::run_in_process(&mut batched, &mut env);
+    acps_learner::run_in_process(&mut batched, &mut env).unwrap();
     assert_eq!(sequential.episodes().len(), 300);
     assert_eq!(batched.episodes().len(), 300);
     assert_ne!(fingerprint(&sequential), fingerprint(&batched));
@@ -208,7 +206,7 @@ fn reissued_tasks_come_out_again_unchanged() {
 
 #[test]
 fn bad_configs_are_refused_with_the_field_name() {
-    let problem = ContextualFunction::grid_problem(6, 0);
+    let problem = ContextualFunction::new(2, 6, 0).unwrap().grid_problem().unwrap();
     let selector = || {
         SelectorConfig {
             method: Method::Random,
@@ -252,7 +250,7 @@ fn bad_configs_are_refused_with_the_field_name() {
 #[test]
 fn evaluations_keep_every_test_outcome_in_order() {
     let (mut learner, mut env) = function_learner(Method::Random, 2, 1, 100);
-    acps_learner::run_in_process(&mut learner, &mut env);
+    acps_learner::run_in_process(&mut learner, &mut env).unwrap();
     let contexts = learner.problem().test_contexts.clone();
     for evaluation in learner.evaluations() {
         assert_eq!(evaluation.outcomes.len(), contexts.len());
@@ -275,7 +273,7 @@ fn a_failed_outcome_is_retried_once_then_consumed_as_failed() {
     // Transient failures: the first attempt of every 5th training task fails, the retry works.
     let (mut transient, mut env) = function_learner(Method::Random, 8, 1, 200);
     let (mut reference, mut env_reference) = function_learner(Method::Random, 8, 1, 200);
-    acps_learner::run_in_process(&mut reference, &mut env_reference);
+    acps_learner::run_in_process(&mut reference, &mut env_reference).unwrap();
     let mut attempts = std::collections::HashMap::new();
     while let Some(task) = transient.ask() {
         let attempt = attempts.entry(task.id).and_modify(|n| *n += 1).or_insert(1);
@@ -356,4 +354,19 @@ fn progress_of_several_learners_adds_episodes_and_averages_scores() {
     let nested = LearningProgress::combine([total, part(0, Some(7.0))]);
     assert_eq!(nested.score, Some(4.0));
     assert_eq!(LearningProgress::combine([part(5, None)]).score, None);
+}
+
+#[test]
+fn an_environment_other_than_the_problems_is_refused_before_any_rollout() {
+    let (mut learner, _) = function_learner(Method::Random, 1, 1, 10);
+    // The same function of another problem seed: another matrix A, another environment.
+    let mut other = ContextualFunction::new(2, 6, 2).unwrap();
+    let error = acps_learner::run_in_process(&mut learner, &mut other).unwrap_err();
+    let message = error.to_string();
+    assert!(
+        message.contains(&learner.problem().environment.to_string()) && message.contains(&other.spec().to_string()),
+        "{message}"
+    );
+    assert_eq!(learner.stats(), &Default::default(), "nothing was performed");
+    assert!(learner.episodes().is_empty());
 }

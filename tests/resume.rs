@@ -8,7 +8,7 @@ use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, run_in_process};
 use acps_models::contextual_function::ContextualFunction;
 use acps_models::learning_model::{LearningModel, LearningModelConfig};
-use acps_shared::{Environment, Outcome, Task};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 
@@ -32,6 +32,10 @@ fn selector_config(method: Method) -> SelectorConfig {
 struct Flaky(ContextualFunction);
 
 impl Environment for Flaky {
+    fn spec(&self) -> EnvironmentSpec {
+        self.0.spec()
+    }
+
     fn context_dim(&self) -> usize {
         self.0.context_dim()
     }
@@ -76,7 +80,8 @@ impl Setup {
                 in_flight,
                 per_task,
             } => {
-                let problem = ContextualFunction::grid_problem(6, seed);
+                let function = ContextualFunction::new(2, 6, seed).unwrap();
+                let problem = function.grid_problem().unwrap();
                 let selector = selector_config(method).build(&problem).unwrap();
                 let memory = if per_task {
                     MemoryConfig::BestPerTask { per_task: 3 }
@@ -97,7 +102,7 @@ impl Setup {
                     eval_every: 40,
                     creps: Some(creps),
                 };
-                let environment = Flaky(ContextualFunction::new(2, 6, seed).unwrap());
+                let environment = Flaky(function);
                 (Learner::new(config, problem, selector).unwrap(), Box::new(environment))
             }
             Setup::Toy {
@@ -105,15 +110,6 @@ impl Setup {
                 seed,
                 in_flight,
             } => {
-                let problem = LearningModel::problem();
-                let selector = selector_config(method).build(&problem).unwrap();
-                let config = LearnerConfig {
-                    seed,
-                    episodes: 200,
-                    in_flight,
-                    eval_every: 10,
-                    creps: None,
-                };
                 let model = LearningModel::new(
                     LearningModelConfig {
                         sigma_r: 0.01,
@@ -122,6 +118,15 @@ impl Setup {
                     seed,
                 )
                 .unwrap();
+                let problem = model.problem();
+                let selector = selector_config(method).build(&problem).unwrap();
+                let config = LearnerConfig {
+                    seed,
+                    episodes: 200,
+                    in_flight,
+                    eval_every: 10,
+                    creps: None,
+                };
                 (Learner::new(config, problem, selector).unwrap(), Box::new(model))
             }
         }
@@ -186,13 +191,13 @@ fn interrupted(setup: Setup, cuts: &[usize], shuffled: Option<u64>) -> Vec<u8> {
             "{setup:?}: restore is exact"
         );
     }
-    run_in_process(&mut learner, environment.as_mut());
+    run_in_process(&mut learner, environment.as_mut()).unwrap();
     bits(&learner, environment.as_ref())
 }
 
 fn uninterrupted(setup: Setup) -> Vec<u8> {
     let (mut learner, mut environment) = setup.build();
-    run_in_process(&mut learner, environment.as_mut());
+    run_in_process(&mut learner, environment.as_mut()).unwrap();
     assert!(learner.is_done());
     bits(&learner, environment.as_ref())
 }
@@ -270,7 +275,7 @@ fn the_interrupted_runs_did_fail_retry_and_update() {
         per_task: false,
     }
     .build();
-    run_in_process(&mut learner, environment.as_mut());
+    run_in_process(&mut learner, environment.as_mut()).unwrap();
     let stats = learner.stats();
     assert!(
         stats.retries > 0 && stats.failed_episodes > 0 && stats.updates > 0,

@@ -2,7 +2,7 @@
 //! the analytic backend (two DMP rollouts, forward kinematics and Jacobian at release,
 //! closed-form flight) and the rapier3d multibody arm tracking the same trajectory.
 
-use acps_models::environment::{self, Model, Sim};
+use acps_models::environment::{self, Sim};
 use acps_models::robot::Robot;
 use acps_models::throw::{PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
 use acps_shared::{Environment, Task, TaskKind};
@@ -49,7 +49,7 @@ fn analytic(c: &mut Criterion) {
 fn rapier(c: &mut Criterion) {
     let tasks = tasks();
     // The rapier environment exactly as the experiments and the workers build it.
-    let mut env = environment::build(&environment::throwing(Model::Grid, Sim::Rapier)).unwrap();
+    let mut env = environment::grid(Sim::Rapier).unwrap();
     let mut i = 0;
     c.bench_function("throw_rapier_default", |b| {
         b.iter(|| {

@@ -16,11 +16,7 @@ fn round_trip(c: &mut Criterion) {
         context: vec![0.0; 2],
         theta: vec![0.0; 21],
     };
-    let spec = EnvironmentSpec {
-        model: 0,
-        options: [0; 3],
-        problem_seed: 0,
-    };
+    let spec = EnvironmentSpec::new("bench", [0; 3], &()).unwrap();
     let tasks = [WireTask::new(0, &task, spec).unwrap()];
     for workers in [1, 8, 64] {
         let run = RunName::new(&format!("bench-rt-{}-{workers}", std::process::id())).unwrap();
@@ -35,7 +31,9 @@ fn round_trip(c: &mut Criterion) {
             c.bench_function(&format!("task_round_trip_{workers}_workers"), |b| {
                 b.iter(|| {
                     next = (next + 1) % workers;
-                    let pending = clients[next].send_copy(WorkerMessage::request(0, 1)).unwrap();
+                    let pending = clients[next]
+                        .send_copy(WorkerMessage::request(0, 1, acps_shared::Serves::Any))
+                        .unwrap();
                     let request = server.receive().unwrap().unwrap();
                     ipc::reply(&request, Answer::new(Response::Task, 0), &tasks).unwrap();
                     drop(request);

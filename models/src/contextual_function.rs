@@ -10,7 +10,8 @@
 
 use crate::{ModelError, check};
 use acps_shared::{
-    ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, derive_seed, random_unit_vector,
+    ContextSpace, Environment, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Stream, Task, derive_seed,
+    random_unit_vector,
 };
 use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
@@ -19,10 +20,15 @@ use rand_chacha::ChaCha8Rng;
 /// Default number of low-level parameters.
 pub const DEFAULT_N_THETA: usize = 20;
 
+/// The name of the function's environment; its parameters are [n_s, n_theta, problem seed].
+pub const ENVIRONMENT: &str = "contextual-function";
+
 /// The contextual function of one run.
 #[derive(Debug, Clone)]
 pub struct ContextualFunction {
     a: DMatrix<f64>,
+    problem_seed: u64,
+    spec: EnvironmentSpec,
 }
 
 impl ContextualFunction {
@@ -34,7 +40,10 @@ impl ContextualFunction {
         loop {
             let a = DMatrix::from_fn(n_s, n_theta, |_, _| rng.random::<f64>());
             if a.rank(1e-10) == n_s {
-                return Ok(Self { a });
+                // A is everything a rollout depends on: its values are the settings.
+                let parameters = [n_s as u64, n_theta as u64, problem_seed];
+                let spec = EnvironmentSpec::new(ENVIRONMENT, parameters, &a.as_slice()).expect("a valid name");
+                return Ok(Self { a, problem_seed, spec });
             }
         }
     }
@@ -55,26 +64,30 @@ impl ContextualFunction {
         Some((s.iter().sum::<f64>() - cost, cost))
     }
 
-    /// Section 5.1.2: the 25 training contexts on the grid {-1, -1/2, 0, 1/2, 1}^2 and 100 test
-    /// contexts uniform in [-1, 1]^2; the score is ln(mean cost).
-    pub fn grid_problem(n_theta: usize, problem_seed: u64) -> Problem {
+    /// Section 5.1.2 for this function (n_s = 2): the 25 training contexts on the grid
+    /// {-1, -1/2, 0, 1/2, 1}^2 and 100 test contexts uniform in [-1, 1]^2; the score is
+    /// ln(mean cost).
+    pub fn grid_problem(&self) -> Result<Problem, ModelError> {
+        let n_s = self.a.nrows();
+        check(n_s == 2, "contextual function", "n_s", "2 for the grid problem", n_s)?;
         let ticks = [-1.0, -0.5, 0.0, 0.5, 1.0];
         let training_contexts = ticks
             .iter()
             .flat_map(|&x| ticks.iter().map(move |&y| vec![x, y]))
             .collect();
         let space = ContextSpace::new_box(vec![-1.0; 2], vec![1.0; 2]).expect("a valid box");
-        let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, 1));
+        let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(self.problem_seed, Stream::Problem, 1));
         let test_contexts = (0..100).map(|_| space.sample(&mut rng)).collect();
-        Self::problem("function", training_contexts, test_contexts, space, n_theta)
+        Ok(self.problem("function", training_contexts, test_contexts, space))
     }
 
-    /// Section 5.1.3: 25 training contexts s_k with a uniform random direction and
-    /// ||s_k|| = k/25, k = 1..25, and a test set built the same way from another stream; the
+    /// Section 5.1.3 for this function: 25 training contexts s_k with a uniform random direction
+    /// and ||s_k|| = k/25, k = 1..25, and a test set built the same way from another stream; the
     /// continuous space is the unit ball.
-    pub fn shell_problem(n_s: usize, n_theta: usize, problem_seed: u64) -> Problem {
+    pub fn shell_problem(&self) -> Problem {
+        let n_s = self.a.nrows();
         let shells = |index: u64| -> Vec<Vec<f64>> {
-            let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, index));
+            let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(self.problem_seed, Stream::Problem, index));
             (1..=25)
                 .map(|k| {
                     random_unit_vector(n_s, &mut rng)
@@ -85,29 +98,28 @@ impl ContextualFunction {
                 .collect()
         };
         let space = ContextSpace::new_ball(n_s, 1.0).expect("a valid ball");
-        Self::problem(&format!("dims-{n_s}"), shells(1), shells(2), space, n_theta)
+        self.problem(&format!("dims-{n_s}"), shells(1), shells(2), space)
     }
 
-    fn problem(
-        name: &str,
-        training: Vec<Vec<f64>>,
-        test: Vec<Vec<f64>>,
-        space: ContextSpace,
-        n_theta: usize,
-    ) -> Problem {
+    fn problem(&self, name: &str, training: Vec<Vec<f64>>, test: Vec<Vec<f64>>, space: ContextSpace) -> Problem {
         Problem {
             name: name.into(),
             training_contexts: training,
             test_contexts: test,
             space,
-            theta0: vec![0.0; n_theta],
+            theta0: vec![0.0; self.a.ncols()],
             score: ScoreAggregate::LogMean,
             metric: "natural log of the mean cost |f - f*| over the test contexts, exploration off".into(),
+            environment: self.spec,
         }
     }
 }
 
 impl Environment for ContextualFunction {
+    fn spec(&self) -> EnvironmentSpec {
+        self.spec
+    }
+
     fn context_dim(&self) -> usize {
         self.a.nrows()
     }
@@ -156,18 +168,37 @@ mod tests {
 
     #[test]
     fn problem_sets_match_the_paper() {
-        let grid = ContextualFunction::grid_problem(20, 1);
+        let function = ContextualFunction::new(2, 20, 1).unwrap();
+        let grid = function.grid_problem().unwrap();
+        assert_eq!(grid.environment, function.spec());
         assert_eq!(grid.training_contexts.len(), 25);
         assert!(grid.training_contexts.contains(&vec![-1.0, 0.5]));
         assert_eq!(grid.test_contexts.len(), 100);
         assert!(grid.test_contexts.iter().all(|s| grid.space.contains(s)));
         for n_s in 1..=4 {
-            let p = ContextualFunction::shell_problem(n_s, 20, 1);
+            let p = ContextualFunction::new(n_s, 20, 1).unwrap().shell_problem();
             for (k, s) in p.training_contexts.iter().enumerate() {
                 let norm = s.iter().map(|x| x * x).sum::<f64>().sqrt();
                 assert!((norm - (k + 1) as f64 / 25.0).abs() < 1e-12);
             }
             assert_ne!(p.training_contexts, p.test_contexts);
         }
+        let error = ContextualFunction::new(3, 20, 1).unwrap().grid_problem().unwrap_err();
+        assert!(
+            error.to_string().contains("n_s must be 2 for the grid problem, got 3"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn the_spec_names_the_instance() {
+        let spec = |n_s, n_theta, seed| ContextualFunction::new(n_s, n_theta, seed).unwrap().spec();
+        assert_eq!(spec(2, 20, 5), spec(2, 20, 5));
+        assert_eq!(
+            (spec(2, 20, 5).name(), spec(2, 20, 5).parameters()),
+            (ENVIRONMENT, [2, 20, 5])
+        );
+        assert_ne!(spec(2, 20, 5).settings(), spec(2, 20, 6).settings(), "another matrix A");
+        assert_ne!(spec(2, 20, 5).settings(), spec(2, 21, 5).settings());
     }
 }

@@ -1,96 +1,23 @@
-//! Environments by specification: a worker receives an [`EnvironmentSpec`] with every task and
-//! builds (and caches) the environment it names; in-process runs build theirs the same way, so
-//! both perform identical rollouts.
+//! Environments by spec: a worker receives an [`EnvironmentSpec`] with every task and builds
+//! (and caches) the environment it names from its name and parameters; in-process runs build
+//! theirs with the same constructors. The spec of what was built then says whether it is the
+//! environment asked for: a build with other settings builds another one.
 
-use crate::contextual_function::ContextualFunction;
+use crate::ModelError;
+use crate::contextual_function::{self, ContextualFunction};
 use crate::rapier_sim::{RapierArm, RapierConfig};
 use crate::robot::Robot;
 use crate::targets;
-use crate::throw::{PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
-use crate::{ModelError, check};
-use acps_shared::EnvironmentSpec;
-use acps_shared::{Environment, Outcome, Task};
+use crate::throw::{
+    DARTBOARD_ENVIRONMENT, GRID_ENVIRONMENT, PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy,
+    ThrowingEnvironment,
+};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
 
-/// The environments a spec can name.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Model {
-    /// The Section 5.1 contextual function: options = [n_s, n_theta, 0].
-    ContextualFunction,
-    /// The PA-10 grid problem: options = [simulator, 0, 0].
-    Grid,
-    /// The PA-10 dartboard problem: options = [simulator, 0, 0].
-    Dartboard,
-    /// A rollout that costs nothing (reward -||theta||^2), for measuring transport.
-    Trivial,
-}
+pub use crate::throw::Sim;
 
-/// How a throwing environment simulates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Sim {
-    /// Forward kinematics at release and closed-form flight.
-    Analytic,
-    /// The rapier3d multibody arm with the default configuration.
-    Rapier,
-}
-
-impl Model {
-    fn code(self) -> u32 {
-        match self {
-            Model::ContextualFunction => 1,
-            Model::Grid => 2,
-            Model::Dartboard => 3,
-            Model::Trivial => 4,
-        }
-    }
-
-    fn from_code(code: u32) -> Option<Self> {
-        [Model::ContextualFunction, Model::Grid, Model::Dartboard, Model::Trivial]
-            .into_iter()
-            .find(|m| m.code() == code)
-    }
-}
-
-/// The spec of the contextual function with `n_s` context and `n_theta` parameter dimensions
-/// whose matrix A comes from `problem_seed`.
-pub fn contextual_function(n_s: usize, n_theta: usize, problem_seed: u64) -> EnvironmentSpec {
-    EnvironmentSpec {
-        model: Model::ContextualFunction.code(),
-        options: [n_s as u32, n_theta as u32, 0],
-        problem_seed,
-    }
-}
-
-/// The spec of a throwing problem.
-pub fn throwing(model: Model, sim: Sim) -> EnvironmentSpec {
-    let sim = match sim {
-        Sim::Analytic => 0,
-        Sim::Rapier => 1,
-    };
-    EnvironmentSpec {
-        model: model.code(),
-        options: [sim, 0, 0],
-        problem_seed: 0,
-    }
-}
-
-/// For a dartboard spec, the same throws scored against any target as on the grid (reward
-/// -||s - b||^2): the dartboard's reward is defined at field centres only. `None` for other
-/// specs.
-pub fn free_targets(spec: &EnvironmentSpec) -> Option<EnvironmentSpec> {
-    (Model::from_code(spec.model) == Some(Model::Dartboard)).then_some(EnvironmentSpec {
-        model: Model::Grid.code(),
-        ..*spec
-    })
-}
-
-/// The spec of the trivial environment.
-pub fn trivial() -> EnvironmentSpec {
-    EnvironmentSpec {
-        model: Model::Trivial.code(),
-        options: [0; 3],
-        problem_seed: 0,
-    }
-}
+/// The name of the [`TrivialEnvironment`].
+pub const TRIVIAL_ENVIRONMENT: &str = "trivial";
 
 /// The analytic backend needs only the release state, which the DMPs' 1 ms Euler substeps fix
 /// whatever the control period, so each DMP is sampled at its two end points only.
@@ -129,45 +56,86 @@ fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironmen
     ))
 }
 
-/// Build the environment `spec` names.
-pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, ModelError> {
-    let model = Model::from_code(spec.model);
-    check(
-        model.is_some(),
-        "environment spec",
-        "model",
-        "1 (function), 2 (grid), 3 (dartboard) or 4 (trivial)",
-        spec.model,
-    )?;
-    let sim = || match spec.options[0] {
-        0 => Ok(Sim::Analytic),
-        1 => Ok(Sim::Rapier),
-        other => Err(ModelError {
-            model: "environment spec",
-            field: "simulator",
-            accepted: "0 (analytic) or 1 (rapier)",
-            got: other.to_string(),
-        }),
-    };
-    Ok(match model.expect("checked above") {
-        Model::ContextualFunction => {
-            let [n_s, n_theta, _] = spec.options;
-            Box::new(ContextualFunction::new(
-                n_s as usize,
-                n_theta as usize,
-                spec.problem_seed,
-            )?)
-        }
-        Model::Grid => Box::new(throwing_environment(sim()?, Targets::Grid)?),
-        Model::Dartboard => Box::new(throwing_environment(sim()?, Targets::Dartboard(dartboard_fields()))?),
-        Model::Trivial => Box::new(TrivialEnvironment),
+/// The PA-10 throwing at the grid problem's targets.
+pub fn grid(sim: Sim) -> Result<ThrowingEnvironment, ModelError> {
+    throwing_environment(sim, Targets::Grid)
+}
+
+/// The PA-10 throwing at the dartboard's fields.
+pub fn dartboard(sim: Sim) -> Result<ThrowingEnvironment, ModelError> {
+    throwing_environment(sim, Targets::Dartboard(dartboard_fields()))
+}
+
+/// The simulator a throwing environment's spec names (its first parameter).
+fn sim_of(spec: &EnvironmentSpec) -> Result<Sim, ModelError> {
+    let [parameter, ..] = spec.parameters();
+    Sim::from_parameter(parameter).ok_or_else(|| ModelError {
+        model: "environment spec",
+        field: "simulator (parameter 0)",
+        accepted: "0 (analytic) or 1 (rapier)",
+        got: parameter.to_string(),
     })
 }
 
+/// Build the environment `spec` names from its name and parameters; the settings hash is for the
+/// caller to compare with the built environment's.
+pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, ModelError> {
+    Ok(match spec.name() {
+        contextual_function::ENVIRONMENT => {
+            let [n_s, n_theta, problem_seed] = spec.parameters();
+            let size = |n: u64| usize::try_from(n).unwrap_or(usize::MAX);
+            Box::new(ContextualFunction::new(size(n_s), size(n_theta), problem_seed)?)
+        }
+        GRID_ENVIRONMENT => Box::new(grid(sim_of(spec)?)?),
+        DARTBOARD_ENVIRONMENT => Box::new(dartboard(sim_of(spec)?)?),
+        TRIVIAL_ENVIRONMENT => Box::new(TrivialEnvironment::new()),
+        other => {
+            return Err(ModelError {
+                model: "environment spec",
+                field: "name",
+                accepted: "contextual-function, throw-grid, throw-dartboard or trivial",
+                got: other.to_string(),
+            });
+        }
+    })
+}
+
+/// For a dartboard spec, the same throws scored against any target as on the grid (reward
+/// -||s - b||^2): the dartboard's reward is defined at field centres only. `None` for other
+/// specs.
+pub fn free_targets(spec: &EnvironmentSpec) -> Result<Option<ThrowingEnvironment>, ModelError> {
+    if spec.name() == DARTBOARD_ENVIRONMENT {
+        grid(sim_of(spec)?).map(Some)
+    } else {
+        Ok(None)
+    }
+}
+
 /// A rollout that costs nothing: reward -||theta||^2, score ||theta||^2.
-pub struct TrivialEnvironment;
+pub struct TrivialEnvironment {
+    spec: EnvironmentSpec,
+}
+
+impl TrivialEnvironment {
+    /// The trivial environment; it has no settings.
+    pub fn new() -> Self {
+        Self {
+            spec: EnvironmentSpec::new(TRIVIAL_ENVIRONMENT, [0; 3], &()).expect("a valid name"),
+        }
+    }
+}
+
+impl Default for TrivialEnvironment {
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 impl Environment for TrivialEnvironment {
+    fn spec(&self) -> EnvironmentSpec {
+        self.spec
+    }
+
     fn context_dim(&self) -> usize {
         1
     }
@@ -187,32 +155,38 @@ mod tests {
     use super::*;
     use acps_shared::TaskKind;
 
-    #[test]
-    fn specs_build_the_environments_they_name() {
-        let task = |theta: Vec<f64>, context: Vec<f64>| Task {
+    fn task(theta: Vec<f64>, context: Vec<f64>) -> Task {
+        Task {
             id: 3,
             kind: TaskKind::Train,
             seed: 1,
             context,
             theta,
-        };
-        let mut function = build(&contextual_function(2, 20, 5)).unwrap();
+        }
+    }
+
+    #[test]
+    fn specs_build_the_environments_that_declare_them() {
         let direct = ContextualFunction::new(2, 20, 5).unwrap();
+        let mut function = build(&direct.spec()).unwrap();
+        assert_eq!(function.spec(), direct.spec());
         let t = task(vec![0.1; 20], vec![0.5, -0.5]);
         assert_eq!(
             function.rollout(&t).reward,
             direct.evaluate(&t.theta, &t.context).unwrap().0
         );
-        let mut grid = build(&throwing(Model::Grid, Sim::Analytic)).unwrap();
-        assert!(grid.rollout(&task(vec![0.0; PARAMS], vec![-3.5, -3.5])).is_ok());
-        let mut board = build(&throwing(Model::Dartboard, Sim::Analytic)).unwrap();
-        let free = free_targets(&throwing(Model::Dartboard, Sim::Rapier)).unwrap();
-        assert_eq!(free, throwing(Model::Grid, Sim::Rapier));
-        assert_eq!(free_targets(&throwing(Model::Grid, Sim::Analytic)), None);
+        let analytic = grid(Sim::Analytic).unwrap();
+        let mut built = build(&analytic.spec()).unwrap();
+        assert_eq!(built.spec(), analytic.spec());
+        assert!(built.rollout(&task(vec![0.0; PARAMS], vec![-3.5, -3.5])).is_ok());
+        let board = dartboard(Sim::Analytic).unwrap();
+        let mut built = build(&board.spec()).unwrap();
+        assert_eq!(built.spec(), board.spec());
         let bull = dartboard_fields()[0].centre;
-        assert_eq!(board.rollout(&task(vec![0.0; PARAMS], bull.to_vec())).reward, 0.0);
+        assert_eq!(built.rollout(&task(vec![0.0; PARAMS], bull.to_vec())).reward, 0.0);
+        let trivial = TrivialEnvironment::new().spec();
         assert_eq!(
-            build(&trivial())
+            build(&trivial)
                 .unwrap()
                 .rollout(&task(vec![3.0, 4.0], vec![0.0]))
                 .reward,
@@ -221,28 +195,30 @@ mod tests {
     }
 
     #[test]
+    fn the_dartboards_free_targets_are_the_grids_throws() {
+        let free = free_targets(&dartboard(Sim::Analytic).unwrap().spec())
+            .unwrap()
+            .unwrap();
+        assert_eq!(free.spec(), grid(Sim::Analytic).unwrap().spec());
+        assert!(free_targets(&grid(Sim::Analytic).unwrap().spec()).unwrap().is_none());
+    }
+
+    #[test]
     fn bad_specs_name_the_field() {
-        let error = build(&EnvironmentSpec {
-            model: 9,
-            options: [0; 3],
-            problem_seed: 0,
-        })
-        .err()
-        .unwrap()
-        .to_string();
-        assert!(error.contains("model must be 1 (function)"), "{error}");
-        let error = build(&EnvironmentSpec {
-            model: 2,
-            options: [7, 0, 0],
-            problem_seed: 0,
-        })
-        .err()
-        .unwrap()
-        .to_string();
+        let spec = |name: &str, parameters| EnvironmentSpec::from_parts(name.as_bytes(), 0, parameters).unwrap();
+        let error = build(&spec("learning-model", [0; 3])).err().unwrap().to_string();
         assert!(
-            error.contains("simulator must be 0 (analytic) or 1 (rapier), got 7"),
+            error.contains(
+                "name must be contextual-function, throw-grid, throw-dartboard or trivial, got learning-model"
+            ),
             "{error}"
         );
-        assert!(build(&contextual_function(3, 2, 0)).is_err(), "n_theta must exceed n_s");
+        let error = build(&spec(GRID_ENVIRONMENT, [7, 0, 0])).err().unwrap().to_string();
+        assert!(
+            error.contains("simulator (parameter 0) must be 0 (analytic) or 1 (rapier), got 7"),
+            "{error}"
+        );
+        let function = spec(contextual_function::ENVIRONMENT, [3, 2, 0]);
+        assert!(build(&function).is_err(), "n_theta must exceed n_s");
     }
 }

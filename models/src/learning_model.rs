@@ -14,7 +14,9 @@
 //! - the model has no policy parameters: theta is empty.
 
 use crate::{ModelError, check};
-use acps_shared::{ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind, derive_seed};
+use acps_shared::{
+    ContextSpace, Environment, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind, derive_seed,
+};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -22,6 +24,9 @@ use rand_distr::{Distribution, Normal};
 
 /// Number of contexts in the model.
 pub const CONTEXTS: usize = 10;
+
+/// The name of the model's environment (it is never built from a spec: it keeps state).
+pub const ENVIRONMENT: &str = "learning-model";
 
 /// Noise levels of the model (the four panels of Fig. 2 vary these).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -39,6 +44,7 @@ pub struct LearningModel {
     baselines: [f64; CONTEXTS],
     learning_factors: [f64; CONTEXTS],
     competence: [f64; CONTEXTS],
+    spec: EnvironmentSpec,
 }
 
 impl LearningModel {
@@ -68,7 +74,18 @@ impl LearningModel {
             baselines,
             learning_factors,
             competence: [0.0; CONTEXTS],
+            spec: Self::describe(&config, &baselines, &learning_factors),
         })
+    }
+
+    /// The spec of an instance: its noise levels, baselines and learning factors (the
+    /// competences are its state, which starts at zero).
+    fn describe(
+        config: &LearningModelConfig,
+        baselines: &[f64; CONTEXTS],
+        learning_factors: &[f64; CONTEXTS],
+    ) -> EnvironmentSpec {
+        EnvironmentSpec::new(ENVIRONMENT, [0; 3], &(config, baselines, learning_factors)).expect("a valid name")
     }
 
     /// Replace the drawn learning factors, for example by the permutation of the paper's Fig. 3.
@@ -82,12 +99,13 @@ impl LearningModel {
             format!("{learning_factors:?}"),
         )?;
         self.learning_factors = learning_factors;
+        self.spec = Self::describe(&self.config, &self.baselines, &learning_factors);
         Ok(self)
     }
 
-    /// The problem the learner sees: the ten contexts are both training and test set, and the
-    /// score of an evaluation is J = sum_s r(s).
-    pub fn problem() -> Problem {
+    /// The problem the learner sees in this instance: the ten contexts are both training and
+    /// test set, and the score of an evaluation is J = sum_s r(s).
+    pub fn problem(&self) -> Problem {
         let contexts: Vec<Vec<f64>> = (0..CONTEXTS).map(|s| vec![s as f64]).collect();
         Problem {
             name: "learning-model".into(),
@@ -97,6 +115,7 @@ impl LearningModel {
             theta0: Vec::new(),
             score: ScoreAggregate::Sum,
             metric: "J = sum over the 10 contexts of the noise-free reward r(s)".into(),
+            environment: self.spec,
         }
     }
 
@@ -142,6 +161,10 @@ fn context_index(context: &[f64]) -> Option<usize> {
 }
 
 impl Environment for LearningModel {
+    fn spec(&self) -> EnvironmentSpec {
+        self.spec
+    }
+
     fn context_dim(&self) -> usize {
         1
     }
@@ -230,6 +253,13 @@ mod tests {
         .unwrap()
         .with_learning_factors([0.5; CONTEXTS])
         .unwrap();
+        assert_eq!(model.problem().environment, model.spec());
+        let drawn = LearningModel::new(model.config, 3).unwrap();
+        assert_ne!(
+            drawn.spec(),
+            model.spec(),
+            "other learning factors, another environment"
+        );
         let untrained = 1.0 / (1.0 + 4f64.exp());
         assert!((model.true_reward(0) - untrained).abs() < 1e-15);
         let outcome = model.rollout(&task(0, TaskKind::Train, 4.0));

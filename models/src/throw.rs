@@ -20,7 +20,7 @@ use crate::rapier_sim::RapierArm;
 use crate::robot::Robot;
 use crate::targets::{self, Field, Point};
 use crate::trajectory::JointTrajectory;
-use acps_shared::{ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Task};
+use acps_shared::{ContextSpace, Environment, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Task};
 use nalgebra::DMatrix;
 
 /// Number of joints the throw drives.
@@ -170,7 +170,34 @@ impl SpeedLimits {
     }
 }
 
+/// Which simulator a throwing environment uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sim {
+    /// Forward kinematics at release and closed-form flight.
+    Analytic,
+    /// The rapier3d multibody arm.
+    Rapier,
+}
+
+impl Sim {
+    /// The first parameter of a throwing environment's spec: 0 analytic, 1 rapier.
+    pub fn parameter(self) -> u64 {
+        match self {
+            Sim::Analytic => 0,
+            Sim::Rapier => 1,
+        }
+    }
+
+    /// The simulator a spec's first parameter names.
+    pub fn from_parameter(parameter: u64) -> Option<Self> {
+        [Sim::Analytic, Sim::Rapier]
+            .into_iter()
+            .find(|sim| sim.parameter() == parameter)
+    }
+}
+
 /// How the ball's flight is obtained.
+#[derive(Debug)]
 pub enum Simulator {
     /// The commanded joint state at release, forward kinematics and the Jacobian, then the
     /// closed-form ballistic flight: exact for perfect tracking.
@@ -181,6 +208,14 @@ pub enum Simulator {
 }
 
 impl Simulator {
+    /// Which simulator this is.
+    pub fn sim(&self) -> Sim {
+        match self {
+            Simulator::Analytic => Sim::Analytic,
+            Simulator::Rapier(_) => Sim::Rapier,
+        }
+    }
+
     fn landing(&mut self, robot: &Robot, trajectory: &JointTrajectory) -> Option<Point> {
         match self {
             Simulator::Analytic => {
@@ -192,6 +227,12 @@ impl Simulator {
         }
     }
 }
+
+/// The name of a throwing environment at [`Targets::Grid`]; its parameters are
+/// [[`Sim::parameter`], 0, 0].
+pub const GRID_ENVIRONMENT: &str = "throw-grid";
+/// The name of a throwing environment at [`Targets::Dartboard`]; parameters as on the grid.
+pub const DARTBOARD_ENVIRONMENT: &str = "throw-dartboard";
 
 /// Which targets the contexts are.
 #[derive(Debug, Clone)]
@@ -211,6 +252,7 @@ pub struct ThrowingEnvironment {
     simulator: Simulator,
     targets: Targets,
     speed_limits: SpeedLimits,
+    spec: EnvironmentSpec,
 }
 
 impl ThrowingEnvironment {
@@ -222,12 +264,21 @@ impl ThrowingEnvironment {
         targets: Targets,
         speed_limits: SpeedLimits,
     ) -> Self {
+        let name = match targets {
+            Targets::Grid => GRID_ENVIRONMENT,
+            Targets::Dartboard(_) => DARTBOARD_ENVIRONMENT,
+        };
+        // Every part of the environment shapes a throw: the arm, the policy's design and control
+        // period, the simulator and its settings (a time step), the targets and the limits.
+        let settings = (&robot, &policy, &simulator, &targets, &speed_limits);
+        let spec = EnvironmentSpec::new(name, [simulator.sim().parameter(), 0, 0], &settings).expect("a valid name");
         Self {
             robot,
             policy,
             simulator,
             targets,
             speed_limits,
+            spec,
         }
     }
 
@@ -246,6 +297,10 @@ impl ThrowingEnvironment {
 }
 
 impl Environment for ThrowingEnvironment {
+    fn spec(&self) -> EnvironmentSpec {
+        self.spec
+    }
+
     fn context_dim(&self) -> usize {
         2
     }
@@ -287,9 +342,9 @@ impl Environment for ThrowingEnvironment {
     }
 }
 
-/// The grid problem as the learner sees it: 25 training targets, 16 test targets, offsets
-/// starting at 0 (W = 0 around theta_0).
-pub fn grid_problem() -> Problem {
+/// The grid problem in `environment` as the learner sees it: 25 training targets, 16 test
+/// targets, offsets starting at 0 (W = 0 around theta_0).
+pub fn grid_problem(environment: EnvironmentSpec) -> Problem {
     Problem {
         name: "grid".into(),
         training_contexts: targets::grid_training_targets(),
@@ -298,11 +353,13 @@ pub fn grid_problem() -> Problem {
         theta0: vec![0.0; PARAMS],
         score: ScoreAggregate::Mean,
         metric: "mean distance to the test targets in cm, exploration off".into(),
+        environment,
     }
 }
 
-/// The dartboard problem for `fields`: every field centre is a training and a test context.
-pub fn dartboard_problem(fields: &[Field], bull: Point) -> Problem {
+/// The dartboard problem for `fields` in `environment`: every field centre is a training and a
+/// test context.
+pub fn dartboard_problem(fields: &[Field], bull: Point, environment: EnvironmentSpec) -> Problem {
     let centres: Vec<Vec<f64>> = fields.iter().map(|f| f.centre.to_vec()).collect();
     let reach = targets::RING_RADII[4];
     Problem {
@@ -317,6 +374,7 @@ pub fn dartboard_problem(fields: &[Field], bull: Point) -> Problem {
         theta0: vec![0.0; PARAMS],
         score: ScoreAggregate::Mean,
         metric: "mean distance from the field centres in cm over the 81 fields, exploration off".into(),
+        environment,
     }
 }
 
@@ -327,6 +385,49 @@ mod tests {
     fn analytic(targets: Targets) -> ThrowingEnvironment {
         let policy = ThrowPolicy::new(ThrowDesign::pa10(), 0.001).unwrap();
         ThrowingEnvironment::new(Robot::pa10(), policy, Simulator::Analytic, targets, SpeedLimits::Ignore)
+    }
+
+    #[test]
+    fn the_spec_changes_with_every_setting_that_shapes_a_throw() {
+        let robot = Robot::pa10();
+        let build = |control_dt: f64, simulator: Simulator, speed_limits: SpeedLimits| {
+            let policy = ThrowPolicy::new(ThrowDesign::pa10(), control_dt).unwrap();
+            ThrowingEnvironment::new(robot.clone(), policy, simulator, Targets::Grid, speed_limits).spec()
+        };
+        let rapier = |dt: f64| {
+            let config = crate::rapier_sim::RapierConfig {
+                dt,
+                ..Default::default()
+            };
+            Simulator::Rapier(Box::new(RapierArm::new(&robot, config).unwrap()))
+        };
+        let reference = build(0.004, Simulator::Analytic, SpeedLimits::Ignore);
+        assert_eq!(reference, build(0.004, Simulator::Analytic, SpeedLimits::Ignore));
+        assert_eq!(
+            (reference.name(), reference.parameters()),
+            (GRID_ENVIRONMENT, [0, 0, 0])
+        );
+        let enforced = build(0.004, Simulator::Analytic, SpeedLimits::Enforce { scale: 2.0 });
+        let on_rapier = build(0.004, rapier(0.008), SpeedLimits::Ignore);
+        assert_eq!(on_rapier.parameters(), [Sim::Rapier.parameter(), 0, 0]);
+        for other in [
+            build(0.002, Simulator::Analytic, SpeedLimits::Ignore),
+            enforced,
+            on_rapier,
+        ] {
+            assert_ne!(other, reference);
+        }
+        // Another time step of the physics: the same name and parameters, other settings.
+        let finer = build(0.004, rapier(0.004), SpeedLimits::Ignore);
+        assert_eq!(
+            (finer.name(), finer.parameters()),
+            (on_rapier.name(), on_rapier.parameters())
+        );
+        assert_ne!(finer.settings(), on_rapier.settings());
+        assert_eq!(
+            analytic(Targets::Dartboard(vec![])).spec().name(),
+            DARTBOARD_ENVIRONMENT
+        );
     }
 
     #[test]
@@ -467,7 +568,7 @@ mod tests {
         let double = fields.iter().find(|f| f.category == targets::Category::Double).unwrap();
         assert_eq!(env.rollout(&task(double.centre)).reward, targets::MISS_REWARD);
         assert!(!env.rollout(&task([0.0, 0.0])).is_ok(), "a context that is no field");
-        let problem = dartboard_problem(&fields, INITIAL_LANDING);
+        let problem = dartboard_problem(&fields, INITIAL_LANDING, env.spec());
         assert_eq!((problem.training_contexts.len(), problem.theta0.len()), (81, PARAMS));
     }
 }

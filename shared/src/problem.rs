@@ -1,6 +1,6 @@
 //! What the learner needs to know about a problem, independent of who simulates it.
 
-use crate::ContextSpace;
+use crate::{ContextSpace, Environment, EnvironmentSpec};
 use serde::{Deserialize, Serialize};
 
 /// How the scores of an evaluation's rollouts (one per test context) become one number.
@@ -48,12 +48,40 @@ pub struct Problem {
     pub score: ScoreAggregate,
     /// What the aggregated score means, for people reading results.
     pub metric: String,
+    /// The environment the problem is defined for: rollouts of any other are refused.
+    pub environment: EnvironmentSpec,
+}
+
+/// An environment that is not the one a problem is defined for.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("problem '{problem}' is defined for environment {expected}, not for {found}")]
+pub struct EnvironmentMatchError {
+    /// The problem's name.
+    pub problem: String,
+    /// The problem's environment (boxed, as the error path is rare and results stay small).
+    pub expected: Box<EnvironmentSpec>,
+    /// The environment offered.
+    pub found: Box<EnvironmentSpec>,
 }
 
 impl Problem {
     /// Dimension of the contexts.
     pub fn context_dim(&self) -> usize {
         self.space.dim()
+    }
+
+    /// Refuse an environment other than the problem's.
+    pub fn check_environment(&self, environment: &dyn Environment) -> Result<(), EnvironmentMatchError> {
+        let found = environment.spec();
+        if found == self.environment {
+            Ok(())
+        } else {
+            Err(EnvironmentMatchError {
+                problem: self.name.clone(),
+                expected: Box::new(self.environment),
+                found: Box::new(found),
+            })
+        }
     }
 }
 
@@ -68,5 +96,51 @@ mod tests {
         assert_eq!(ScoreAggregate::Mean.apply(&scores), Some(3.0));
         assert_eq!(ScoreAggregate::LogMean.apply(&scores), Some(3.0f64.ln()));
         assert_eq!(ScoreAggregate::Mean.apply(&[]), None);
+    }
+
+    /// An environment that is only its spec.
+    struct Named(EnvironmentSpec);
+
+    impl Environment for Named {
+        fn spec(&self) -> EnvironmentSpec {
+            self.0
+        }
+
+        fn context_dim(&self) -> usize {
+            1
+        }
+
+        fn param_dim(&self) -> usize {
+            0
+        }
+
+        fn rollout(&mut self, task: &crate::Task) -> crate::Outcome {
+            crate::Outcome::failed(task.id)
+        }
+    }
+
+    #[test]
+    fn another_environment_is_refused_naming_both() {
+        let spec = |dt: f64| EnvironmentSpec::new("arm", [0; 3], &dt).unwrap();
+        let problem = Problem {
+            name: "reach".into(),
+            training_contexts: vec![vec![0.0]],
+            test_contexts: vec![],
+            space: ContextSpace::new_box(vec![0.0], vec![1.0]).unwrap(),
+            theta0: vec![],
+            score: ScoreAggregate::Mean,
+            metric: "none".into(),
+            environment: spec(0.01),
+        };
+        assert_eq!(problem.check_environment(&Named(spec(0.01))), Ok(()));
+        let error = problem.check_environment(&Named(spec(0.02))).unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            format!(
+                "problem 'reach' is defined for environment {}, not for {}",
+                spec(0.01),
+                spec(0.02)
+            )
+        );
     }
 }

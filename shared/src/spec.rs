@@ -1,14 +1,226 @@
-//! Which environment a task needs.
+//! What an environment is: the identity a problem is defined for, every task names and every
+//! worker declares, so that rollouts of differently configured environments are never mixed.
 
+use crate::{FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
+use std::fmt;
 
-/// Which environment a task needs: workers build environments from this and cache them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// Most bytes of an environment's name (a fixed capacity, so that a spec crosses a wire as is).
+pub const MAX_NAME: usize = 32;
+
+/// Which environment a problem is defined for: a name, a hash of the settings that change its
+/// rollouts, and three numbers a factory may build it from (for example a problem seed). Two
+/// environments whose specs are equal perform the same rollouts; anything that would make them
+/// differ (another time step, another random instance, another robot) must change the spec.
+///
+/// # Stability of the settings hash
+/// [`EnvironmentSpec::new`] hashes the `Debug` text of a settings value with FNV-1a (64 bit).
+/// The hash is the same in every process and on every platform of one build, and in builds that
+/// print the settings the same way. A change of the settings' types, or of how a dependency or
+/// the compiler prints them, changes the hash: processes of such builds then refuse each other's
+/// tasks, which errs on the safe side. The hash may cover settings that happen not to change
+/// rollouts; it must cover every one that does.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(try_from = "SpecFields", into = "SpecFields")]
 pub struct EnvironmentSpec {
-    /// The model (see `acps_models::environment`).
-    pub model: u32,
-    /// Model-specific small integers (for example the simulator, context dimension, n_theta).
-    pub options: [u32; 3],
-    /// Seed of the problem instance (for example the contextual function's matrix A).
-    pub problem_seed: u64,
+    /// ASCII, padded with zeros.
+    name: [u8; MAX_NAME],
+    settings: u64,
+    parameters: [u64; 3],
+}
+
+/// A spec that cannot be made.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SpecBuildError {
+    /// The name is empty, too long, or has a character outside the accepted set.
+    #[error("environment name {0:?} must be 1 to {MAX_NAME} characters of ASCII letters, digits, '-', '_' and '.'")]
+    Name(String),
+    /// A saved settings hash is not 16 hexadecimal digits.
+    #[error("environment settings {0:?} must be 16 hexadecimal digits")]
+    Settings(String),
+}
+
+impl EnvironmentSpec {
+    /// The spec of the environment `name` built from `parameters` with `settings`, everything
+    /// that changes its rollouts (see the type's documentation for what the hash promises).
+    pub fn new(name: &str, parameters: [u64; 3], settings: &impl fmt::Debug) -> Result<Self, SpecBuildError> {
+        let text = format!("{settings:?}");
+        Self::from_parts(name.as_bytes(), fnv1a(FNV_OFFSET, text.as_bytes()), parameters)
+    }
+
+    /// A spec from its parts as they were stored or sent: `name` may be padded with zeros.
+    pub fn from_parts(name: &[u8], settings: u64, parameters: [u64; 3]) -> Result<Self, SpecBuildError> {
+        let len = name.iter().position(|&b| b == 0).unwrap_or(name.len());
+        let (text, padding) = name.split_at(len);
+        let valid = (1..=MAX_NAME).contains(&len)
+            && padding.iter().all(|&b| b == 0)
+            && text
+                .iter()
+                .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.'));
+        if !valid {
+            return Err(SpecBuildError::Name(String::from_utf8_lossy(name).into_owned()));
+        }
+        let mut padded = [0; MAX_NAME];
+        padded[..len].copy_from_slice(text);
+        Ok(Self {
+            name: padded,
+            settings,
+            parameters,
+        })
+    }
+
+    /// The environment's name.
+    pub fn name(&self) -> &str {
+        let len = self.name.iter().position(|&b| b == 0).unwrap_or(MAX_NAME);
+        std::str::from_utf8(&self.name[..len]).expect("names are ASCII")
+    }
+
+    /// The name padded with zeros to [`MAX_NAME`] bytes.
+    pub fn padded_name(&self) -> [u8; MAX_NAME] {
+        self.name
+    }
+
+    /// The hash of the settings that change rollouts.
+    pub fn settings(&self) -> u64 {
+        self.settings
+    }
+
+    /// The numbers a factory builds the environment from.
+    pub fn parameters(&self) -> [u64; 3] {
+        self.parameters
+    }
+}
+
+/// `contextual-function [2, 20, 7] (settings 9f3a0c12d4e5b6a7)`.
+impl fmt::Display for EnvironmentSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let [a, b, c] = self.parameters;
+        write!(f, "{} [{a}, {b}, {c}] (settings {:016x})", self.name(), self.settings)
+    }
+}
+
+impl fmt::Debug for EnvironmentSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "EnvironmentSpec({self})")
+    }
+}
+
+/// How a spec is saved: the hash as hexadecimal text, which any JSON reader keeps exactly.
+#[derive(Serialize, Deserialize)]
+struct SpecFields {
+    name: String,
+    settings: String,
+    parameters: [u64; 3],
+}
+
+impl From<EnvironmentSpec> for SpecFields {
+    fn from(spec: EnvironmentSpec) -> Self {
+        Self {
+            name: spec.name().to_string(),
+            settings: format!("{:016x}", spec.settings),
+            parameters: spec.parameters,
+        }
+    }
+}
+
+impl TryFrom<SpecFields> for EnvironmentSpec {
+    type Error = SpecBuildError;
+
+    fn try_from(fields: SpecFields) -> Result<Self, SpecBuildError> {
+        let settings = (fields.settings.len() == 16)
+            .then(|| u64::from_str_radix(&fields.settings, 16).ok())
+            .flatten()
+            .ok_or_else(|| SpecBuildError::Settings(fields.settings.clone()))?;
+        Self::from_parts(fields.name.as_bytes(), settings, fields.parameters)
+    }
+}
+
+/// The environments a worker serves, as it declares them to a learner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Serves {
+    /// This one only: the learner hands the worker only tasks that need it.
+    One(EnvironmentSpec),
+    /// Whatever its factory builds: the worker checks the environment of every task it gets.
+    Any,
+}
+
+impl Serves {
+    /// Whether a task that needs `spec` may go to the worker.
+    pub fn includes(&self, spec: &EnvironmentSpec) -> bool {
+        match self {
+            Serves::One(served) => served == spec,
+            Serves::Any => true,
+        }
+    }
+}
+
+/// `contextual-function [...] (settings ...)`, or "any environment its factory builds".
+impl fmt::Display for Serves {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Serves::One(spec) => spec.fmt(f),
+            Serves::Any => f.write_str("any environment its factory builds"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_that_differ_give_specs_that_differ() {
+        let spec = |dt: f64| EnvironmentSpec::new("arm.v2", [1, 0, 0], &(dt, 3)).unwrap();
+        assert_eq!(spec(0.008), spec(0.008));
+        assert_ne!(spec(0.008), spec(0.004));
+        assert_eq!(spec(0.008).name(), "arm.v2");
+        // The hash is FNV-1a over the Debug text: the same in every process and build that
+        // prints the settings the same way.
+        assert_eq!(spec(0.008).settings(), fnv1a(FNV_OFFSET, b"(0.008, 3)"));
+        let other = EnvironmentSpec::new("arm.v2", [2, 0, 0], &(0.008, 3)).unwrap();
+        assert_ne!(other, spec(0.008), "the parameters count");
+        assert_eq!(
+            spec(0.008).to_string(),
+            format!("arm.v2 [1, 0, 0] (settings {:016x})", spec(0.008).settings())
+        );
+    }
+
+    #[test]
+    fn names_are_short_ascii() {
+        for bad in ["", "with space", "ünïcode", &"x".repeat(MAX_NAME + 1)] {
+            let error = EnvironmentSpec::new(bad, [0; 3], &()).unwrap_err();
+            assert_eq!(error, SpecBuildError::Name(bad.to_string()));
+        }
+        let longest = "x".repeat(MAX_NAME);
+        assert_eq!(EnvironmentSpec::new(&longest, [0; 3], &()).unwrap().name(), longest);
+        // Padding only at the end: a zero byte cannot hide characters behind it.
+        assert!(EnvironmentSpec::from_parts(b"ab\0c", 0, [0; 3]).is_err());
+        assert_eq!(EnvironmentSpec::from_parts(b"ab\0\0", 0, [0; 3]).unwrap().name(), "ab");
+    }
+
+    #[test]
+    fn specs_are_saved_readably_and_read_back_checked() {
+        let spec = EnvironmentSpec::new("trivial", [u64::MAX, 0, 7], &()).unwrap();
+        let json = serde_json::to_string(&spec).unwrap();
+        assert_eq!(
+            json,
+            format!(
+                r#"{{"name":"trivial","settings":"{:016x}","parameters":[18446744073709551615,0,7]}}"#,
+                spec.settings()
+            )
+        );
+        assert_eq!(serde_json::from_str::<EnvironmentSpec>(&json).unwrap(), spec);
+        let short = json.replace(&format!("{:016x}", spec.settings()), "abc");
+        assert!(serde_json::from_str::<EnvironmentSpec>(&short).is_err());
+        let renamed = json.replace("trivial", "not valid");
+        assert!(serde_json::from_str::<EnvironmentSpec>(&renamed).is_err());
+    }
+
+    #[test]
+    fn a_worker_serving_one_environment_takes_only_its_tasks() {
+        let a = EnvironmentSpec::new("a", [0; 3], &()).unwrap();
+        let b = EnvironmentSpec::new("b", [0; 3], &()).unwrap();
+        assert!(Serves::One(a).includes(&a) && !Serves::One(a).includes(&b));
+        assert!(Serves::Any.includes(&b));
+    }
 }

@@ -1,5 +1,6 @@
 //! Tasks, outcomes and the environment trait.
 
+use crate::EnvironmentSpec;
 use serde::{Deserialize, Serialize};
 
 /// Why a task exists.
@@ -98,6 +99,11 @@ impl Outcome {
 /// Something that performs rollouts. Implementations must be deterministic given the task
 /// (its seed included), unless they document otherwise.
 pub trait Environment: Send {
+    /// What the environment is: its name, the hash of the settings that change its rollouts, and
+    /// the numbers it was built from. Learners refuse an environment whose spec is not their
+    /// problem's, and workers check it for every task they perform, so return a value computed
+    /// when the environment was built.
+    fn spec(&self) -> EnvironmentSpec;
     /// Dimension of the context s.
     fn context_dim(&self) -> usize;
     /// Dimension of the low-level parameters theta.
@@ -128,6 +134,10 @@ pub trait Environment: Send {
 
 /// A boxed environment is one: a worker serves `Box<dyn Environment>` as it serves any other.
 impl<E: Environment + ?Sized> Environment for Box<E> {
+    fn spec(&self) -> EnvironmentSpec {
+        (**self).spec()
+    }
+
     fn context_dim(&self) -> usize {
         (**self).context_dim()
     }

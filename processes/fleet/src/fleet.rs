@@ -307,19 +307,10 @@ fn start_workers(run: &RunName, spawn: &Spawn) -> Result<Vec<Child>, FleetError>
     Ok(children)
 }
 
-/// A hash of the jobs' problems, environments and seeds (FNV-1a, stable across builds).
+/// A hash of the jobs' problems (their environments included) and seeds, stable across builds.
 fn identity_of(jobs: &[FleetJob]) -> u64 {
-    let mut hash = 0xcbf2_9ce4_8422_2325u64;
-    for job in jobs {
-        let description = format!(
-            "{:?} {:?} {}",
-            job.learner.problem(),
-            job.environment,
-            job.learner.seed()
-        );
-        for byte in description.bytes() {
-            hash = (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    hash
+    jobs.iter().fold(acps_shared::FNV_OFFSET, |hash, job| {
+        let learner = job.learner();
+        acps_shared::fnv1a(hash, format!("{:?} {}", learner.problem(), learner.seed()).as_bytes())
+    })
 }

@@ -15,4 +15,4 @@ pub mod processes;
 pub mod server;
 
 pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};
-pub use server::{FleetError, FleetJob, FleetProgress, Liveness, Observer, ServeOptions};
+pub use server::{FleetError, FleetJob, FleetJobBuildError, FleetProgress, Liveness, Observer, ServeOptions};

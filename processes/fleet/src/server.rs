@@ -18,12 +18,15 @@
 //!
 //! A late outcome of a re-issued task is recognised as a duplicate and dropped (or, arriving
 //! first, accepted: the rollout is seeded, so both copies carry the same bits). Workers of
-//! another build or run are refused.
+//! another build or run, and workers serving an environment no job needs, are refused; a worker
+//! that serves one environment is handed only tasks of jobs that need it.
 
 use acps_learner::{Learner, LearningProgress, TellError};
-use acps_shared::EnvironmentSpec;
+use acps_shared::{EnvironmentSpec, Serves, SpecBuildError};
 use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
-use acps_wire::wire::{Answer, CapacityError, PROTOCOL_VERSION, Response, WireTask};
+use acps_wire::wire::{
+    Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, WireTask, WorkerMessage, check_task_sizes,
+};
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -33,12 +36,48 @@ use std::time::{Duration, Instant};
 /// How long the server tells queued outcomes before it looks for requests again.
 const TELL_BUDGET: Duration = Duration::from_micros(50);
 
-/// One learner and the environment its tasks run in.
+/// A learner whose tasks the wire carries, ready to be served: its problem's environment is
+/// what workers must serve to perform its tasks.
 pub struct FleetJob {
+    learner: Learner,
+}
+
+/// A learner a fleet cannot serve.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("problem '{problem}' cannot be served to workers: {capacity}")]
+pub struct FleetJobBuildError {
+    /// The learner's problem.
+    pub problem: String,
+    /// What its tasks would carry beyond the wire's capacity.
+    pub capacity: CapacityError,
+}
+
+impl FleetJob {
+    /// A job of `learner`, refused when its tasks' contexts or parameters exceed what the wire
+    /// carries: before the run starts rather than when a task would be handed out.
+    pub fn new(learner: Learner) -> Result<Self, FleetJobBuildError> {
+        let problem = learner.problem();
+        check_task_sizes(problem.context_dim(), problem.theta0.len()).map_err(|capacity| FleetJobBuildError {
+            problem: problem.name.clone(),
+            capacity,
+        })?;
+        Ok(Self { learner })
+    }
+
     /// The learner core.
-    pub learner: Learner,
-    /// What workers build to perform its tasks.
-    pub environment: EnvironmentSpec,
+    pub fn learner(&self) -> &Learner {
+        &self.learner
+    }
+
+    /// The learner core, once served.
+    pub fn into_learner(self) -> Learner {
+        self.learner
+    }
+
+    /// The environment the job's tasks need.
+    fn environment(&self) -> &EnvironmentSpec {
+        &self.learner.problem().environment
+    }
 }
 
 /// Progress of a fleet run, reported every tick.
@@ -56,7 +95,7 @@ pub struct FleetProgress {
     pub reissued: u64,
     /// Outcomes dropped as duplicates (a re-issued task answered twice).
     pub duplicates: u64,
-    /// Requests refused (another build or run).
+    /// Requests refused (another build, run or environment).
     pub refused: u64,
     /// Requests that only delivered outcomes, because the worker's asking requests all waited.
     pub delivered: u64,
@@ -78,7 +117,7 @@ pub enum FleetError {
     /// Another learner already serves this run name.
     #[error("another learner already serves run '{0}'; choose another run name")]
     RunTaken(String),
-    /// A task does not fit the wire.
+    /// A task does not fit the wire (a job's checked sizes prevent it).
     #[error(transparent)]
     Capacity(#[from] CapacityError),
     /// The stop flag was set (Ctrl-C, or the caller's [`Fleet::stop_flag`](crate::Fleet::stop_flag)).
@@ -242,18 +281,18 @@ pub(crate) fn serve(
             }
             let message = request.payload();
             slowest_rollout = slowest_rollout.max(message.slowest_rollout());
-            if message.protocol != PROTOCOL_VERSION || (message.run != 0 && message.run != identity) {
-                progress.refused += 1;
-                if refused_clients.insert(request.origin()) {
-                    tracing::warn!(
-                        "refused a worker of run '{run}': protocol {} (ours {PROTOCOL_VERSION}), run identity {:016x} (ours {identity:016x})",
-                        message.protocol,
-                        message.run
-                    );
+            let serves = match admit(message, identity, jobs) {
+                Ok(serves) => serves,
+                Err(mismatch) => {
+                    progress.refused += 1;
+                    let (answer, reason) = refusal(&mismatch, identity, jobs);
+                    if refused_clients.insert(request.origin()) {
+                        tracing::warn!("refused a worker of run '{run}': {reason}");
+                    }
+                    let _ = ipc::reply(&request, answer, &[]);
+                    continue;
                 }
-                let _ = ipc::reply(&request, Answer::new(Response::Refused, identity), &[]);
-                continue;
-            }
+            };
             if serving_since.is_none() {
                 waiting_for.insert(request.origin());
                 if waiting_for.len() >= options.start_with {
@@ -272,7 +311,7 @@ pub(crate) fn serve(
                     progress.delivered += 1;
                     wake_now = true;
                 }
-                want => parked.push_back((request, want)),
+                want => parked.push_back((request, want, serves)),
             }
         }
         // Answer before telling: tasks are created eagerly, so ready ones wait in the cores, and
@@ -330,7 +369,7 @@ pub(crate) fn serve(
         progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
         let serving = || serving_since.map_or(0.0, |since: Instant| since.elapsed().as_secs_f64());
         if progress.jobs_done == jobs.len() {
-            for (request, _) in parked.drain(..) {
+            for (request, ..) in parked.drain(..) {
                 let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
             }
             let _ = notifier.notify();
@@ -474,12 +513,74 @@ fn reissue_tasks_of_silent_workers(
     reissued
 }
 
-/// Answer parked requests, each with as many ready tasks as it asks for (round robin over the
-/// jobs), as soon as at least one is ready; returns how many tasks went out. Requests of hung
-/// workers stay parked.
+/// Why the learner refuses a worker's request.
+enum Mismatch {
+    /// Another protocol version.
+    Protocol(u32),
+    /// Another run identity.
+    Run(u64),
+    /// An environment none of the jobs needs.
+    Environment(EnvironmentSpec),
+    /// An environment description that is none.
+    Unreadable(SpecBuildError),
+}
+
+/// What a request's worker serves, if the learner accepts it: this build's protocol, this run
+/// (or any), and an environment some job needs (or any).
+fn admit(message: &WorkerMessage, identity: u64, jobs: &[FleetJob]) -> Result<Serves, Mismatch> {
+    if message.protocol != PROTOCOL_VERSION {
+        return Err(Mismatch::Protocol(message.protocol));
+    }
+    if message.run != 0 && message.run != identity {
+        return Err(Mismatch::Run(message.run));
+    }
+    let serves = message.serves().map_err(Mismatch::Unreadable)?;
+    match serves {
+        Serves::One(spec) if !jobs.iter().any(|job| *job.environment() == spec) => Err(Mismatch::Environment(spec)),
+        serves => Ok(serves),
+    }
+}
+
+/// The answer refusing a worker for `mismatch`, and the reason in words, naming the worker's
+/// and the learner's environments. The answer names one environment the jobs need, preferably
+/// one of the worker's environment's name: the closest description of what it should be.
+fn refusal(mismatch: &Mismatch, identity: u64, jobs: &[FleetJob]) -> (Answer, String) {
+    let mut needed: Vec<EnvironmentSpec> = Vec::new();
+    for job in jobs {
+        if !needed.contains(job.environment()) {
+            needed.push(*job.environment());
+        }
+    }
+    let closest = match mismatch {
+        Mismatch::Environment(spec) => needed.iter().find(|need| need.name() == spec.name()),
+        _ => None,
+    }
+    .or(needed.first())
+    .copied();
+    let code = match mismatch {
+        Mismatch::Protocol(_) => Refusal::Protocol,
+        Mismatch::Run(_) => Refusal::Run,
+        Mismatch::Environment(_) | Mismatch::Unreadable(_) => Refusal::Environment,
+    };
+    let answer = Answer::refused(code, identity, closest, needed.len());
+    let reason = match mismatch {
+        Mismatch::Protocol(protocol) => format!("protocol {protocol} (ours {PROTOCOL_VERSION})"),
+        Mismatch::Run(run) => format!("run identity {run:016x} (ours {identity:016x})"),
+        Mismatch::Environment(spec) => format!("it serves environment {spec}; the jobs need {}", answer.needs()),
+        Mismatch::Unreadable(error) => format!(
+            "its environment cannot be read ({error}); the jobs need {}",
+            answer.needs()
+        ),
+    };
+    (answer, reason)
+}
+
+/// Answer parked requests, each with as many ready tasks as it asks for of the environments its
+/// worker serves (round robin over the jobs), as soon as at least one is ready; returns how
+/// many tasks went out. Requests of hung workers stay parked.
 fn answer(
     jobs: &mut [FleetJob],
-    parked: &mut VecDeque<(TaskRequest, usize)>,
+    parked: &mut VecDeque<(TaskRequest, usize, Serves)>,
     hung: &HashSet<UniqueClientId>,
     holders: &mut HashMap<(u32, u64), UniqueClientId>,
     next_job: &mut usize,
@@ -489,42 +590,56 @@ fn answer(
     let mut answered = 0;
     // Allocated only when a request is waiting: most passes have none.
     let mut tasks = Vec::new();
-    let mut held_back = Vec::new();
-    while let Some((request, want)) = parked.pop_front() {
+    // What workers serve whose requests found nothing ready in this pass: the next request of
+    // the same kind would find nothing either.
+    let mut dry: Vec<Serves> = Vec::new();
+    for _ in 0..parked.len() {
+        let Some((request, want, serves)) = parked.pop_front() else {
+            break;
+        };
         if !request.is_connected() {
             continue;
         }
-        if hung.contains(&request.origin()) {
-            held_back.push((request, want));
+        // Hung workers get nothing until they speak again.
+        if hung.contains(&request.origin()) || dry.contains(&serves) {
+            parked.push_back((request, want, serves));
             continue;
         }
         tasks.clear();
         tasks.reserve(want);
         let started = Instant::now();
         while tasks.len() < want {
-            let Some((job, task)) = next_task(jobs, next_job) else {
+            let Some((job, task)) = next_task(jobs, next_job, &serves) else {
                 break;
             };
-            tasks.push(WireTask::new(job as u32, &task, jobs[job].environment)?);
+            tasks.push(WireTask::new(job as u32, &task, *jobs[job].environment())?);
             holders.insert((job as u32, task.id), request.origin());
         }
         progress.learner_seconds += started.elapsed().as_secs_f64();
         if tasks.is_empty() {
-            parked.push_front((request, want));
-            break;
+            if serves == Serves::Any {
+                // Nothing is ready for anyone: the request keeps its place.
+                parked.push_front((request, want, serves));
+                break;
+            }
+            dry.push(serves);
+            parked.push_back((request, want, serves));
+            continue;
         }
         ipc::reply(&request, Answer::new(Response::Task, identity), &tasks)?;
         answered += tasks.len();
     }
-    parked.extend(held_back);
     Ok(answered)
 }
 
-/// The next ready task, round robin over the jobs.
-fn next_task(jobs: &mut [FleetJob], next_job: &mut usize) -> Option<(usize, acps_shared::Task)> {
+/// The next ready task of an environment the worker `serves`, round robin over the jobs.
+fn next_task(jobs: &mut [FleetJob], next_job: &mut usize, serves: &Serves) -> Option<(usize, acps_shared::Task)> {
     let n = jobs.len();
     for offset in 0..n {
         let job = (*next_job + offset) % n;
+        if !serves.includes(jobs[job].environment()) {
+            continue;
+        }
         if let Some(task) = jobs[job].learner.ask() {
             *next_job = (job + 1) % n;
             return Some((job, task));

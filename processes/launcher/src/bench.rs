@@ -9,7 +9,7 @@ use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress};
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
-use acps_models::environment::{self, TrivialEnvironment};
+use acps_models::environment::TrivialEnvironment;
 use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
 use anyhow::Context;
 use rayon::prelude::*;
@@ -116,7 +116,6 @@ const IN_FLIGHT: usize = 64;
 
 struct Job {
     learner: Learner,
-    spec: acps_shared::EnvironmentSpec,
     environment: Box<dyn Environment>,
 }
 
@@ -127,6 +126,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
             .map(|seed| {
                 // One context, one parameter, no evaluation: the learner's cost stays small so
                 // that the fleet rows measure the transport.
+                let environment = TrivialEnvironment::new();
                 let problem = Problem {
                     name: "trivial".into(),
                     training_contexts: vec![vec![0.0]],
@@ -135,6 +135,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                     theta0: vec![1.0],
                     score: ScoreAggregate::Mean,
                     metric: "none".into(),
+                    environment: environment.spec(),
                 };
                 let creps = CRepsConfig {
                     epsilon: 1.0,
@@ -155,8 +156,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                 let selector = Box::new(RoundRobin::all(problem.training_contexts.clone())?);
                 Ok(Job {
                     learner: Learner::new(config, problem, selector)?,
-                    spec: environment::trivial(),
-                    environment: Box::new(TrivialEnvironment),
+                    environment: Box::new(environment),
                 })
             })
             .collect(),
@@ -169,17 +169,14 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                 methods: Some(vec![Method::MonotonicProgress]),
                 ..Options::default()
             };
-            paper::grid(sim, &options)
+            Ok(paper::grid(sim, &options)
                 .jobs()?
                 .into_iter()
-                .map(|job| {
-                    Ok(Job {
-                        spec: job.spec.context("grid jobs have specs")?,
-                        learner: job.learner,
-                        environment: job.environment,
-                    })
+                .map(|job| Job {
+                    learner: job.learner,
+                    environment: job.environment,
                 })
-                .collect()
+                .collect())
         }
     }
 }
@@ -342,9 +339,9 @@ fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<
     let start = Instant::now();
     let run = |job: &mut Job| run_in_process(&mut job.learner, job.environment.as_mut());
     if parallel {
-        jobs.par_iter_mut().for_each(run);
+        jobs.par_iter_mut().try_for_each(run)?;
     } else {
-        jobs.iter_mut().for_each(run);
+        jobs.iter_mut().try_for_each(run)?;
     }
     Ok(Measurement {
         seconds: start.elapsed().as_secs_f64(),
@@ -356,13 +353,10 @@ fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<
 /// The jobs of `workload` served to a fleet of `workers` processes started for it.
 fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::Result<Measurement> {
     let name = format!("bench-{}-{}-{workers}", std::process::id(), workload.name());
-    let mut fleet_jobs: Vec<FleetJob> = jobs(workload, options.scale)?
+    let mut fleet_jobs = jobs(workload, options.scale)?
         .into_iter()
-        .map(|j| FleetJob {
-            learner: j.learner,
-            environment: j.spec,
-        })
-        .collect();
+        .map(|j| FleetJob::new(j.learner))
+        .collect::<Result<Vec<_>, _>>()?;
     let mut builder = Fleet::builder(name)
         .identity(0x0bec_4000 + workers as u64)
         .spawn_workers(workers, crate::workers::command(options.worker_in_flight, workers))

@@ -6,7 +6,7 @@ use acps_learner::creps::RestoredPolicy;
 use acps_models::environment;
 use acps_models::robot::Robot;
 use acps_models::throw::{ThrowDesign, ThrowPolicy};
-use acps_shared::{ContextSpace, Outcome, Stream, Task, TaskKind, derive_seed};
+use acps_shared::{ContextSpace, Environment, Outcome, Stream, Task, TaskKind, derive_seed};
 use anyhow::{Context, bail};
 use std::path::Path;
 
@@ -94,22 +94,20 @@ fn describe(space: &ContextSpace) -> String {
     }
 }
 
-/// Throw `policy` greedily at `contexts` in the environment `saved` names. Task ids and seeds
-/// are the context's index and its derived seed; the built-in environments of saved policies do
-/// not draw random numbers, so the outcome depends on the context and the policy only. On the
-/// dartboard, whose reward exists at field centres only, other targets get the grid's reward.
+/// Throw `policy` greedily at `contexts` in the environment `saved` names, refused when this
+/// build builds it with other settings. Task ids and seeds are the context's index and its
+/// derived seed; the built-in environments of saved policies do not draw random numbers, so the
+/// outcome depends on the context and the policy only. On the dartboard, whose reward exists at
+/// field centres only, other targets get the grid's reward.
 pub fn replay(saved: &SavedPolicy, policy: &RestoredPolicy, contexts: &[Vec<f64>]) -> anyhow::Result<Replay> {
-    let spec = saved.environment.with_context(|| {
-        format!(
-            "the {} experiment's environment keeps state between rollouts and cannot be rebuilt for a replay",
-            saved.experiment
-        )
-    })?;
-    let mut environment = environment::build(&spec).context("rebuilding the run's environment")?;
-    let mut free = environment::free_targets(&spec)
-        .map(|spec| environment::build(&spec))
-        .transpose()
-        .context("rebuilding the run's environment")?;
+    let spec = &saved.problem.environment;
+    let rebuilding = "rebuilding the run's environment";
+    let mut environment = environment::build(spec).context(rebuilding)?;
+    saved
+        .problem
+        .check_environment(environment.as_ref())
+        .context(rebuilding)?;
+    let mut free = environment::free_targets(spec).context(rebuilding)?;
     let throws: Vec<Throw> = contexts
         .iter()
         .enumerate()

@@ -6,15 +6,14 @@
 
 use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::Progress;
-use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress, Observer};
+use acps_fleet::{Fleet, FleetError, FleetJob, FleetJobBuildError, FleetProgress, Observer};
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
     run_in_process,
 };
-use acps_shared::EnvironmentSpec;
-use acps_shared::{Environment, Problem};
+use acps_shared::{Environment, EnvironmentMatchError, Problem};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -29,9 +28,9 @@ pub struct Instance {
     pub environment: Box<dyn Environment>,
     /// The best achievable score, when the problem knows it (the Section 4 model's J_opt).
     pub optimal_score: Option<f64>,
-    /// How a worker builds the same environment; `None` for environments that keep state between
-    /// rollouts (the Section 4 model), which a fleet cannot serve.
-    pub spec: Option<acps_shared::EnvironmentSpec>,
+    /// Whether the environment keeps state between rollouts (the Section 4 model): a fleet cannot
+    /// serve it, since a rollout would depend on which worker performed the ones before.
+    pub keeps_state: bool,
 }
 
 /// Builds the problem instance of a run from the run's seed.
@@ -71,10 +70,8 @@ pub struct Experiment {
 pub struct RunResult {
     /// The run's seed (problem instance and learner).
     pub seed: u64,
-    /// The problem the run learned.
+    /// The problem the run learned, with the environment it is defined for.
     pub problem: Problem,
-    /// How to build its environment again, if it can be built from a spec.
-    pub spec: Option<EnvironmentSpec>,
     /// The final upper-level policy, if the problem has policy parameters.
     pub policy: Option<PolicySnapshot>,
     /// Episodes at which the policy was evaluated.
@@ -242,8 +239,8 @@ pub struct Job {
     pub learner: Learner,
     /// Its environment, for in-process runs.
     pub environment: Box<dyn Environment>,
-    /// How a worker builds the same environment, if it can.
-    pub spec: Option<EnvironmentSpec>,
+    /// Whether the environment keeps state between rollouts.
+    pub keeps_state: bool,
     /// The instance's optimal score, if known.
     pub optimal_score: Option<f64>,
 }
@@ -254,7 +251,6 @@ impl Job {
         RunResult {
             seed: learner.seed(),
             problem: learner.problem().clone(),
-            spec: self.spec,
             policy: learner.policy().and_then(|p| p.snapshot()),
             eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
             scores: learner.evaluations().iter().map(|e| e.score).collect(),
@@ -277,9 +273,15 @@ pub enum RunError {
     /// A learner refused its configuration.
     #[error(transparent)]
     Learner(#[from] LearnerError),
+    /// An instance's environment is not the one its problem is defined for.
+    #[error(transparent)]
+    Environment(#[from] EnvironmentMatchError),
     /// Checkpoints could not be written or resumed from.
     #[error(transparent)]
     Checkpoints(#[from] CheckpointsError),
+    /// A learner's tasks do not fit the fleet's wire.
+    #[error(transparent)]
+    FleetJob(#[from] FleetJobBuildError),
     /// The fleet failed.
     #[error(transparent)]
     Fleet(#[from] FleetError),
@@ -292,20 +294,21 @@ pub enum RunError {
 
 impl Experiment {
     /// Every (method, run) learner of the experiment, method-major.
-    pub fn jobs(&self) -> Result<Vec<Job>, LearnerError> {
+    pub fn jobs(&self) -> Result<Vec<Job>, RunError> {
         (0..self.methods.len())
             .flat_map(|m| (0..self.runs).map(move |r| (m, r)))
             .map(|(method, run)| self.job(&self.methods[method], self.base_seed + run as u64))
             .collect()
     }
 
-    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, LearnerError> {
+    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, RunError> {
         let Instance {
             problem,
             environment,
             optimal_score,
-            spec,
+            keeps_state,
         } = (self.instance)(seed);
+        problem.check_environment(environment.as_ref())?;
         let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
             problem: problem.name.clone(),
             reason: e.to_string(),
@@ -321,7 +324,7 @@ impl Experiment {
         Ok(Job {
             learner,
             environment,
-            spec,
+            keeps_state,
             optimal_score,
         })
     }
@@ -418,9 +421,9 @@ impl Experiment {
     }
 
     /// One learner run of `selector` with `seed`, in this thread.
-    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, LearnerError> {
+    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, RunError> {
         let mut job = self.job(selector, seed)?;
-        run_in_process(&mut job.learner, job.environment.as_mut());
+        run_in_process(&mut job.learner, job.environment.as_mut())?;
         Ok(job.result())
     }
 
@@ -445,15 +448,11 @@ impl Experiment {
         let mut fleet_jobs = Vec::with_capacity(jobs.len());
         let mut optimal = Vec::with_capacity(jobs.len());
         for job in jobs {
-            let environment = job.spec.ok_or_else(|| RunError::Stateful(self.name.clone()))?;
+            if job.keeps_state {
+                return Err(RunError::Stateful(self.name.clone()));
+            }
             optimal.push(job.optimal_score);
-            fleet_jobs.push((
-                FleetJob {
-                    learner: job.learner,
-                    environment,
-                },
-                job.environment,
-            ));
+            fleet_jobs.push((FleetJob::new(job.learner)?, job.environment));
         }
         let (mut learners, environments): (Vec<FleetJob>, Vec<_>) = fleet_jobs.into_iter().unzip();
         let mut observer = Checkpointing {
@@ -468,9 +467,9 @@ impl Experiment {
         if let Err(FleetError::Interrupted) = served {
             // Tasks out with workers are handed out again after a restore, so nothing is lost.
             for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {
-                if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner.is_done()) {
+                if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner().is_done()) {
                     writer
-                        .write(&job.learner, environment.as_ref())
+                        .write(job.learner(), environment.as_ref())
                         .map_err(CheckpointsError::from)?;
                 }
             }
@@ -481,9 +480,9 @@ impl Experiment {
             .zip(environments)
             .zip(optimal)
             .map(|((fleet_job, environment), optimal_score)| Job {
-                learner: fleet_job.learner,
+                learner: fleet_job.into_learner(),
                 environment,
-                spec: Some(fleet_job.environment),
+                keeps_state: false,
                 optimal_score,
             })
             .collect();
@@ -504,10 +503,7 @@ impl Experiment {
             "settings": self.settings,
         })
         .to_string();
-        // FNV-1a: stable across builds and platforms, unlike std's hasher.
-        description.bytes().fold(0xcbf2_9ce4_8422_2325u64, |hash, byte| {
-            (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3)
-        })
+        acps_shared::fnv1a(acps_shared::FNV_OFFSET, description.as_bytes())
     }
 
     fn summary(&self, jobs: &[Job]) -> Summary {
@@ -628,6 +624,32 @@ pub fn standard_error(values: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use acps_models::contextual_function::ContextualFunction;
+
+    #[test]
+    fn an_instance_whose_environment_is_not_its_problems_is_refused_in_process() {
+        let options = crate::paper::Options {
+            runs: 1,
+            episodes: Some(10),
+            ..Default::default()
+        };
+        let mut experiment = crate::paper::function(&options);
+        // The problem of seed s with the function of seed s + 1, as a user's wiring might do.
+        experiment.instance = Box::new(|seed| Instance {
+            problem: ContextualFunction::new(2, 20, seed).unwrap().grid_problem().unwrap(),
+            environment: Box::new(ContextualFunction::new(2, 20, seed + 1).unwrap()),
+            optimal_score: None,
+            keeps_state: false,
+        });
+        let expected = ContextualFunction::new(2, 20, 0).unwrap().spec();
+        let found = ContextualFunction::new(2, 20, 1).unwrap().spec();
+        let error = experiment.run(&Progress::new("function", true)).unwrap_err();
+        assert!(matches!(error, RunError::Environment(_)), "{error}");
+        assert_eq!(
+            error.to_string(),
+            format!("problem 'function' is defined for environment {expected}, not for {found}")
+        );
+    }
 
     #[test]
     fn standard_error_matches_the_textbook_formula() {

@@ -555,7 +555,8 @@ fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     } else {
         args.target
     };
-    let replay = evaluate::replay(&saved, &policy, &contexts)?;
+    let replay =
+        evaluate::replay(&saved, &policy, &contexts).with_context(|| format!("replaying {}", path.display()))?;
     print!("{}", evaluate::report(&saved, &replay, test_set));
     if let Some(file) = args.render {
         let first = replay.throws.first().context("--render: there is no throw to draw")?;

@@ -8,14 +8,13 @@ use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
-use acps_models::environment::{self, Model};
+use acps_models::environment;
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
 use acps_models::rapier_sim::RapierConfig;
 use acps_models::robot::Robot;
 use acps_models::targets::{Category, Field};
 use acps_models::throw::{INITIAL_LANDING, SpeedLimits, dartboard_problem, grid_problem};
-use acps_shared::EnvironmentSpec;
-use acps_shared::Problem;
+use acps_shared::{Environment, Problem};
 use serde_json::json;
 use std::collections::BTreeMap;
 
@@ -150,11 +149,10 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
                     .expect("the factors were validated");
             }
             Instance {
-                problem: LearningModel::problem(),
+                problem: environment.problem(),
                 optimal_score: Some(environment.optimal_performance()),
                 environment: Box::new(environment),
-                // The model keeps state between rollouts, so it cannot be served by a fleet.
-                spec: None,
+                keeps_state: true,
             }
         }),
         selection_window: episodes as usize,
@@ -189,8 +187,10 @@ pub fn function(options: &Options) -> Experiment {
         episodes: 2500,
         eval_every: 50,
     };
-    function_experiment("function", 2, setting, &defaults, options, |seed, n_theta| {
-        ContextualFunction::grid_problem(n_theta, seed)
+    function_experiment("function", 2, setting, &defaults, options, |function| {
+        function
+            .grid_problem()
+            .expect("the function experiment's contexts are 2-D")
     })
 }
 
@@ -206,9 +206,14 @@ pub fn dims(n_s: usize, options: &Options) -> Experiment {
         episodes: 5000,
         eval_every: 100,
     };
-    function_experiment("dims", n_s, setting, &defaults, options, move |seed, n_theta| {
-        ContextualFunction::shell_problem(n_s, n_theta, seed)
-    })
+    function_experiment(
+        "dims",
+        n_s,
+        setting,
+        &defaults,
+        options,
+        ContextualFunction::shell_problem,
+    )
 }
 
 /// The C-REPS schedule of a Section 5.1 experiment.
@@ -226,7 +231,7 @@ fn function_experiment(
     setting: FunctionSetting,
     defaults: &[Method],
     options: &Options,
-    problem: impl Fn(u64, usize) -> Problem + Send + Sync + 'static,
+    problem: impl Fn(&ContextualFunction) -> Problem + Send + Sync + 'static,
 ) -> Experiment {
     let overrides = &options.overrides;
     let n_theta = overrides.n_theta.unwrap_or(DEFAULT_N_THETA);
@@ -275,10 +280,8 @@ fn function_experiment(
             creps: Some(creps),
         },
         instance: Box::new(move |seed| {
-            from_spec(
-                problem(seed, n_theta),
-                environment::contextual_function(n_s, n_theta, seed),
-            )
+            let function = ContextualFunction::new(n_s, n_theta, seed).expect("the experiment's function is valid");
+            stateless(problem(&function), Box::new(function))
         }),
         selection_window: 250,
         settings,
@@ -298,13 +301,13 @@ pub fn sim_name(sim: Sim) -> &'static str {
     }
 }
 
-/// An instance whose environment is built from `spec`, as workers build theirs.
-fn from_spec(problem: Problem, spec: EnvironmentSpec) -> Instance {
+/// An instance of `problem` whose `environment`'s rollouts depend on the task only.
+fn stateless(problem: Problem, environment: Box<dyn Environment>) -> Instance {
     Instance {
         problem,
-        environment: environment::build(&spec).expect("the experiment's environment spec is valid"),
+        environment,
         optimal_score: None,
-        spec: Some(spec),
+        keeps_state: false,
     }
 }
 
@@ -385,7 +388,10 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
             eval_every,
             creps: Some(creps),
         },
-        instance: Box::new(move |_| from_spec(grid_problem(), environment::throwing(Model::Grid, sim))),
+        instance: Box::new(move |_| {
+            let environment = environment::grid(sim).expect("the shipped PA-10 throws");
+            stateless(grid_problem(environment.spec()), Box::new(environment))
+        }),
         selection_window: 250,
         detail: None,
         best_policy: true,
@@ -414,9 +420,10 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
         },
         instance: Box::new(move |_| {
             let fields = environment::dartboard_fields();
-            from_spec(
-                dartboard_problem(&fields, fields[0].centre),
-                environment::throwing(Model::Dartboard, sim),
+            let environment = environment::dartboard(sim).expect("the shipped PA-10 throws");
+            stateless(
+                dartboard_problem(&fields, fields[0].centre, environment.spec()),
+                Box::new(environment),
             )
         }),
         selection_window: 10_000,

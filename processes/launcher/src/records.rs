@@ -17,7 +17,6 @@
 
 use crate::experiment::{RunResult, Summary};
 use acps_learner::creps::{PolicySnapshot, Rejection, RestoredPolicy};
-use acps_shared::EnvironmentSpec;
 use acps_shared::Problem;
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
@@ -25,7 +24,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// The `format` of policy files this build writes and reads.
-pub const POLICY_FORMAT: &str = "acps-policy-1";
+pub const POLICY_FORMAT: &str = "acps-policy-2";
 
 /// The directory of the policy files inside a run directory.
 pub const POLICY_DIR: &str = "policies";
@@ -47,9 +46,8 @@ pub struct SavedPolicy {
     pub training_episodes: u64,
     /// The score of the learner's last evaluation on the test contexts.
     pub final_score: Option<f64>,
-    /// How to build the environment (null when it cannot be rebuilt from a spec).
-    pub environment: Option<EnvironmentSpec>,
-    /// The problem: training and test contexts, context space, theta_0, score aggregate.
+    /// The problem: training and test contexts, context space, theta_0, score aggregate, and the
+    /// environment it is defined for.
     pub problem: Problem,
     /// The upper-level policy.
     pub policy: PolicySnapshot,
@@ -65,15 +63,16 @@ impl SavedPolicy {
     /// policy fits the problem (context dimension, n_theta). Errors name the file and the field.
     pub fn load(path: &Path) -> anyhow::Result<(Self, RestoredPolicy)> {
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let saved: SavedPolicy =
-            serde_json::from_str(&text).with_context(|| format!("{}: not an acps policy file", path.display()))?;
+        let not_a_policy = || format!("{}: not an acps policy file", path.display());
+        let json: serde_json::Value = serde_json::from_str(&text).with_context(not_a_policy)?;
         let bad = |field: &str, reason: String| anyhow::anyhow!("{}: {field} {reason}", path.display());
-        if saved.format != POLICY_FORMAT {
-            return Err(bad(
-                "format",
-                format!("must be {POLICY_FORMAT:?}, got {:?}", saved.format),
-            ));
+        // The format first: a file of another format need not have this one's fields.
+        let format = json.get("format").and_then(|f| f.as_str());
+        if format != Some(POLICY_FORMAT) {
+            let got = format.map_or("none".to_string(), |f| format!("{f:?}"));
+            return Err(bad("format", format!("must be {POLICY_FORMAT:?}, got {got}")));
         }
+        let saved: SavedPolicy = serde_json::from_value(json).with_context(not_a_policy)?;
         let restored = saved
             .policy
             .restore()
@@ -242,7 +241,6 @@ fn saved_policy(summary: &Summary, method: &str, run: usize, result: &RunResult)
         seed: result.seed,
         training_episodes: result.episodes.len() as u64,
         final_score: result.scores.last().copied().flatten(),
-        environment: result.spec,
         problem: result.problem.clone(),
         policy: result.policy.clone()?,
     })

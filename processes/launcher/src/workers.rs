@@ -1,19 +1,25 @@
 //! The acps binary's workers: the project's models plugged into `acps-worker`, and the command
 //! a fleet starts them with.
 
-use acps_shared::{Environment, EnvironmentSpec};
+use acps_shared::{Environment, EnvironmentSpec, Serves};
 use acps_worker::EnvironmentFactory;
 use std::collections::HashMap;
 use std::path::Path;
 use std::process::Command;
 
-/// Builds environments with `acps_models::environment::build` and keeps them for later tasks.
+/// Builds environments with `acps_models::environment::build` and keeps them for later tasks:
+/// it serves any spec of the project's models, and the worker checks that what it built is
+/// the environment a task needs (this build may configure it differently from the learner's).
 #[derive(Default)]
 pub struct ModelFactory {
     cache: HashMap<EnvironmentSpec, Box<dyn Environment>>,
 }
 
 impl EnvironmentFactory for ModelFactory {
+    fn serves(&self) -> Serves {
+        Serves::Any
+    }
+
     fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
         if !self.cache.contains_key(spec) {
             let environment = acps_models::environment::build(spec).map_err(|e| e.to_string())?;

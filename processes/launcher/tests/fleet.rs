@@ -4,10 +4,14 @@ use acps::paper::{self, Options, Sim};
 use acps::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetJob, FleetProgress, Liveness};
 use acps_learner::{Method, run_in_process};
-use acps_shared::{Environment, Outcome, Task};
+use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
+use acps_models::environment;
+use acps_models::robot::Robot;
+use acps_models::throw::{Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, Response, WorkerMessage};
-use acps_worker::{EnvironmentFactory, Single, WorkerExit, WorkerOptions};
+use acps_worker::{EnvironmentFactory, Single, WorkerError, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -407,7 +411,7 @@ fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
 }
 
 #[test]
-fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
+fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worker_serves() {
     let dir = temp_dir("refuse");
     let run = run_name("refuse");
     let out = dir.join("fleet");
@@ -454,10 +458,10 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         };
         let wrong_protocol = WorkerMessage {
             protocol: 99,
-            ..WorkerMessage::request(0, 1)
+            ..WorkerMessage::request(0, 1, Serves::Any)
         };
         assert_eq!(ask(wrong_protocol).response(), Some(Response::Refused));
-        let wrong_run = WorkerMessage::request(0x1234_5678, 1);
+        let wrong_run = WorkerMessage::request(0x1234_5678, 1, Serves::Any);
         let answer = ask(wrong_run);
         assert_eq!(answer.response(), Some(Response::Refused));
         assert_ne!(answer.run, 0x1234_5678, "the refusal carries the learner's identity");
@@ -469,6 +473,25 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
         name: "embedded".into(),
         ..WorkerOptions::default()
     };
+    // Before it, one whose arm follows trajectories sampled at another control period: the
+    // same model with other settings, refused when it first asks.
+    let policy = ThrowPolicy::new(ThrowDesign::pa10(), 0.25).unwrap();
+    let other = ThrowingEnvironment::new(
+        Robot::pa10(),
+        policy,
+        Simulator::Analytic,
+        Targets::Grid,
+        SpeedLimits::Ignore,
+    );
+    let (theirs, ours) = (other.spec(), environment::grid(Sim::Analytic).unwrap().spec());
+    assert_ne!(theirs, ours);
+    let error = acps_worker::serve(&run, &options, &mut Single(other), &AtomicBool::new(false)).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        format!(
+            "the learner of run '{run}' refused this worker: this worker serves {theirs}; the run's jobs need {ours}"
+        )
+    );
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false)).unwrap();
     assert_eq!(report.exit, WorkerExit::Finished);
     assert!(report.rollouts >= 2 * 2 * 300);
@@ -477,6 +500,11 @@ fn workers_of_another_build_or_run_are_refused_and_an_embedded_worker_serves() {
     assert!(output.status.success(), "{stderr}");
     assert!(
         stderr.contains("refused a worker") && stderr.contains("protocol 99"),
+        "{stderr}"
+    );
+    // The learner names both environments too.
+    assert!(
+        stderr.contains(&format!("it serves environment {theirs}; the jobs need {ours}")),
         "{stderr}"
     );
     assert_eq!(
@@ -650,8 +678,8 @@ fn test_fleet(run: &RunName, start_with: usize) -> Fleet {
         .unwrap()
 }
 
-/// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`), its jobs ready for a
-/// fleet, and each job's episodes when run in-process (as text: the bits, NaN included).
+/// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`) with
+/// [`served_and_in_process`]'s jobs and episodes.
 fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>, Vec<String>) {
     let options = Options {
         runs: 2,
@@ -661,12 +689,19 @@ fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>,
         ..Options::default()
     };
     let experiment = paper::grid(Sim::Analytic, &options);
+    let (jobs, reference) = served_and_in_process(&experiment);
+    (experiment, jobs, reference)
+}
+
+/// `experiment`'s jobs ready for a fleet, and each job's episodes when run in-process (as text:
+/// the bits, NaN included).
+fn served_and_in_process(experiment: &acps::experiment::Experiment) -> (Vec<FleetJob>, Vec<String>) {
     let reference = experiment
         .jobs()
         .unwrap()
         .into_iter()
         .map(|mut job| {
-            run_in_process(&mut job.learner, job.environment.as_mut());
+            run_in_process(&mut job.learner, job.environment.as_mut()).unwrap();
             format!("{:?}", job.learner.episodes())
         })
         .collect();
@@ -674,17 +709,16 @@ fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>,
         .jobs()
         .unwrap()
         .into_iter()
-        .map(|job| FleetJob {
-            environment: job.spec.unwrap(),
-            learner: job.learner,
-        })
+        .map(|job| FleetJob::new(job.learner).unwrap())
         .collect();
-    (experiment, jobs, reference)
+    (jobs, reference)
 }
 
-/// Each fleet job's episodes, as [`short_grid`] gives the in-process ones.
+/// Each fleet job's episodes, as [`served_and_in_process`] gives the in-process ones.
 fn episodes(jobs: &[FleetJob]) -> Vec<String> {
-    jobs.iter().map(|job| format!("{:?}", job.learner.episodes())).collect()
+    jobs.iter()
+        .map(|job| format!("{:?}", job.learner().episodes()))
+        .collect()
 }
 
 /// Every rollout of the wrapped environment takes a millisecond, longer than a batch's worth of
@@ -692,6 +726,10 @@ fn episodes(jobs: &[FleetJob]) -> Vec<String> {
 struct Sleepy(Box<dyn Environment>);
 
 impl Environment for Sleepy {
+    fn spec(&self) -> EnvironmentSpec {
+        self.0.spec()
+    }
+
     fn context_dim(&self) -> usize {
         self.0.context_dim()
     }
@@ -867,6 +905,10 @@ struct Stuck<'a> {
 }
 
 impl Environment for Stuck<'_> {
+    fn spec(&self) -> EnvironmentSpec {
+        self.inner.spec()
+    }
+
     fn context_dim(&self) -> usize {
         self.inner.context_dim()
     }
@@ -1074,5 +1116,117 @@ fn a_worker_that_gives_up_waiting_leaves_nothing_behind() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
     assert!(stderr.contains(&format!("no learner serves run '{run}'")), "{stderr}");
+    assert_clean(&run);
+}
+
+/// A factory that says it serves any environment, but provides the one it holds for every task,
+/// as a worker whose build configures the project's models differently would.
+struct Liar(ContextualFunction);
+
+impl EnvironmentFactory for Liar {
+    fn serves(&self) -> Serves {
+        Serves::Any
+    }
+
+    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+        Ok(&mut self.0)
+    }
+}
+
+#[test]
+fn workers_of_other_environments_are_refused_and_the_result_stays_the_in_process_one() {
+    // Two runs of the function experiment: two problem instances (seeds 0 and 1), so two
+    // environments.
+    let options = Options {
+        runs: 2,
+        episodes: Some(100),
+        in_flight: 2,
+        methods: Some(vec![Method::MonotonicProgress]),
+        ..Options::default()
+    };
+    let (mut jobs, reference) = served_and_in_process(&paper::function(&options));
+    let function = |seed| ContextualFunction::new(2, DEFAULT_N_THETA, seed).unwrap();
+    let run = run_name("environments");
+    let worker = |name: &str, factory: &mut dyn EnvironmentFactory| {
+        let options = WorkerOptions {
+            name: name.into(),
+            startup_timeout: Duration::from_secs(60),
+            ..WorkerOptions::default()
+        };
+        acps_worker::serve(&run, &options, factory, &AtomicBool::new(false))
+    };
+    let (progress, (refused, liar, zero, one)) = std::thread::scope(|scope| {
+        let workers = scope.spawn(|| {
+            // The function of another problem seed: refused when it first asks.
+            let refused = worker("seed-7", &mut Single(function(7)));
+            // Takes tasks as any worker, and refuses the first: the learner re-issues them.
+            let liar = worker("liar", &mut Liar(function(7)));
+            // One worker per instance, each handed only its own instance's tasks.
+            let zero = scope.spawn(|| worker("seed-0", &mut Single(function(0))));
+            let one = worker("seed-1", &mut Single(function(1)));
+            (refused, liar, zero.join().unwrap(), one)
+        });
+        let mut fleet = test_fleet(&run, 0);
+        let stop = fleet.stop_flag();
+        let started = Instant::now();
+        let progress = fleet
+            .serve(&mut jobs, &mut |_: &FleetProgress| {
+                if started.elapsed() > Duration::from_secs(120) {
+                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            })
+            .expect("the run finishes within two minutes");
+        (progress, workers.join().unwrap())
+    });
+    let [seed0, seed1, seed7] = [0, 1, 7].map(|seed| function(seed).spec());
+    match refused {
+        Err(WorkerError::Refused { reason, .. }) => assert_eq!(
+            reason,
+            format!("this worker serves {seed7}; the run's jobs need {seed0} and 1 other")
+        ),
+        other => panic!("expected a refusal at the handshake, got {other:?}"),
+    }
+    match liar {
+        Err(WorkerError::TaskRefused { needed, provided, .. }) => {
+            assert!(
+                [seed0, seed1].contains(&needed) && *provided == seed7,
+                "{needed} {provided}"
+            )
+        }
+        other => panic!("expected a refused task, got {other:?}"),
+    }
+    for served in [zero, one] {
+        assert_eq!(served.unwrap().exit, WorkerExit::Finished);
+    }
+    assert!(progress.refused >= 1 && progress.reissued >= 1, "{progress:?}");
+    assert_eq!(episodes(&jobs), reference);
+    ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
+}
+
+#[test]
+fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serving() {
+    // Section 5.1.3's problem in 9 dimensions: it runs in-process, and its contexts are one value
+    // more than a task on the wire carries.
+    let options = Options {
+        runs: 1,
+        episodes: Some(20),
+        methods: Some(vec![Method::Random]),
+        ..Options::default()
+    };
+    let experiment = paper::dims(9, &options);
+    let summary = experiment.run(&acps::progress::Progress::new("dims", true)).unwrap();
+    assert_eq!(summary.methods["random"].episodes, [0, 20]);
+    let run = run_name("too-large");
+    let mut fleet = test_fleet(&run, 0);
+    let error = experiment
+        .run_fleet(&mut fleet, None, |_| panic!("nothing is served"))
+        .err()
+        .unwrap();
+    drop(fleet);
+    assert_eq!(
+        error.to_string(),
+        "problem 'dims-9' cannot be served to workers: a task's context has 9 values, the wire carries at most 8 (MAX_CONTEXT)"
+    );
     assert_clean(&run);
 }

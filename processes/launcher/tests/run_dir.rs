@@ -196,7 +196,14 @@ fn the_policy_file_describes_the_final_policy() {
     let s = summary(&dir);
     let path = dir.join("policies/monotonic-progress-run0.json");
     let policy: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-    assert_eq!(policy["format"], "acps-policy-1");
+    assert_eq!(policy["format"], "acps-policy-2");
+    // The environment the problem is defined for, which a replay must rebuild exactly.
+    let environment = &policy["problem"]["environment"];
+    assert_eq!(
+        (environment["name"].as_str(), &environment["parameters"]),
+        (Some("throw-grid"), &serde_json::json!([0, 0, 0]))
+    );
+    assert_eq!(environment["settings"].as_str().map(str::len), Some(16));
     assert_eq!(
         (policy["experiment"].as_str(), policy["run"].as_u64()),
         (Some("grid"), Some(0))
@@ -428,7 +435,17 @@ fn evaluate_refuses_missing_and_corrupted_policies() {
     check(&policy.to_string(), "policy covariance: covariance must be");
     let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
     policy["format"] = serde_json::json!("acps-policy-0");
-    check(&policy.to_string(), "format must be \"acps-policy-1\"");
+    check(
+        &policy.to_string(),
+        "format must be \"acps-policy-2\", got \"acps-policy-0\"",
+    );
+    // A run whose environment this build builds with other settings (another time step, say).
+    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
+    policy["problem"]["environment"]["settings"] = serde_json::json!("0123456789abcdef");
+    check(
+        &policy.to_string(),
+        "problem 'grid' is defined for environment throw-grid [0, 0, 0] (settings 0123456789abcdef), not for throw-grid [0, 0, 0] (settings ",
+    );
     let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
     policy["problem"]["theta0"].as_array_mut().unwrap().pop();
     check(

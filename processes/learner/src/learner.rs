@@ -32,7 +32,7 @@
 
 use crate::creps::{CReps, CRepsConfig, CRepsError, CRepsState, Rejection, UpdateReport};
 use crate::selection::{Choice, ContextSelector, SelectionError, SelectorState};
-use acps_shared::{Outcome, Problem, Stream, Task, TaskKind, derive_seed};
+use acps_shared::{EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -221,6 +221,7 @@ struct Fit {
     in_flight: u64,
     eval_every: u64,
     problem: String,
+    environment: EnvironmentSpec,
     training_contexts: u64,
     test_contexts: u64,
     context_dim: u64,
@@ -235,6 +236,7 @@ impl Fit {
             in_flight: learner.config.in_flight as u64,
             eval_every: learner.config.eval_every,
             problem: learner.problem.name.clone(),
+            environment: learner.problem.environment,
             training_contexts: learner.problem.training_contexts.len() as u64,
             test_contexts: learner.problem.test_contexts.len() as u64,
             context_dim: learner.problem.context_dim() as u64,
@@ -263,6 +265,9 @@ impl Fit {
         ];
         if self.problem != learner.problem {
             return mismatch("problem", &self.problem, &learner.problem);
+        }
+        if self.environment != learner.environment {
+            return mismatch("environment", &self.environment, &learner.environment);
         }
         match numbers.into_iter().find(|(_, a, b)| a != b) {
             Some((what, checkpoint, here)) => mismatch(what, &checkpoint, &here),
@@ -797,8 +802,13 @@ fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
         .unwrap_or(0)
 }
 
-/// Drive `learner` to the end with `environment` in this thread.
-pub fn run_in_process(learner: &mut Learner, environment: &mut dyn acps_shared::Environment) {
+/// Drive `learner` to the end with `environment` in this thread; an environment other than the
+/// one the learner's problem is defined for is refused before any rollout.
+pub fn run_in_process(
+    learner: &mut Learner,
+    environment: &mut dyn acps_shared::Environment,
+) -> Result<(), EnvironmentMatchError> {
+    learner.problem.check_environment(environment)?;
     while let Some(task) = learner.ask() {
         let outcome = environment.rollout(&task);
         learner
@@ -806,4 +816,5 @@ pub fn run_in_process(learner: &mut Learner, environment: &mut dyn acps_shared::
             .expect("the outcome answers a task just handed out");
     }
     debug_assert!(learner.is_done());
+    Ok(())
 }

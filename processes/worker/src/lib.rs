@@ -4,14 +4,22 @@
 //! for, queued or not yet reported), and sends the outcomes of the tasks it performed with its
 //! next request for tasks; cheap rollouts travel in batches. It stops
 //! when the learner says the run is over, when the learner disappears, when the caller's stop
-//! flag is set, or when the learner refuses it (another build or another run).
+//! flag is set, or when the learner refuses it (another build or another run, or an environment
+//! no job of the run needs).
+//!
+//! Every request declares the environments the worker serves ([`EnvironmentFactory::serves`]),
+//! and the worker checks every task: one that needs another environment than the one its
+//! factory provides stops it with an error naming both, and the learner hands the task to
+//! another worker once this one is gone.
 //!
 //! Embedding: call [`serve`] on any thread of your program with an [`EnvironmentFactory`] (for
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 
-use acps_shared::{Environment, EnvironmentSpec, Outcome};
+use acps_shared::{Environment, EnvironmentSpec, Serves};
 use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
-use acps_wire::wire::{MAX_BATCH, PROTOCOL_VERSION, Response, WireOutcome, WireTask, WorkerMessage};
+use acps_wire::wire::{
+    Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireOutcome, WireTask, WorkerMessage,
+};
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::VecDeque;
@@ -23,14 +31,22 @@ const JOIN_POLL: Duration = Duration::from_millis(2);
 
 /// Where a worker gets the environment a task names.
 pub trait EnvironmentFactory {
-    /// The environment for `spec`, or why there is none.
+    /// The environments this factory provides, declared to the learner with every request.
+    fn serves(&self) -> Serves;
+
+    /// The environment for `spec`, or why there is none. The worker refuses the task when the
+    /// environment's own spec is not `spec`.
     fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String>;
 }
 
-/// One environment of your own, used for every task whatever its spec says.
+/// One environment of your own: the worker serves its spec and refuses tasks of any other.
 pub struct Single<E: Environment>(pub E);
 
 impl<E: Environment> EnvironmentFactory for Single<E> {
+    fn serves(&self) -> Serves {
+        Serves::One(self.0.spec())
+    }
+
     fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
         Ok(&mut self.0)
     }
@@ -113,8 +129,33 @@ pub enum WorkerError {
     Refused {
         /// The run.
         run: String,
-        /// Why.
+        /// Why, naming both sides' protocol versions, run identities or environments.
         reason: String,
+    },
+    /// The environment returned an outcome the wire cannot carry (too many diagnostics).
+    #[error("task {task_id} of job {job}: the outcome cannot be sent: {capacity}")]
+    OutcomeTooLarge {
+        /// The job.
+        job: u32,
+        /// The task.
+        task_id: u64,
+        /// What exceeds which capacity.
+        capacity: CapacityError,
+    },
+    /// A task needs another environment than the one the factory provided for it (for example
+    /// one the learner's build configures differently).
+    #[error(
+        "task {task_id} of job {job} needs environment {needed}, this worker's is {provided}; it stops, and the learner hands the task to another worker"
+    )]
+    TaskRefused {
+        /// The job.
+        job: u32,
+        /// The task.
+        task_id: u64,
+        /// The environment the task needs (boxed, as errors are rare and results stay small).
+        needed: Box<EnvironmentSpec>,
+        /// The environment the factory provided.
+        provided: Box<EnvironmentSpec>,
     },
     /// A task named an environment the factory cannot provide.
     #[error("task {task_id} of job {job}: no environment: {reason}")]
@@ -200,6 +241,7 @@ pub fn serve(
         .map_err(|e| IpcError::new("creating the worker's listener", e))?;
     // The learner's identity, learnt from its first answer; 0 asks to join whatever runs.
     let mut identity = 0u64;
+    let serves = factory.serves();
     // Requests in flight, each with the number of tasks it asks for; `None` is a free slot. The
     // first `asking` slots ask for tasks, the last one only delivers outcomes.
     let asking = options.in_flight.min(MAX_ASKING_REQUESTS);
@@ -207,7 +249,7 @@ pub fn serve(
     // Tasks answered by the learner and not yet simulated.
     let mut queue: VecDeque<WireTask> = VecDeque::new();
     // Outcomes not yet sent.
-    let mut outbox = WorkerMessage::request(identity, 1);
+    let mut outbox = WorkerMessage::request(identity, 1, serves);
     let mut batching = Batching::new(options.in_flight);
     // Told to the learner, which then waits for this worker at least a few times as long.
     let mut slowest = Duration::ZERO;
@@ -254,7 +296,7 @@ pub fn serve(
                 .send_copy(outbox)
                 .map_err(|e| IpcError::new("sending a request", e))?;
             *slot = Some((request, want));
-            outbox = WorkerMessage::request(identity, 1);
+            outbox = WorkerMessage::request(identity, 1, serves);
             sent = true;
         }
         unannounced |= sent;
@@ -290,20 +332,9 @@ pub fn serve(
                         });
                     }
                     Some(Response::Refused) | None => {
-                        let reason = if answer.protocol != PROTOCOL_VERSION {
-                            format!(
-                                "protocol version {} here, {} at the learner (another build)",
-                                PROTOCOL_VERSION, answer.protocol
-                            )
-                        } else {
-                            format!(
-                                "this worker belongs to run identity {identity:016x}, the learner runs {:016x}",
-                                answer.run
-                            )
-                        };
                         return Err(WorkerError::Refused {
                             run: run.to_string(),
-                            reason,
+                            reason: refusal_reason(&answer, identity, &serves),
                         });
                     }
                 }
@@ -316,24 +347,36 @@ pub fn serve(
         let next = if outbox_full { None } else { queue.pop_front() };
         if let Some(wire) = next {
             let task = wire.to_task();
-            let environment =
-                factory
-                    .environment(&wire.environment.into())
-                    .map_err(|reason| WorkerError::Environment {
-                        job: wire.job,
-                        task_id: task.id,
-                        reason,
-                    })?;
+            let no_environment = |reason: String| WorkerError::Environment {
+                job: wire.job,
+                task_id: task.id,
+                reason,
+            };
+            let spec = EnvironmentSpec::try_from(wire.environment).map_err(|e| no_environment(e.to_string()))?;
+            let environment = factory.environment(&spec).map_err(no_environment)?;
+            let provided = environment.spec();
+            if provided != spec {
+                return Err(WorkerError::TaskRefused {
+                    job: wire.job,
+                    task_id: task.id,
+                    needed: Box::new(spec),
+                    provided: Box::new(provided),
+                });
+            }
             let started = Instant::now();
             let outcome = environment.rollout(&task);
             let took = started.elapsed();
             batching.observe(took);
             slowest = slowest.max(took);
             rollouts += 1;
-            // An outcome the wire cannot carry is reported as failed rather than cut.
-            let wire_outcome = WireOutcome::new(wire.job, &outcome)
-                .or_else(|_| WireOutcome::new(wire.job, &Outcome::failed(task.id)))
-                .expect("a failed outcome has no diagnostics");
+            // An outcome the wire cannot carry stops the worker: reported as failed, it would
+            // read as the environment's failure and change the run's result.
+            let wire_outcome =
+                WireOutcome::new(wire.job, &outcome).map_err(|capacity| WorkerError::OutcomeTooLarge {
+                    job: wire.job,
+                    task_id: task.id,
+                    capacity,
+                })?;
             outbox
                 .push(wire_outcome)
                 .expect("a full outbox stops the simulation until it is sent");
@@ -358,6 +401,26 @@ pub fn serve(
                 rollouts,
             });
         }
+    }
+}
+
+/// Why the learner's `answer` refused this worker (of run `identity`, 0 before it learnt one,
+/// serving `serves`), naming both sides.
+fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves) -> String {
+    if answer.protocol != PROTOCOL_VERSION {
+        return format!(
+            "protocol version {} here, {} at the learner (another build)",
+            PROTOCOL_VERSION, answer.protocol
+        );
+    }
+    match answer.refusal() {
+        Some(Refusal::Environment) => {
+            format!("this worker serves {serves}; the run's jobs need {}", answer.needs())
+        }
+        _ => format!(
+            "this worker belongs to run identity {identity:016x}, the learner runs {:016x}",
+            answer.run
+        ),
     }
 }
 

@@ -495,11 +495,7 @@ mod tests {
             let services = open_services(&node).unwrap();
             let server = task_server(&run, &services.tasks).unwrap();
             let client = services.tasks.client_builder().create().unwrap();
-            let spec = acps_shared::EnvironmentSpec {
-                model: 1,
-                options: [0; 3],
-                problem_seed: 0,
-            };
+            let spec = acps_shared::EnvironmentSpec::new("test", [0; 3], &()).unwrap();
             let task = |id: u64| {
                 let task = Task {
                     id,
@@ -511,7 +507,9 @@ mod tests {
                 WireTask::new(2, &task, spec).unwrap()
             };
             let answered = |tasks: &[WireTask]| {
-                let pending = client.send_copy(WorkerMessage::request(0, tasks.len())).unwrap();
+                let pending = client
+                    .send_copy(WorkerMessage::request(0, tasks.len(), acps_shared::Serves::Any))
+                    .unwrap();
                 let request = server.receive().unwrap().expect("the request arrived");
                 let sent = reply(&request, Answer::new(Response::Task, 5), tasks);
                 drop(request);

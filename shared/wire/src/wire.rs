@@ -10,50 +10,49 @@
 //! per batch instead of once per task. An answer is an [`Answer`] header over a slice of exactly
 //! the tasks it carries, written in place in shared memory.
 
-use acps_shared::{EnvironmentSpec, Outcome, OutcomeStatus, Task, TaskKind};
+use acps_shared::{EnvironmentSpec, MAX_NAME, Outcome, OutcomeStatus, Serves, SpecBuildError, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 use std::time::Duration;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
 pub const PROTOCOL_VERSION: u32 = 6;
-/// Largest context a task can carry.
+/// Largest context a task can carry (docs/CHOICES.md: why 8).
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
 pub const MAX_THETA: usize = 64;
-/// Largest diagnostics vector an outcome can carry.
-pub const MAX_DIAGNOSTICS: usize = 4;
+/// Largest diagnostics vector an outcome can carry (docs/CHOICES.md: why 16).
+pub const MAX_DIAGNOSTICS: usize = 16;
 /// Most tasks one answer carries, and most outcomes one request carries.
 pub const MAX_BATCH: usize = 32;
 
-/// An [`EnvironmentSpec`] as it crosses the wire.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+/// An [`EnvironmentSpec`] as it crosses the wire (all zeros: none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct WireEnvironment {
-    /// [`EnvironmentSpec::model`].
-    pub model: u32,
-    /// [`EnvironmentSpec::options`].
-    pub options: [u32; 3],
-    /// [`EnvironmentSpec::problem_seed`].
-    pub problem_seed: u64,
+    /// [`EnvironmentSpec::name`], padded with zeros.
+    pub name: [u8; MAX_NAME],
+    /// [`EnvironmentSpec::settings`].
+    pub settings: u64,
+    /// [`EnvironmentSpec::parameters`].
+    pub parameters: [u64; 3],
 }
 
 impl From<EnvironmentSpec> for WireEnvironment {
     fn from(spec: EnvironmentSpec) -> Self {
         Self {
-            model: spec.model,
-            options: spec.options,
-            problem_seed: spec.problem_seed,
+            name: spec.padded_name(),
+            settings: spec.settings(),
+            parameters: spec.parameters(),
         }
     }
 }
 
-impl From<WireEnvironment> for EnvironmentSpec {
-    fn from(wire: WireEnvironment) -> Self {
-        Self {
-            model: wire.model,
-            options: wire.options,
-            problem_seed: wire.problem_seed,
-        }
+impl TryFrom<WireEnvironment> for EnvironmentSpec {
+    type Error = SpecBuildError;
+
+    /// The spec, unless the name is not one (a corrupt message).
+    fn try_from(wire: WireEnvironment) -> Result<Self, SpecBuildError> {
+        EnvironmentSpec::from_parts(&wire.name, wire.settings, wire.parameters)
     }
 }
 
@@ -65,8 +64,21 @@ pub enum Response {
     Task = 1,
     /// The run is over: stop.
     Stop = 2,
-    /// The worker belongs to another run or build: stop and say why.
+    /// The worker belongs to another run or build, or serves none of the run's environments:
+    /// stop and say why.
     Refused = 3,
+}
+
+/// Why the learner refused a worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Refusal {
+    /// Another protocol version: another build.
+    Protocol = 1,
+    /// Another run identity.
+    Run = 2,
+    /// The worker serves none of the environments the run's jobs need.
+    Environment = 3,
 }
 
 /// One task of an answer.
@@ -106,6 +118,12 @@ pub struct Answer {
     pub protocol: u32,
     /// The learner's run identity.
     pub run: u64,
+    /// For `Refused`, a [`Refusal`]; else 0.
+    pub refusal: u32,
+    /// How many environments the learner's jobs need.
+    pub environments: u32,
+    /// For `Refused`, one of them: the first with the worker's environment's name, if any.
+    pub environment: WireEnvironment,
 }
 
 /// One outcome of a [`WorkerMessage`].
@@ -148,13 +166,19 @@ pub struct WorkerMessage {
     /// The worker's slowest rollout so far, in microseconds (saturating): the learner waits at
     /// least a few times this long for a silent worker before it hands its tasks to others.
     pub slowest_rollout_us: u32,
+    /// 1: the worker serves `environment` only; 0: any environment its factory builds.
+    pub serves_one: u32,
+    /// Padding, always 0.
+    pub reserved: u32,
+    /// The environment a worker that serves one serves (zeros otherwise).
+    pub environment: WireEnvironment,
     /// The outcomes.
     pub outcomes: [WireOutcome; MAX_BATCH],
 }
 
 /// A task or outcome that does not fit the fixed capacities.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{what} has {len} values, the wire carries at most {max}")]
+#[error("{what} has {len} values, the wire carries at most {max} ({limit})")]
 pub struct CapacityError {
     /// What overflowed.
     pub what: &'static str,
@@ -162,19 +186,54 @@ pub struct CapacityError {
     pub len: usize,
     /// The capacity.
     pub max: usize,
+    /// The capacity's name in this module.
+    pub limit: &'static str,
 }
 
-fn fit<const N: usize>(what: &'static str, values: &[f64]) -> Result<([f64; N], u32), CapacityError> {
-    if values.len() > N {
+/// A part of a task or an outcome with a capacity: what it is, and the capacity's name.
+struct Part {
+    what: &'static str,
+    limit: &'static str,
+}
+
+const CONTEXT: Part = Part {
+    what: "a task's context",
+    limit: "MAX_CONTEXT",
+};
+const THETA: Part = Part {
+    what: "a task's theta",
+    limit: "MAX_THETA",
+};
+const DIAGNOSTICS: Part = Part {
+    what: "an outcome's diagnostics",
+    limit: "MAX_DIAGNOSTICS",
+};
+
+/// Refuse `len` values of `part` beyond its capacity `max`.
+fn check_capacity(part: Part, len: usize, max: usize) -> Result<(), CapacityError> {
+    if len > max {
         return Err(CapacityError {
-            what,
-            len: values.len(),
-            max: N,
+            what: part.what,
+            len,
+            max,
+            limit: part.limit,
         });
     }
+    Ok(())
+}
+
+fn fit<const N: usize>(part: Part, values: &[f64]) -> Result<([f64; N], u32), CapacityError> {
+    check_capacity(part, values.len(), N)?;
     let mut array = [0.0; N];
     array[..values.len()].copy_from_slice(values);
     Ok((array, values.len() as u32))
+}
+
+/// Refuse tasks with contexts of `context` values or parameters of `theta` values when the wire
+/// cannot carry them: the check a learner's tasks pass before any is handed out.
+pub fn check_task_sizes(context: usize, theta: usize) -> Result<(), CapacityError> {
+    check_capacity(CONTEXT, context, MAX_CONTEXT)?;
+    check_capacity(THETA, theta, MAX_THETA)
 }
 
 fn kind_code(kind: TaskKind) -> u32 {
@@ -193,8 +252,8 @@ pub struct BatchFull;
 impl WireTask {
     /// A task of `job` to perform in `environment`.
     pub fn new(job: u32, task: &Task, environment: EnvironmentSpec) -> Result<Self, CapacityError> {
-        let (context, context_len) = fit::<MAX_CONTEXT>("a task's context", &task.context)?;
-        let (theta, theta_len) = fit::<MAX_THETA>("a task's theta", &task.theta)?;
+        let (context, context_len) = fit::<MAX_CONTEXT>(CONTEXT, &task.context)?;
+        let (theta, theta_len) = fit::<MAX_THETA>(THETA, &task.theta)?;
         Ok(Self {
             kind: kind_code(task.kind),
             job,
@@ -233,6 +292,44 @@ impl Answer {
             response: response as u32,
             protocol: PROTOCOL_VERSION,
             run,
+            ..Self::default()
+        }
+    }
+
+    /// A refusal for `refusal` by the learner of run identity `run`, whose jobs need
+    /// `environments` environments, `environment` among them (`None` when they need none).
+    pub fn refused(refusal: Refusal, run: u64, environment: Option<EnvironmentSpec>, environments: usize) -> Self {
+        Self {
+            refusal: refusal as u32,
+            environments: u32::try_from(environments).unwrap_or(u32::MAX),
+            environment: environment.map(WireEnvironment::from).unwrap_or_default(),
+            ..Self::new(Response::Refused, run)
+        }
+    }
+
+    /// Why the learner refused, `None` for an unknown code (or no refusal).
+    pub fn refusal(&self) -> Option<Refusal> {
+        match self.refusal {
+            1 => Some(Refusal::Protocol),
+            2 => Some(Refusal::Run),
+            3 => Some(Refusal::Environment),
+            _ => None,
+        }
+    }
+
+    /// The environment a refusal names, `None` when the learner named none.
+    pub fn environment(&self) -> Option<EnvironmentSpec> {
+        EnvironmentSpec::try_from(self.environment).ok()
+    }
+
+    /// What a refusal says the learner's jobs need, in words: the environment it names and how
+    /// many others.
+    pub fn needs(&self) -> String {
+        match (self.environment(), self.environments) {
+            (None, _) => "no environment".to_string(),
+            (Some(spec), 0 | 1) => spec.to_string(),
+            (Some(spec), 2) => format!("{spec} and 1 other"),
+            (Some(spec), n) => format!("{spec} and {} others", n - 1),
         }
     }
 
@@ -250,7 +347,7 @@ impl Answer {
 impl WireOutcome {
     /// `job`'s outcome. Diagnostics beyond the capacity are an error rather than silently cut.
     pub fn new(job: u32, outcome: &Outcome) -> Result<Self, CapacityError> {
-        let (diagnostics, diagnostics_len) = fit::<MAX_DIAGNOSTICS>("an outcome's diagnostics", &outcome.diagnostics)?;
+        let (diagnostics, diagnostics_len) = fit::<MAX_DIAGNOSTICS>(DIAGNOSTICS, &outcome.diagnostics)?;
         Ok(Self {
             job,
             ok: u32::from(outcome.is_ok()),
@@ -281,8 +378,8 @@ impl WireOutcome {
 
 impl WorkerMessage {
     /// A request for `want` tasks (at most [`MAX_BATCH`]) without outcomes, from a worker that
-    /// means to join `run` (0: whatever runs).
-    pub fn request(run: u64, want: usize) -> Self {
+    /// means to join `run` (0: whatever runs) and `serves` these environments.
+    pub fn request(run: u64, want: usize, serves: Serves) -> Self {
         const EMPTY: WireOutcome = WireOutcome {
             job: 0,
             ok: 0,
@@ -299,7 +396,21 @@ impl WorkerMessage {
             run,
             count: 0,
             slowest_rollout_us: 0,
+            serves_one: u32::from(matches!(serves, Serves::One(_))),
+            reserved: 0,
+            environment: match serves {
+                Serves::One(spec) => spec.into(),
+                Serves::Any => WireEnvironment::default(),
+            },
             outcomes: [EMPTY; MAX_BATCH],
+        }
+    }
+
+    /// The environments the worker serves, or why its message does not say.
+    pub fn serves(&self) -> Result<Serves, SpecBuildError> {
+        match self.serves_one {
+            0 => Ok(Serves::Any),
+            _ => EnvironmentSpec::try_from(self.environment).map(Serves::One),
         }
     }
 
@@ -340,11 +451,7 @@ mod tests {
     use super::*;
 
     fn spec() -> EnvironmentSpec {
-        EnvironmentSpec {
-            model: 3,
-            options: [1, 0, 0],
-            problem_seed: 9,
-        }
+        EnvironmentSpec::new("throw-grid", [1, 0, 0], &0.008).unwrap()
     }
 
     #[test]
@@ -357,10 +464,11 @@ mod tests {
             theta: (0..21).map(f64::from).collect(),
         };
         let wire = WireTask::new(5, &task, spec()).unwrap();
-        assert_eq!((wire.job, EnvironmentSpec::from(wire.environment)), (5, spec()));
+        assert_eq!((wire.job, EnvironmentSpec::try_from(wire.environment)), (5, Ok(spec())));
         assert_eq!(wire.to_task(), task);
         let outcome = Outcome::new(42, -1.5, 12.0).with_diagnostics(vec![-3.4, -4.1]);
-        let mut message = WorkerMessage::request(11, 4);
+        let mut message = WorkerMessage::request(11, 4, Serves::One(spec()));
+        assert_eq!(message.serves(), Ok(Serves::One(spec())));
         assert_eq!(message.outcomes().count(), 0);
         message.push(WireOutcome::new(5, &outcome).unwrap()).unwrap();
         message
@@ -377,9 +485,10 @@ mod tests {
 
     #[test]
     fn batches_are_bounded_and_clamped() {
-        let mut message = WorkerMessage::request(0, 0);
+        let mut message = WorkerMessage::request(0, 0, Serves::Any);
+        assert_eq!(message.serves(), Ok(Serves::Any));
         assert_eq!(message.wanted(), 0, "a request may only deliver outcomes");
-        assert_eq!(WorkerMessage::request(0, 1000).wanted(), MAX_BATCH);
+        assert_eq!(WorkerMessage::request(0, 1000, Serves::Any).wanted(), MAX_BATCH);
         for id in 0..MAX_BATCH as u64 {
             message
                 .push(WireOutcome::new(0, &Outcome::new(id, 0.0, 0.0)).unwrap())
@@ -407,6 +516,29 @@ mod tests {
     }
 
     #[test]
+    fn refusals_say_why_and_name_an_environment() {
+        let answer = Answer::refused(Refusal::Environment, 7, Some(spec()), 3);
+        assert_eq!(
+            (
+                answer.response(),
+                answer.refusal(),
+                answer.environment(),
+                answer.environments
+            ),
+            (Some(Response::Refused), Some(Refusal::Environment), Some(spec()), 3)
+        );
+        assert_eq!(answer.needs(), format!("{} and 2 others", spec()));
+        let none = Answer::refused(Refusal::Run, 7, None, 0);
+        assert_eq!((none.refusal(), none.environment()), (Some(Refusal::Run), None));
+        assert_eq!(none.needs(), "no environment");
+        assert_eq!(Answer::new(Response::Task, 7).refusal(), None);
+        // A name that is none (a corrupt message) is an error, not a spec.
+        let mut message = WorkerMessage::request(0, 1, Serves::One(spec()));
+        message.environment.name[0] = b' ';
+        assert!(message.serves().is_err());
+    }
+
+    #[test]
     fn overflow_is_an_error_and_nan_stays_failed() {
         let task = Task {
             id: 0,
@@ -418,13 +550,35 @@ mod tests {
         let error = WireTask::new(0, &task, spec()).unwrap_err();
         assert_eq!(
             error.to_string(),
-            "a task's context has 9 values, the wire carries at most 8"
+            "a task's context has 9 values, the wire carries at most 8 (MAX_CONTEXT)"
+        );
+        assert_eq!(check_task_sizes(MAX_CONTEXT, MAX_THETA), Ok(()));
+        assert_eq!(check_task_sizes(MAX_CONTEXT + 1, 0), Err(error));
+        let error = check_task_sizes(1, MAX_THETA + 1).unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "a task's theta has 65 values, the wire carries at most 64 (MAX_THETA)"
         );
         let mut wire = WireOutcome::new(0, &Outcome::new(3, 1.0, 1.0)).unwrap();
         wire.reward = f64::NAN;
         assert!(!wire.to_outcome().1.is_ok());
         assert!(!WireOutcome::new(0, &Outcome::failed(4)).unwrap().to_outcome().1.is_ok());
+        let most = Outcome::new(5, 0.0, 0.0).with_diagnostics((0..MAX_DIAGNOSTICS).map(|d| d as f64).collect());
+        assert_eq!(WireOutcome::new(0, &most).unwrap().to_outcome().1, most);
         let too_many = Outcome::new(5, 0.0, 0.0).with_diagnostics(vec![0.0; MAX_DIAGNOSTICS + 1]);
-        assert!(WireOutcome::new(0, &too_many).is_err());
+        assert_eq!(
+            WireOutcome::new(0, &too_many).unwrap_err().to_string(),
+            "an outcome's diagnostics has 17 values, the wire carries at most 16 (MAX_DIAGNOSTICS)"
+        );
+    }
+
+    #[test]
+    fn the_payloads_have_the_sizes_docs_choices_gives() {
+        use std::mem::size_of;
+        assert_eq!(size_of::<WireEnvironment>(), 64);
+        assert_eq!(size_of::<WireTask>(), 672);
+        assert_eq!(size_of::<WireOutcome>(), 168);
+        assert_eq!(size_of::<WorkerMessage>(), 5472);
+        assert_eq!(size_of::<Answer>(), 88);
     }
 }

@@ -1,7 +1,7 @@
 //! Checkpoint files: a learner's snapshot and its environment's state, so that a run can be
 //! resumed after it was stopped (even by `kill -9`) and end bit for bit as if it never was.
 //!
-//! # Format (version 2)
+//! # Format (version 3)
 //! A 48-byte header, all integers little-endian, then the payload:
 //!
 //! | offset | bytes | field |
@@ -22,7 +22,7 @@
 //! so a process killed during a write leaves the previous checkpoint intact.
 
 use crate::learner::{Learner, LearnerSnapshot, RestoreError};
-use acps_shared::Environment;
+use acps_shared::{Environment, FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 /// The first eight bytes of every checkpoint file.
 pub const MAGIC: [u8; 8] = *b"ACPSCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 48;
 
@@ -139,15 +139,6 @@ pub enum ErrorKind {
     #[error("environment state: {0}")]
     Environment(String),
 }
-
-/// FNV-1a, 64 bit: any single changed byte changes it.
-fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
-    bytes.iter().fold(hash, |hash, &byte| {
-        (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3)
-    })
-}
-
-const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 fn config() -> bincode::config::Configuration {
     bincode::config::standard()

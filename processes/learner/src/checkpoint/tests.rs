@@ -4,12 +4,21 @@ use super::*;
 use crate::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use crate::selection::RoundRobin;
 use crate::{LearnerConfig, run_in_process};
-use acps_shared::{ContextSpace, Outcome, Problem, ScoreAggregate, Task};
+use acps_shared::{ContextSpace, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Task};
 
 /// A stateless environment: reward -(theta - s)^2 summed.
 struct Quadratic;
 
+/// The spec of an environment named `name` without settings.
+fn spec(name: &str) -> EnvironmentSpec {
+    EnvironmentSpec::new(name, [0; 3], &()).unwrap()
+}
+
 impl Environment for Quadratic {
+    fn spec(&self) -> EnvironmentSpec {
+        spec("quadratic")
+    }
+
     fn context_dim(&self) -> usize {
         1
     }
@@ -25,6 +34,11 @@ impl Environment for Quadratic {
 }
 
 fn learner(seed: u64, episodes: u64) -> Learner {
+    learner_in(seed, episodes, Quadratic.spec())
+}
+
+/// A learner of a problem defined for `environment`.
+fn learner_in(seed: u64, episodes: u64, environment: EnvironmentSpec) -> Learner {
     let problem = Problem {
         name: "quadratic".into(),
         training_contexts: vec![vec![0.0], vec![0.5], vec![1.0]],
@@ -33,6 +47,7 @@ fn learner(seed: u64, episodes: u64) -> Learner {
         theta0: vec![0.0, 0.0],
         score: ScoreAggregate::Mean,
         metric: "cost".into(),
+        environment,
     };
     let selector = Box::new(RoundRobin::all(problem.training_contexts.clone()).unwrap());
     let config = LearnerConfig {
@@ -100,8 +115,8 @@ fn a_restored_learner_finishes_like_the_original() {
     let saved = decode(&encode(STAMP, &Checkpoint::take(&original, &environment)), STAMP).unwrap();
     let mut restored = learner(7, 60);
     saved.apply(&mut restored, &mut Quadratic).unwrap();
-    run_in_process(&mut original, &mut environment);
-    run_in_process(&mut restored, &mut Quadratic);
+    run_in_process(&mut original, &mut environment).unwrap();
+    run_in_process(&mut restored, &mut Quadratic).unwrap();
     assert!(restored.stats().updates > 0);
     let final_bytes = |l: &Learner| encode(STAMP, &Checkpoint::take(l, &Quadratic));
     assert_eq!(final_bytes(&restored), final_bytes(&original));
@@ -249,6 +264,19 @@ fn a_checkpoint_of_another_learner_is_refused_by_restore() {
     assert_eq!(
         error.to_string(),
         "the checkpoint is of a learner with episodes 60, this one has episodes 61"
+    );
+    // Another environment.
+    let error = checkpoint
+        .clone()
+        .apply(&mut learner_in(7, 60, spec("cubic")), &mut Quadratic)
+        .unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        format!(
+            "the checkpoint is of a learner with environment {}, this one has environment {}",
+            spec("quadratic"),
+            spec("cubic")
+        )
     );
     // An environment state for an environment that keeps none.
     let mut with_state = checkpoint;
