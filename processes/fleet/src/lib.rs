@@ -14,5 +14,6 @@ mod fleet;
 pub mod processes;
 pub mod server;
 
+pub use acps_wire::ipc::RunName;
 pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};
 pub use server::{FleetError, FleetJob, FleetJobBuildError, FleetProgress, Liveness, Observer, ServeOptions};
