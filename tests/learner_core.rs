@@ -2,7 +2,7 @@
 
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
-use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, TellError};
+use acps_learner::{Learner, LearnerConfig, LearnerTellError, Method, SelectorConfig};
 use acps_models::contextual_function::ContextualFunction;
 use acps_shared::{Environment, Outcome, TaskKind};
 use rand::SeedableRng;
@@ -180,18 +180,18 @@ fn unknown_and_duplicate_outcomes_are_refused() {
     let second = learner.ask().unwrap();
     assert_eq!(
         learner.tell(Outcome::new(999, 0.0, 0.0)),
-        Err(TellError::UnknownTask { task_id: 999 })
+        Err(LearnerTellError::UnknownTask { task_id: 999 })
     );
     learner.tell(env.rollout(&second)).unwrap();
     assert_eq!(
         learner.tell(env.rollout(&second)),
-        Err(TellError::Duplicate { task_id: second.id })
+        Err(LearnerTellError::Duplicate { task_id: second.id })
     );
     learner.tell(env.rollout(&first)).unwrap();
     // Consumed now: a late copy is unknown.
     assert_eq!(
         learner.tell(env.rollout(&first)),
-        Err(TellError::UnknownTask { task_id: first.id })
+        Err(LearnerTellError::UnknownTask { task_id: first.id })
     );
 }
 

@@ -14,7 +14,10 @@
 //! - the model has no policy parameters: theta is empty.
 
 use crate::{ModelError, check};
-use acps_shared::{ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind, derive_seed};
+use acps_shared::{
+    ContextSpace, Environment, EnvironmentRestoreError, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind,
+    derive_seed,
+};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -170,13 +173,12 @@ impl Environment for LearningModel {
         self.competence.iter().flat_map(|l| l.to_le_bytes()).collect()
     }
 
-    fn restore_state(&mut self, state: &[u8]) -> Result<(), String> {
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), EnvironmentRestoreError> {
         if state.len() != 8 * CONTEXTS {
-            return Err(format!(
-                "a learning-model state has {} bytes (ten competences), got {}",
-                8 * CONTEXTS,
-                state.len()
-            ));
+            return Err(EnvironmentRestoreError::Length {
+                expected: 8 * CONTEXTS,
+                got: state.len(),
+            });
         }
         for (l, bytes) in self.competence.iter_mut().zip(state.chunks_exact(8)) {
             *l = f64::from_le_bytes(bytes.try_into().expect("chunks of 8 bytes"));

@@ -9,8 +9,8 @@ mod seed;
 mod spec;
 mod task;
 
-pub use context_space::{ContextSpace, ContextSpaceError, random_unit_vector};
+pub use context_space::{ContextSpace, ContextSpaceCreateError, random_unit_vector};
 pub use problem::{Problem, ScoreAggregate};
 pub use seed::{Stream, derive_seed};
 pub use spec::EnvironmentSpec;
-pub use task::{Environment, Outcome, OutcomeStatus, Task, TaskKind};
+pub use task::{Environment, EnvironmentRestoreError, Outcome, OutcomeStatus, Task, TaskKind};

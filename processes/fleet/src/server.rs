@@ -12,7 +12,7 @@
 //! re-issued task is recognised as a duplicate and dropped. Workers of another build or run are
 //! refused.
 
-use acps_learner::{Learner, LearningProgress, TellError};
+use acps_learner::{Learner, LearnerTellError, LearningProgress};
 use acps_shared::EnvironmentSpec;
 use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
 use acps_wire::wire::{Answer, CapacityError, PROTOCOL_VERSION, Response, WireTask};
@@ -211,7 +211,7 @@ pub fn serve(
                     progress.outcomes += 1;
                     after_tell(job as usize, &jobs[job as usize].learner).map_err(FleetError::Hook)?;
                 }
-                Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
+                Some(Err(LearnerTellError::UnknownTask { .. } | LearnerTellError::Duplicate { .. })) | None => {
                     progress.duplicates += 1
                 }
             }

@@ -10,7 +10,7 @@ use acps_fleet::{self as fleet, FleetError, FleetJob, FleetProgress, ServeOption
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::{
-    Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
+    Episode, Learner, LearnerConfig, LearnerCreateError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
     run_in_process,
 };
 use acps_shared::EnvironmentSpec;
@@ -256,7 +256,7 @@ impl Job {
 pub enum RunError {
     /// A learner refused its configuration.
     #[error(transparent)]
-    Learner(#[from] LearnerError),
+    Learner(#[from] LearnerCreateError),
     /// Checkpoints could not be written or resumed from.
     #[error(transparent)]
     Checkpoints(#[from] CheckpointsError),
@@ -272,25 +272,21 @@ pub enum RunError {
 
 impl Experiment {
     /// Every (method, run) learner of the experiment, method-major.
-    pub fn jobs(&self) -> Result<Vec<Job>, LearnerError> {
+    pub fn jobs(&self) -> Result<Vec<Job>, LearnerCreateError> {
         (0..self.methods.len())
             .flat_map(|m| (0..self.runs).map(move |r| (m, r)))
             .map(|(method, run)| self.job(&self.methods[method], self.base_seed + run as u64))
             .collect()
     }
 
-    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, LearnerError> {
+    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, LearnerCreateError> {
         let Instance {
             problem,
             environment,
             optimal_score,
             spec,
         } = (self.instance)(seed);
-        let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
-            problem: problem.name.clone(),
-            reason: e.to_string(),
-        })?;
-        let learner = Learner::new(
+        let learner = Learner::with_selector(
             LearnerConfig {
                 seed,
                 ..self.learner.clone()
@@ -388,8 +384,7 @@ impl Experiment {
             .enumerate()
             .map(|(index, (mut job, file))| {
                 if checkpoints.resume {
-                    restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())
-                        .map_err(CheckpointsError::from)?;
+                    restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())?;
                 }
                 let writer = Writer::new(file, self.stamp(index), checkpoints.every, &job.learner);
                 Ok((job, writer))
@@ -398,7 +393,7 @@ impl Experiment {
     }
 
     /// One learner run of `selector` with `seed`, in this thread.
-    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, LearnerError> {
+    pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, LearnerCreateError> {
         let mut job = self.job(selector, seed)?;
         run_in_process(&mut job.learner, job.environment.as_mut());
         Ok(job.result())
@@ -459,9 +454,7 @@ impl Experiment {
             // Tasks out with workers are handed out again after a restore, so nothing is lost.
             for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {
                 if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner.is_done()) {
-                    writer
-                        .write(&job.learner, environment.as_ref())
-                        .map_err(CheckpointsError::from)?;
+                    writer.write(&job.learner, environment.as_ref())?;
                 }
             }
         }

@@ -10,7 +10,7 @@ pub mod method;
 pub mod selection;
 
 pub use learner::{
-    Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerSnapshot, LearnerStats, LearningProgress,
-    RestoreError, TellError, UpdateRecord, run_in_process,
+    Episode, Evaluation, Learner, LearnerConfig, LearnerCreateError, LearnerRestoreError, LearnerSnapshot,
+    LearnerStats, LearnerTellError, LearningProgress, UpdateRecord, run_in_process,
 };
-pub use method::{Method, SelectorConfig, UnknownMethod};
+pub use method::{Method, MethodParseError, SelectorConfig};

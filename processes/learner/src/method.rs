@@ -2,7 +2,7 @@
 
 use crate::selection::{
     BanditSelector, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward, RoundRobin, SaggRiac, SaggRiacConfig,
-    SelectionError, UniformContinuous, UniformDiscrete,
+    SelectorCreateError, UniformContinuous, UniformDiscrete,
 };
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
@@ -80,21 +80,21 @@ impl fmt::Display for Method {
     }
 }
 
-/// A method name that does not exist.
+/// A name that [`Method::from_str`] does not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac"
 )]
-pub struct UnknownMethod(pub String);
+pub struct MethodParseError(pub String);
 
 impl FromStr for Method {
-    type Err = UnknownMethod;
+    type Err = MethodParseError;
 
     fn from_str(name: &str) -> Result<Self, Self::Err> {
         Method::ALL
             .into_iter()
             .find(|m| m.name() == name)
-            .ok_or_else(|| UnknownMethod(name.to_string()))
+            .ok_or_else(|| MethodParseError(name.to_string()))
     }
 }
 
@@ -113,7 +113,7 @@ pub struct SelectorConfig {
 
 impl SelectorConfig {
     /// Build the selector for `problem`.
-    pub fn build(&self, problem: &Problem) -> Result<Box<dyn ContextSelector>, SelectionError> {
+    pub fn build(&self, problem: &Problem) -> Result<Box<dyn ContextSelector>, SelectorCreateError> {
         let contexts = problem.training_contexts.clone();
         Ok(match self.method {
             Method::RoundRobin => Box::new(RoundRobin::all(contexts)?),

@@ -59,11 +59,14 @@ pub use dual::{
     DEFAULT_ETA_MIN, DualOptions, DualSolution, DualValue, ETA_MIN_RANGE, TOLERANCE_RANGE, effective_sample_size,
     evaluate_dual, feature_matching_residual, kl_to_uniform, solve_dual,
 };
-pub use error::CRepsError;
+pub use error::{
+    BatchCreateError, CRepsCreateError, CRepsRestoreError, CRepsUpdateError, DualEvaluateError, DualSolveError,
+    FeatureMapValidateError, InvalidValue, PolicyCreateError, PolicyFitError,
+};
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
-pub use snapshot::{PolicySnapshot, RestoredPolicy, SnapshotError};
+pub use snapshot::{PolicySnapshot, PolicySnapshotRestoreError, RestoredPolicy};
 pub use update::{Batch, Rejection, UpdateReport, UpdateSettings, update};
 
 use nalgebra::{DMatrix, DVector};
@@ -137,7 +140,12 @@ impl CReps {
     /// A learner for `context_dim`-dimensional contexts, initial mean `theta0` and `n_tasks`
     /// training contexts (the buckets of [`MemoryConfig::BestPerTask`]). Every field of `config`
     /// and every argument is validated.
-    pub fn new(config: CRepsConfig, context_dim: usize, theta0: &[f64], n_tasks: usize) -> Result<Self, CRepsError> {
+    pub fn new(
+        config: CRepsConfig,
+        context_dim: usize,
+        theta0: &[f64],
+        n_tasks: usize,
+    ) -> Result<Self, CRepsCreateError> {
         check_positive("epsilon", config.epsilon)?;
         dual::check_eta_min(config.eta_min)?;
         check_non_negative("ridge", config.ridge)?;
@@ -158,7 +166,8 @@ impl CReps {
             weights.row_mut(constant).copy_from_slice(theta0);
         }
         let covariance = DMatrix::identity(theta0.len(), theta0.len()) * config.initial_sigma;
-        let policy = LinearGaussianPolicy::new(weights, covariance)?;
+        let policy = LinearGaussianPolicy::new(weights, covariance)
+            .expect("W is finite (theta0 was checked) and Sigma_0 = initial_sigma I with a checked initial_sigma");
         let memory = Memory::new(&config.memory, n_tasks);
         Ok(Self {
             config,
@@ -274,31 +283,30 @@ impl CReps {
     /// Continue from `state`, saved by [`state`](CReps::state) of a learner built with the same
     /// configuration and dimensions. A state of other dimensions or another memory is refused
     /// and leaves the learner unchanged.
-    pub fn restore(&mut self, state: CRepsState) -> Result<(), CRepsError> {
+    pub fn restore(&mut self, state: CRepsState) -> Result<(), CRepsRestoreError> {
         let (n_phi, n_theta) = (self.policy.n_features(), self.policy.n_params());
         let shape = |m: &DMatrix<f64>| (m.nrows(), m.ncols());
-        let error = |reason: String| Err(CRepsError::State(reason));
         if shape(&state.weights) != (n_phi, n_theta)
             || shape(&state.covariance) != (n_theta, n_theta)
             || shape(&state.sampling_factor) != (n_theta, n_theta)
         {
-            return error(format!(
-                "W {:?}, Sigma {:?} and its factor {:?}; this policy has W {:?} and Sigma {:?}",
-                shape(&state.weights),
-                shape(&state.covariance),
-                shape(&state.sampling_factor),
-                (n_phi, n_theta),
-                (n_theta, n_theta)
-            ));
+            return Err(CRepsRestoreError::Shape {
+                weights: shape(&state.weights),
+                covariance: shape(&state.covariance),
+                factor: shape(&state.sampling_factor),
+                expected_weights: (n_phi, n_theta),
+                expected_covariance: (n_theta, n_theta),
+            });
         }
-        if let Err(reason) = state.memory.check_fits(&self.memory, n_phi, n_theta) {
-            return error(format!("the saved memory is {reason}"));
-        }
+        state
+            .memory
+            .check_fits(&self.memory, n_phi, n_theta)
+            .map_err(CRepsRestoreError::Memory)?;
         if state.since_update >= self.config.update_every {
-            return error(format!(
-                "{} rollouts since the last update, but an update runs every {}",
-                state.since_update, self.config.update_every
-            ));
+            return Err(CRepsRestoreError::Schedule {
+                since_update: state.since_update,
+                update_every: self.config.update_every,
+            });
         }
         self.policy = LinearGaussianPolicy::from_parts(state.weights, state.covariance, state.sampling_factor);
         self.memory = state.memory;

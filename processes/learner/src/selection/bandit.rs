@@ -10,8 +10,8 @@
 
 use super::validate::check_contexts;
 use super::{
-    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, SelectionError,
-    SelectorState,
+    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, SelectorCreateError,
+    SelectorRestoreError, SelectorState,
 };
 use rand::RngCore;
 use std::collections::VecDeque;
@@ -33,7 +33,7 @@ impl BanditSelector {
         ducb: DUcbConfig,
         heuristic: IntrinsicReward,
         first_visit: FirstVisit,
-    ) -> Result<Self, SelectionError> {
+    ) -> Result<Self, SelectorCreateError> {
         check_contexts(&contexts, None)?;
         let arms = contexts.len();
         let bound = ducb.b;
@@ -124,7 +124,7 @@ impl ContextSelector for BanditSelector {
         }
     }
 
-    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectorRestoreError> {
         let SelectorState::Bandit {
             ducb,
             baselines,
@@ -135,9 +135,7 @@ impl ContextSelector for BanditSelector {
         };
         let arms = self.contexts.len();
         if let Some(&arm) = pending.iter().find(|&&arm| arm >= arms) {
-            return Err(SelectionError::State(format!(
-                "pending arm {arm} of a D-UCB selector over {arms} arms"
-            )));
+            return Err(SelectorRestoreError::PendingArm { arm, arms });
         }
         // Check everything before changing anything.
         let mut restored = self.clone();
@@ -152,7 +150,7 @@ impl ContextSelector for BanditSelector {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::selection::RoundRobin;
+    use crate::selection::{DUcbCreateError, RoundRobin};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use std::collections::VecDeque;
@@ -225,9 +223,15 @@ mod tests {
         let config = paper_sec4(1.0);
         let new =
             |contexts, config| BanditSelector::new(contexts, config, IntrinsicReward::BestReward, FirstVisit::Zero);
-        assert_eq!(new(vec![], config.clone()).unwrap_err(), SelectionError::NoContexts);
+        assert_eq!(
+            new(vec![], config.clone()).unwrap_err(),
+            SelectorCreateError::NoContexts
+        );
         let bad = DUcbConfig { gamma: 1.5, ..config };
-        assert_eq!(new(grid(2), bad).unwrap_err(), SelectionError::Gamma(1.5));
+        assert_eq!(
+            new(grid(2), bad).unwrap_err(),
+            SelectorCreateError::DUcb(DUcbCreateError::Gamma(1.5))
+        );
         let best = new(grid(2), paper_sec4(1.0)).unwrap();
         assert!(!best.wants_initial_returns());
     }

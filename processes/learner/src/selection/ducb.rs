@@ -8,8 +8,53 @@
 //! means of the other arms do not change; storing means rather than discounted sums also avoids
 //! 0/0 once a count underflows.
 
-use super::SelectionError;
 use serde::{Deserialize, Serialize};
+
+/// Why [`DUcb::new`] (or [`DUcbConfig::validate`]) refuses its arguments.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DUcbCreateError {
+    /// The discount factor is outside (0, 1].
+    #[error("D-UCB gamma must be in (0, 1], got {0}")]
+    Gamma(f64),
+    /// The padding strength is not finite and positive.
+    #[error("D-UCB xi must be finite and > 0, got {0}")]
+    Xi(f64),
+    /// The reward bound is not finite and positive.
+    #[error("D-UCB b must be finite and > 0, got {0}")]
+    RewardBound(f64),
+    /// Zero arms.
+    #[error("D-UCB number of arms must be >= 1, got 0")]
+    NoArms,
+}
+
+/// Why [`DUcb::update`] refuses a reward. The bandit is left unchanged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DUcbUpdateError {
+    /// An arm index that does not name one of the arms.
+    #[error("arm must be < {arms} (the number of arms), got {arm}")]
+    ArmOutOfRange {
+        /// The offending index.
+        arm: usize,
+        /// The number of arms.
+        arms: usize,
+    },
+    /// A reward that is NaN or infinite.
+    #[error("reward must be finite, got {0}")]
+    NonFiniteReward(f64),
+}
+
+/// Why [`DUcb::restore`] refuses saved statistics: they are of a bandit with another number of
+/// arms. The bandit is left unchanged.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("D-UCB statistics for {counts} counts and {means} means, this bandit has {arms} arms")]
+pub struct DUcbRestoreError {
+    /// The number of saved counts.
+    pub counts: usize,
+    /// The number of saved means.
+    pub means: usize,
+    /// This bandit's number of arms.
+    pub arms: usize,
+}
 
 /// D-UCB parameters (paper notation).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -24,15 +69,15 @@ pub struct DUcbConfig {
 
 impl DUcbConfig {
     /// Check every parameter's range.
-    pub fn validate(&self) -> Result<(), SelectionError> {
+    pub fn validate(&self) -> Result<(), DUcbCreateError> {
         if !(self.gamma > 0.0 && self.gamma <= 1.0) {
-            return Err(SelectionError::Gamma(self.gamma));
+            return Err(DUcbCreateError::Gamma(self.gamma));
         }
         if !(self.xi.is_finite() && self.xi > 0.0) {
-            return Err(SelectionError::Xi(self.xi));
+            return Err(DUcbCreateError::Xi(self.xi));
         }
         if !(self.b.is_finite() && self.b > 0.0) {
-            return Err(SelectionError::RewardBound(self.b));
+            return Err(DUcbCreateError::RewardBound(self.b));
         }
         Ok(())
     }
@@ -67,10 +112,10 @@ pub struct DUcb {
 
 impl DUcb {
     /// A bandit over `arms` arms with no history.
-    pub fn new(arms: usize, config: DUcbConfig) -> Result<Self, SelectionError> {
+    pub fn new(arms: usize, config: DUcbConfig) -> Result<Self, DUcbCreateError> {
         config.validate()?;
         if arms == 0 {
-            return Err(SelectionError::NoArms);
+            return Err(DUcbCreateError::NoArms);
         }
         Ok(Self {
             config,
@@ -168,12 +213,12 @@ impl DUcb {
 
     /// Credit `reward` to `arm`: decay every count and the total by gamma, then add the new
     /// sample with weight 1.
-    pub fn update(&mut self, arm: usize, reward: f64) -> Result<(), SelectionError> {
+    pub fn update(&mut self, arm: usize, reward: f64) -> Result<(), DUcbUpdateError> {
         if arm >= self.arms() {
-            return Err(SelectionError::ArmOutOfRange { arm, arms: self.arms() });
+            return Err(DUcbUpdateError::ArmOutOfRange { arm, arms: self.arms() });
         }
         if !reward.is_finite() {
-            return Err(SelectionError::NonFiniteReward(reward));
+            return Err(DUcbUpdateError::NonFiniteReward(reward));
         }
         let gamma = self.config.gamma;
         self.counts.iter_mut().for_each(|n| *n *= gamma);
@@ -219,14 +264,13 @@ impl DUcb {
     }
 
     /// Continue from saved statistics, which must have one count and one mean per arm.
-    pub fn restore(&mut self, state: DUcbState) -> Result<(), SelectionError> {
+    pub fn restore(&mut self, state: DUcbState) -> Result<(), DUcbRestoreError> {
         if state.counts.len() != self.arms() || state.means.len() != self.arms() {
-            return Err(SelectionError::State(format!(
-                "D-UCB statistics for {} counts and {} means, this bandit has {} arms",
-                state.counts.len(),
-                state.means.len(),
-                self.arms()
-            )));
+            return Err(DUcbRestoreError {
+                counts: state.counts.len(),
+                means: state.means.len(),
+                arms: self.arms(),
+            });
         }
         self.counts = state.counts;
         self.means = state.means;
@@ -445,11 +489,11 @@ mod tests {
         );
         assert_eq!(
             ducb.update(0, f64::INFINITY),
-            Err(SelectionError::NonFiniteReward(f64::INFINITY))
+            Err(DUcbUpdateError::NonFiniteReward(f64::INFINITY))
         );
         assert!(matches!(
             ducb.update(0, f64::NAN),
-            Err(SelectionError::NonFiniteReward(_))
+            Err(DUcbUpdateError::NonFiniteReward(_))
         ));
         assert_eq!(ducb.counts(), [0.0, 0.0], "a refused update must not decay anything");
     }
