@@ -8,7 +8,7 @@
 //!
 //! n_theta is not stated in the paper; the default is 20 (documented in docs/EXPERIMENTS.md).
 
-use crate::{ModelError, check};
+use crate::{InvalidArgument, check};
 use acps_shared::{
     ContextSpace, Environment, Outcome, Problem, ScoreAggregate, Stream, Task, derive_seed, random_unit_vector,
 };
@@ -19,6 +19,11 @@ use rand_chacha::ChaCha8Rng;
 /// Default number of low-level parameters.
 pub const DEFAULT_N_THETA: usize = 20;
 
+/// Why [`ContextualFunction::new`] refuses its dimensions.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("contextual function: {0}")]
+pub struct ContextualFunctionCreateError(#[from] pub InvalidArgument);
+
 /// The contextual function of one run.
 #[derive(Debug, Clone)]
 pub struct ContextualFunction {
@@ -27,9 +32,9 @@ pub struct ContextualFunction {
 
 impl ContextualFunction {
     /// Draw A (n_s x n_theta) uniformly in [0, 1] from `problem_seed` until it has rank n_s.
-    pub fn new(n_s: usize, n_theta: usize, problem_seed: u64) -> Result<Self, ModelError> {
-        check(n_s >= 1, "contextual function", "n_s", ">= 1", n_s)?;
-        check(n_theta > n_s, "contextual function", "n_theta", "> n_s", n_theta)?;
+    pub fn new(n_s: usize, n_theta: usize, problem_seed: u64) -> Result<Self, ContextualFunctionCreateError> {
+        check(n_s >= 1, "n_s", ">= 1", n_s)?;
+        check(n_theta > n_s, "n_theta", "> n_s", n_theta)?;
         let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, 0));
         loop {
             let a = DMatrix::from_fn(n_s, n_theta, |_, _| rng.random::<f64>());

@@ -2,12 +2,14 @@
 //! builds (and caches) the environment it names; in-process runs build theirs the same way, so
 //! both perform identical rollouts.
 
-use crate::contextual_function::ContextualFunction;
-use crate::rapier_sim::{RapierArm, RapierConfig};
+use crate::contextual_function::{ContextualFunction, ContextualFunctionCreateError};
+use crate::rapier_sim::{RapierArm, RapierArmCreateError, RapierConfig};
 use crate::robot::Robot;
 use crate::targets;
-use crate::throw::{PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
-use crate::{ModelError, check};
+use crate::throw::{
+    PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowPolicyCreateError, ThrowingEnvironment,
+};
+
 use acps_shared::EnvironmentSpec;
 use acps_shared::{Environment, Outcome, Task};
 
@@ -105,7 +107,27 @@ pub fn dartboard_fields() -> Vec<targets::Field> {
     targets::dartboard(analytic.landing(&[0.0; PARAMS]).expect("theta_0 lands"))
 }
 
-fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironment, ModelError> {
+/// Why [`build`] cannot build the environment a spec names.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EnvironmentBuildError {
+    /// A model code that names no model.
+    #[error("environment spec: model must be 1 (function), 2 (grid), 3 (dartboard) or 4 (trivial), got {0}")]
+    UnknownModel(u32),
+    /// A simulator code that names no simulator.
+    #[error("environment spec: simulator must be 0 (analytic) or 1 (rapier), got {0}")]
+    UnknownSimulator(u32),
+    /// The contextual function refuses the spec's dimensions.
+    #[error(transparent)]
+    ContextualFunction(#[from] ContextualFunctionCreateError),
+    /// The rapier arm cannot be built.
+    #[error(transparent)]
+    Rapier(#[from] RapierArmCreateError),
+    /// The throw design does not roll out with the simulator's control period.
+    #[error("throw: the design does not roll out: {0}")]
+    Throw(#[from] ThrowPolicyCreateError),
+}
+
+fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironment, EnvironmentBuildError> {
     let robot = Robot::pa10();
     let (simulator, control_dt) = match sim {
         Sim::Analytic => (Simulator::Analytic, ANALYTIC_CONTROL_DT),
@@ -114,12 +136,7 @@ fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironmen
             RAPIER_CONTROL_DT,
         ),
     };
-    let policy = ThrowPolicy::new(ThrowDesign::pa10(), control_dt).map_err(|e| ModelError {
-        model: "throw",
-        field: "design",
-        accepted: "a design that rolls out",
-        got: e.to_string(),
-    })?;
+    let policy = ThrowPolicy::new(ThrowDesign::pa10(), control_dt)?;
     Ok(ThrowingEnvironment::new(
         robot,
         policy,
@@ -130,26 +147,14 @@ fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironmen
 }
 
 /// Build the environment `spec` names.
-pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, ModelError> {
-    let model = Model::from_code(spec.model);
-    check(
-        model.is_some(),
-        "environment spec",
-        "model",
-        "1 (function), 2 (grid), 3 (dartboard) or 4 (trivial)",
-        spec.model,
-    )?;
+pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, EnvironmentBuildError> {
+    let model = Model::from_code(spec.model).ok_or(EnvironmentBuildError::UnknownModel(spec.model))?;
     let sim = || match spec.options[0] {
         0 => Ok(Sim::Analytic),
         1 => Ok(Sim::Rapier),
-        other => Err(ModelError {
-            model: "environment spec",
-            field: "simulator",
-            accepted: "0 (analytic) or 1 (rapier)",
-            got: other.to_string(),
-        }),
+        other => Err(EnvironmentBuildError::UnknownSimulator(other)),
     };
-    Ok(match model.expect("checked above") {
+    Ok(match model {
         Model::ContextualFunction => {
             let [n_s, n_theta, _] = spec.options;
             Box::new(ContextualFunction::new(

@@ -13,7 +13,7 @@
 //! - evaluation and baseline rollouts read the noise-free r(s) and do not learn;
 //! - the model has no policy parameters: theta is empty.
 
-use crate::{ModelError, check};
+use crate::{InvalidArgument, check};
 use acps_shared::{
     ContextSpace, Environment, EnvironmentRestoreError, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind,
     derive_seed,
@@ -35,6 +35,11 @@ pub struct LearningModelConfig {
     pub sigma_b: f64,
 }
 
+/// Why [`LearningModel::new`] or [`LearningModel::with_learning_factors`] refuses a parameter.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("learning model: {0}")]
+pub struct LearningModelCreateError(#[from] pub InvalidArgument);
+
 /// One instance of the model: baselines and learning factors drawn from a seed.
 #[derive(Debug, Clone)]
 pub struct LearningModel {
@@ -46,17 +51,15 @@ pub struct LearningModel {
 
 impl LearningModel {
     /// A model whose baselines and learning-factor permutation come from `problem_seed`.
-    pub fn new(config: LearningModelConfig, problem_seed: u64) -> Result<Self, ModelError> {
+    pub fn new(config: LearningModelConfig, problem_seed: u64) -> Result<Self, LearningModelCreateError> {
         check(
             config.sigma_r.is_finite() && config.sigma_r >= 0.0,
-            "learning model",
             "sigma_r",
             "finite and >= 0",
             config.sigma_r,
         )?;
         check(
             config.sigma_b.is_finite() && config.sigma_b >= 0.0,
-            "learning model",
             "sigma_b",
             "finite and >= 0",
             config.sigma_b,
@@ -75,11 +78,13 @@ impl LearningModel {
     }
 
     /// Replace the drawn learning factors, for example by the permutation of the paper's Fig. 3.
-    pub fn with_learning_factors(mut self, learning_factors: [f64; CONTEXTS]) -> Result<Self, ModelError> {
+    pub fn with_learning_factors(
+        mut self,
+        learning_factors: [f64; CONTEXTS],
+    ) -> Result<Self, LearningModelCreateError> {
         let valid = learning_factors.iter().all(|w| w.is_finite() && *w >= 0.0);
         check(
             valid,
-            "learning model",
             "learning_factors",
             "finite and >= 0",
             format!("{learning_factors:?}"),

@@ -14,35 +14,55 @@ pub mod targets;
 pub mod throw;
 pub mod trajectory;
 
-/// A model parameter outside its accepted range.
+/// A parameter or argument outside its accepted range: the cause the models' errors share.
+/// The message names it and what it accepts.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{model}: {field} must be {accepted}, got {got}")]
-pub struct ModelError {
-    /// The model the parameter belongs to.
-    pub model: &'static str,
-    /// The parameter's name.
-    pub field: &'static str,
-    /// The accepted range, in words.
-    pub accepted: &'static str,
-    /// The value that was given.
-    pub got: String,
+pub enum InvalidArgument {
+    /// A value outside its accepted range.
+    #[error("{name} must be {accepted}, got {got}")]
+    OutOfRange {
+        /// The parameter's or argument's name.
+        name: &'static str,
+        /// The accepted range, in words.
+        accepted: &'static str,
+        /// The value that was given.
+        got: String,
+    },
+    /// A vector or matrix of the wrong size.
+    #[error("{name} must have {expected} entries, got {got}")]
+    WrongLength {
+        /// The argument's name.
+        name: &'static str,
+        /// The required size.
+        expected: usize,
+        /// The given size.
+        got: usize,
+    },
 }
 
+/// `Ok` when `ok`, else [`InvalidArgument::OutOfRange`].
 pub(crate) fn check(
     ok: bool,
-    model: &'static str,
-    field: &'static str,
+    name: &'static str,
     accepted: &'static str,
     got: impl std::fmt::Display,
-) -> Result<(), ModelError> {
+) -> Result<(), InvalidArgument> {
     if ok {
         Ok(())
     } else {
-        Err(ModelError {
-            model,
-            field,
+        Err(InvalidArgument::OutOfRange {
+            name,
             accepted,
             got: got.to_string(),
         })
+    }
+}
+
+/// `Ok` when the lengths agree, else [`InvalidArgument::WrongLength`].
+pub(crate) fn check_len(name: &'static str, expected: usize, got: usize) -> Result<(), InvalidArgument> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(InvalidArgument::WrongLength { name, expected, got })
     }
 }
