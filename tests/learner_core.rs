@@ -1,7 +1,6 @@
 //! The ask/tell core: determinism, in-flight window, reordering, bad input.
 
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
-use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{Learner, LearnerConfig, LearnerTellError, Method, SelectorConfig};
 use acps_models::contextual_function::ContextualFunction;
 use acps_shared::{Environment, Outcome, TaskKind};
@@ -10,18 +9,7 @@ use rand::seq::SliceRandom;
 
 fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) -> (Learner, ContextualFunction) {
     let problem = ContextualFunction::grid_problem(6, seed);
-    let selector = SelectorConfig {
-        method,
-        ducb: DUcbConfig {
-            gamma: 0.99,
-            xi: 1e-8,
-            b: 1.0,
-        },
-        first_visit: FirstVisit::InitialReturn,
-        sagg_riac: SaggRiacConfig::default(),
-    }
-    .build(&problem)
-    .unwrap();
+    let selector = SelectorConfig::from(method).build(&problem).unwrap();
     let creps = CRepsConfig {
         epsilon: 1.0,
         eta_min: DEFAULT_ETA_MIN,
@@ -209,20 +197,7 @@ fn reissued_tasks_come_out_again_unchanged() {
 #[test]
 fn bad_configs_are_refused_with_the_field_name() {
     let problem = ContextualFunction::grid_problem(6, 0);
-    let selector = || {
-        SelectorConfig {
-            method: Method::Random,
-            ducb: DUcbConfig {
-                gamma: 0.99,
-                xi: 1e-8,
-                b: 1.0,
-            },
-            first_visit: FirstVisit::InitialReturn,
-            sagg_riac: SaggRiacConfig::default(),
-        }
-        .build(&problem)
-        .unwrap()
-    };
+    let selector = || SelectorConfig::from(Method::Random).build(&problem).unwrap();
     let config = LearnerConfig {
         seed: 0,
         episodes: 10,

@@ -375,7 +375,7 @@ impl Experiment {
         let files: Vec<_> = self
             .methods
             .iter()
-            .flat_map(|m| (0..self.runs).map(move |r| checkpoints.file(m.method.name(), r)))
+            .flat_map(|m| (0..self.runs).map(move |r| checkpoints.file(m.method().name(), r)))
             .collect();
         let jobs = self.jobs()?;
         checkpoints.prepare(&files)?;
@@ -501,14 +501,14 @@ impl Experiment {
         let mut run_results = BTreeMap::new();
         for selector in &self.methods {
             let runs: Vec<RunResult> = results.drain(..self.runs).collect();
-            let name = selector.method.name().to_string();
+            let name = selector.method().name().to_string();
             methods.insert(name.clone(), self.summarise(&runs, problem.training_contexts.len()));
             run_results.insert(name, runs);
         }
         let best_policy = if self.best_policy {
             // In the methods' order, so ties do not depend on the map's.
             BestPolicy::find(self.methods.iter().map(|selector| {
-                let name = selector.method.name();
+                let name = selector.method().name();
                 (name, run_results[name].as_slice())
             }))
         } else {

@@ -6,7 +6,7 @@
 use crate::experiment::{Experiment, Instance, RunResult, mean};
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
-use acps_learner::{LearnerConfig, Method, SelectorConfig};
+use acps_learner::{BanditConfig, LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::environment::{self, Model};
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
@@ -79,15 +79,19 @@ impl Options {
         self.overrides.first_visit.unwrap_or(FirstVisit::InitialReturn)
     }
 
+    /// The selected methods (else `defaults`), the D-UCB ones with `ducb(method)` and this
+    /// run's first-visit rule.
     fn methods(&self, defaults: &[Method], ducb: impl Fn(Method) -> DUcbConfig) -> Vec<SelectorConfig> {
         let methods = self.methods.clone().unwrap_or_else(|| defaults.to_vec());
         methods
             .into_iter()
-            .map(|method| SelectorConfig {
-                method,
-                ducb: ducb(method),
-                first_visit: self.first_visit(),
-                sagg_riac: SaggRiacConfig::default(),
+            .map(|method| match SelectorConfig::from(method) {
+                SelectorConfig::Bandit(bandit) => SelectorConfig::Bandit(BanditConfig {
+                    ducb: ducb(method),
+                    first_visit: self.first_visit(),
+                    ..bandit
+                }),
+                other => other,
             })
             .collect()
     }

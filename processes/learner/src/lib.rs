@@ -13,4 +13,4 @@ pub use learner::{
     Episode, Evaluation, Learner, LearnerConfig, LearnerCreateError, LearnerRestoreError, LearnerSnapshot,
     LearnerStats, LearnerTellError, LearningProgress, UpdateRecord, run_in_process,
 };
-pub use method::{Method, MethodParseError, SelectorConfig};
+pub use method::{BanditConfig, Baseline, Method, MethodParseError, SelectorConfig};

@@ -236,6 +236,43 @@ mod tests {
         assert!(!best.wants_initial_returns());
     }
 
+    /// B carries the units of the intrinsic reward: returns and B scaled by the same factor make
+    /// the same choices, returns scaled alone do not (for the progress heuristics). (The factor is a power of 2, so the scaled
+    /// run's arithmetic is the original's, exactly.)
+    #[test]
+    fn b_scales_with_the_returns() {
+        let rates = fastest_last(6);
+        let choices = |heuristic, first_visit, returns: f64, b: f64| {
+            let config = DUcbConfig {
+                b,
+                xi: 1e-2,
+                ..DUcbConfig::default()
+            };
+            let mut selector = BanditSelector::new(grid(6), config, heuristic, first_visit).unwrap();
+            let (mut problem, mut noise, mut rng) = start(&mut selector, &rates, 5);
+            (0..300)
+                .map(|_| {
+                    let choice = selector.choose(&mut rng);
+                    let arm = choice.arm.unwrap();
+                    selector.observe(&choice, returns * problem.pull(arm, &mut noise));
+                    arm
+                })
+                .collect::<Vec<_>>()
+        };
+        for heuristic in IntrinsicReward::ALL {
+            for first_visit in [FirstVisit::InitialReturn, FirstVisit::Zero, FirstVisit::Optimistic] {
+                let original = choices(heuristic, first_visit, 1.0, 0.25);
+                let context = format!("{heuristic} {first_visit:?}");
+                assert_eq!(choices(heuristic, first_visit, 1024.0, 256.0), original, "{context}");
+                // Progress dies down as arms saturate, and the padding decides (best reward and
+                // diversity stay on the highest or lowest return whatever the padding).
+                if heuristic.has_baseline() {
+                    assert_ne!(choices(heuristic, first_visit, 1024.0, 0.25), original, "{context}");
+                }
+            }
+        }
+    }
+
     /// A non-stationary toy problem: the return of arm i is min(1, rate_i * pulls_i) plus
     /// uniform noise, so pulling the fastest unsaturated arm is what makes
     /// progress, and that arm moves as arms saturate.

@@ -56,15 +56,50 @@ pub struct DUcbRestoreError {
     pub arms: usize,
 }
 
-/// D-UCB parameters (paper notation).
+/// D-UCB parameters (paper Algorithm 1 and Sec. 3.3, in its notation).
+///
+/// The bandit picks the arm with the largest `m_i + 2 B sqrt(xi ln n / N_i)`: `m_i` is the
+/// discounted mean of the arm's intrinsic rewards, `N_i` its discounted pull count and `n` the
+/// discounted total. The intrinsic rewards are **not normalised**: they are in the units of the
+/// environment's returns (`r`, `-r`, a difference of returns, or its positive part; see
+/// [`IntrinsicReward`](super::IntrinsicReward)). Hence:
+///
+/// - `b` (B) carries the units of the intrinsic reward: it should be the range the intrinsic
+///   rewards vary over (the paper: "an upper bound on the rewards", for rewards in [0, B]).
+///   Scaling every return by c > 0 and B by c leaves every choice unchanged. B is also what a
+///   first visit scores under [`FirstVisit::Optimistic`](super::FirstVisit::Optimistic).
+/// - `xi` is dimensionless; only `B sqrt(xi)` enters the padding. With the paper's 1e-8 the
+///   padding is `2e-4 B sqrt(ln n / N_i)`, so D-UCB is greedy on the discounted means
+///   until an arm's count has decayed by orders of magnitude (at gamma = 0.99 an arm left alone
+///   for ~900 selections gains a factor 100 of padding). Raise xi for more exploration: the
+///   padding grows with its square root (xi = 1e-2 makes it `0.2 B sqrt(ln n / N_i)`).
+/// - `gamma` sets the memory: rewards older than about `1 / (1 - gamma)` selections (100 at
+///   0.99) have little weight, and the discounted counts settle at about `1 / ((1 - gamma) K)`
+///   per arm for K arms, which should be well above 1.
+///
+/// The [`Default`] is the paper's setting of Sec. 5.1 (gamma 0.99, xi 1e-8, B 1): it suits
+/// returns whose intrinsic rewards vary over about 1. For returns of another scale set `b` to
+/// that scale (Sec. 5.2 uses B = 10,000 for returns in -10,000..0); docs/DUCB-PARAMETERS.md
+/// explains the choice.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DUcbConfig {
     /// Discount factor gamma, in (0, 1]; 1 is plain UCB.
     pub gamma: f64,
-    /// Padding strength xi > 0.
+    /// Padding strength xi > 0 (dimensionless).
     pub xi: f64,
-    /// Upper bound B > 0 on the bandit's rewards; scales the padding.
+    /// The range B > 0 of the intrinsic rewards, in their units; scales the padding.
     pub b: f64,
+}
+
+impl Default for DUcbConfig {
+    /// gamma 0.99, xi 1e-8, B 1: the paper's Sec. 5.1 and 5.1.3 setting.
+    fn default() -> Self {
+        Self {
+            gamma: 0.99,
+            xi: 1e-8,
+            b: 1.0,
+        }
+    }
 }
 
 impl DUcbConfig {
