@@ -40,18 +40,45 @@ use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, VecDeque};
 
 /// How the learner runs, independent of the selection method.
+///
+/// [`Default`] is a sequential run of 1000 episodes with [`CRepsConfig::default`]; set the
+/// fields that matter for the problem:
+///
+/// ```
+/// use acps_learner::LearnerConfig;
+///
+/// let config = LearnerConfig { episodes: 2000, ..Default::default() };
+/// assert_eq!((config.in_flight, config.eval_every), (1, 50));
+/// ```
 #[derive(Debug, Clone)]
 pub struct LearnerConfig {
-    /// Seed of every random stream of the run.
+    /// Seed of every random stream of the run (default 0).
     pub seed: u64,
-    /// Number of training episodes (rollouts), >= 1.
+    /// Number of training episodes (rollouts), >= 1 (default 1000, the length of the paper's
+    /// shortest runs, Sec. 4; its others run 2500 to 50,000).
     pub episodes: u64,
-    /// Training tasks in flight, P >= 1: task t is created after outcome t - P is consumed.
+    /// Training tasks in flight, P >= 1: task t is created after outcome t - P is consumed
+    /// (default 1, the paper's sequential algorithm; raise it to keep parallel simulators busy).
     pub in_flight: usize,
-    /// Evaluate the greedy policy every this many consumed training episodes, >= 1.
+    /// Evaluate the greedy policy on the problem's test contexts every this many consumed
+    /// training episodes, >= 1 (default 50, as the paper's Sec. 5.1.2; each evaluation costs one
+    /// rollout per test context).
     pub eval_every: u64,
-    /// The upper-level policy search; `None` for problems without policy parameters.
+    /// The upper-level policy search (default [`CRepsConfig::default`]); `None` for problems
+    /// without policy parameters (an empty theta0).
     pub creps: Option<CRepsConfig>,
+}
+
+impl Default for LearnerConfig {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            episodes: 1000,
+            in_flight: 1,
+            eval_every: 50,
+            creps: Some(CRepsConfig::default()),
+        }
+    }
 }
 
 /// Why [`Learner::new`] or [`Learner::with_selector`] refuses to create a learner.
@@ -383,6 +410,42 @@ impl LearnerSnapshot {
 }
 
 /// The learner: context selection plus C-REPS behind an ask/tell interface.
+///
+/// A problem of your own, the defaults, and a loop that performs each task the learner asks
+/// for (here a closure stands in for the simulator):
+///
+/// ```
+/// use acps_learner::{Learner, LearnerConfig, SelectorConfig};
+/// use acps_shared::{ContextSpace, Outcome, Problem, ScoreAggregate, Task};
+///
+/// // Learn theta(s) = (s, -s) for contexts s in [0, 1]; the return is minus the squared error.
+/// let problem = Problem {
+///     name: "line".into(),
+///     training_contexts: (0..5).map(|i| vec![i as f64 / 4.0]).collect(),
+///     test_contexts: vec![vec![0.1], vec![0.6]],
+///     space: ContextSpace::new_box(vec![0.0], vec![1.0])?,
+///     theta0: vec![0.0, 0.0],
+///     score: ScoreAggregate::Mean,
+///     metric: "mean squared error".into(),
+/// };
+/// let simulate = |task: &Task| {
+///     let s = task.context[0];
+///     let error = (task.theta[0] - s).powi(2) + (task.theta[1] + s).powi(2);
+///     Outcome::new(task.id, -error, error)
+/// };
+///
+/// let config = LearnerConfig { episodes: 500, ..Default::default() };
+/// // D-UCB with monotonic progress: the paper's proposal.
+/// let mut learner = Learner::with_selector(config, problem, &SelectorConfig::default())?;
+/// while let Some(task) = learner.ask() {
+///     learner.tell(simulate(&task))?;
+/// }
+/// assert!(learner.is_done());
+/// let before = learner.evaluations()[0].score.unwrap();
+/// let after = learner.latest_score().unwrap();
+/// assert!(after < before / 100.0, "{before} -> {after}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub struct Learner {
     config: LearnerConfig,
     problem: Problem,

@@ -36,9 +36,12 @@ impl fmt::Debug for CustomFeatures {
 }
 
 /// Which features of the context the policy mean is linear in.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub enum FeatureMap {
-    /// `[s_0, ..., s_{d-1}, 1]`.
+    /// `[s_0, ..., s_{d-1}, 1]`. The default: the fewest features (d + 1) with a constant one,
+    /// so the fewest rollouts per update are needed to fit W. Choose [`Quadratic`](Self::Quadratic)
+    /// when the best parameters bend with the context, as the paper does in Sec. 5.1.
+    #[default]
     Affine,
     /// All monomials of degree <= 2: the `d(d+1)/2` products `s_i s_j` (i <= j, lexicographic:
     /// `s_0^2, s_0 s_1, ..., s_{d-1}^2`), then `s_0, ..., s_{d-1}`, then 1 (P Sec. 2.1: "linear

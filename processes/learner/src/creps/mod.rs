@@ -76,7 +76,26 @@ use serde::{Deserialize, Serialize};
 use error::{check_at_least_one, check_finite, check_non_negative, check_positive};
 use memory::{Memory, Sample};
 
-/// C-REPS settings.
+/// C-REPS settings. [`Default`] is BOLeRo's `CREPSOptimizer`; the paper's three settings are
+/// [`paper_function`](Self::paper_function), [`paper_dims`](Self::paper_dims) and
+/// [`paper_throwing`](Self::paper_throwing).
+///
+/// Only `initial_sigma` has units (those of theta, squared): the update is invariant to the
+/// returns' units (see the module docs), so the other defaults hold for any problem. Set
+/// `initial_sigma` to the exploration variance wanted around theta0.
+///
+/// ```
+/// use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+///
+/// let config = CRepsConfig {
+///     features: FeatureMap::Quadratic,
+///     initial_sigma: 0.1,
+///     ..CRepsConfig::default()
+/// };
+/// assert_eq!(config.memory, MemoryConfig::SlidingWindow { capacity: 100 });
+/// // The paper's PA-10 setting for 25 targets keeps the best 12 throws of each.
+/// assert_eq!(CRepsConfig::paper_throwing(25).memory, MemoryConfig::BestPerTask { per_task: 12 });
+/// ```
 #[derive(Clone, Debug)]
 pub struct CRepsConfig {
     /// Bound on the KL divergence between successive sample weightings, finite and > 0.
@@ -98,16 +117,56 @@ pub struct CRepsConfig {
 
 impl Default for CRepsConfig {
     /// BOLeRo's `CREPSOptimizer` defaults (epsilon 2, ridge 1e-4, an update every 25 rollouts
-    /// on a sliding window of 100, affine features, Sigma_0 = I) and [`DEFAULT_ETA_MIN`].
+    /// on a sliding window of 100, Sigma_0 = I), [`FeatureMap::default`] (affine) and
+    /// [`DEFAULT_ETA_MIN`].
     fn default() -> Self {
         Self {
             epsilon: 2.0,
             eta_min: DEFAULT_ETA_MIN,
             ridge: 1e-4,
             update_every: 25,
-            memory: MemoryConfig::SlidingWindow { capacity: 100 },
-            features: FeatureMap::Affine,
+            memory: MemoryConfig::default(),
+            features: FeatureMap::default(),
             initial_sigma: 1.0,
+        }
+    }
+}
+
+impl CRepsConfig {
+    /// The paper's Sec. 5.1.2 (Fig. 4): epsilon 2, the last 50 rollouts, an update every 25,
+    /// quadratic features, Sigma_0 = I.
+    pub fn paper_function() -> Self {
+        Self {
+            memory: MemoryConfig::SlidingWindow { capacity: 50 },
+            features: FeatureMap::Quadratic,
+            ..Self::default()
+        }
+    }
+
+    /// The paper's Sec. 5.1.3 (Fig. 6) for `n_s`-dimensional contexts: epsilon 1, the last
+    /// 25 n_s^2 rollouts, an update every 13 n_s^2, quadratic features, Sigma_0 = I.
+    pub fn paper_dims(n_s: usize) -> Self {
+        let n2 = n_s * n_s;
+        Self {
+            epsilon: 1.0,
+            update_every: 13 * n2,
+            memory: MemoryConfig::SlidingWindow { capacity: 25 * n2 },
+            features: FeatureMap::Quadratic,
+            ..Self::default()
+        }
+    }
+
+    /// The paper's Sec. 5.2.2 (the PA-10 throws) for `tasks` training contexts: epsilon 0.5, an
+    /// update every 50 on the best 300/K rollouts per task ([`MemoryConfig::best_per_task`]),
+    /// polar-quadratic features of 2-D contexts, Sigma_0 = 0.02 I.
+    pub fn paper_throwing(tasks: usize) -> Self {
+        Self {
+            epsilon: 0.5,
+            update_every: 50,
+            memory: MemoryConfig::best_per_task(300, tasks),
+            features: FeatureMap::PolarQuadratic,
+            initial_sigma: 0.02,
+            ..Self::default()
         }
     }
 }
