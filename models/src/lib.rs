@@ -1,7 +1,16 @@
-//! Environments for acps.
+//! The environments of the paper's experiments, for acps.
 //!
-//! - [`learning_model`]: the artificial model of a contextual learning process (paper Section 4).
-//! - [`contextual_function`]: the contextual function optimisation problem (paper Section 5.1).
+//! - [`learning_model`]: the artificial model of a contextual learning process (paper Sec. 4).
+//! - [`contextual_function`]: the contextual function optimisation problem (paper Sec. 5.1).
+//! - [`throw`]: the PA-10 throwing task (paper Sec. 5.2): the throw's DMPs and its environment.
+//! - [`robot`]: the arm's description file and kinematics.
+//! - [`rapier_sim`]: the arm simulated as a rapier3d multibody.
+//! - [`dmp`]: dynamic movement primitives, as the throw chains them.
+//! - [`trajectory`]: sampled joint trajectories.
+//! - [`targets`]: the grid of targets and the dartboard's fields.
+//! - [`environment`]: building any of these from an [`EnvironmentSpec`](acps_shared::EnvironmentSpec).
+//!
+//! The models' errors share [`InvalidArgument`] as their cause.
 #![warn(missing_docs)]
 
 pub mod contextual_function;

@@ -1,6 +1,12 @@
-//! What every part of an acps run agrees on: the task a learner hands out, the outcome an
-//! environment returns, the problem description, the space contexts live in, and how seeds are
-//! derived.
+//! What every part of an acps run agrees on, whoever simulates it:
+//!
+//! - `problem`: [`Problem`], what the learner needs to know about a problem (its contexts,
+//!   space, initial parameters and how evaluations are scored).
+//! - `context_space`: [`ContextSpace`], the box or ball the contexts live in.
+//! - `task`: the [`Task`] a learner hands out, the [`Outcome`] a rollout returns, and the
+//!   [`Environment`] trait of whatever performs rollouts.
+//! - `seed`: how every random stream of a run is derived from its seed ([`derive_seed`]).
+//! - `spec`: [`EnvironmentSpec`], which environment a worker must build for a task.
 #![warn(missing_docs)]
 
 mod context_space;

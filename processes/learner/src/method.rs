@@ -128,7 +128,7 @@ pub struct BanditConfig {
 }
 
 impl Default for BanditConfig {
-    /// Monotonic progress, the heuristic the paper recommends (Sec. 3.2.4 and 6), with
+    /// Monotonic progress, the heuristic the paper recommends (Sec. 5.1.2: "favorable in the long run"), with
     /// [`DUcbConfig::default`] and [`FirstVisit::default`].
     fn default() -> Self {
         Self::new(IntrinsicReward::MonotonicProgress)
@@ -147,31 +147,48 @@ impl BanditConfig {
 }
 
 /// A context-selection method with the parameters it needs, and only those. Build the selector
-/// for a problem with [`build`](Self::build).
+/// for a problem with [`build`](Self::build), or hand the configuration to
+/// [`Learner::with_selector`](crate::Learner::with_selector).
 ///
 /// ```
 /// use acps_learner::selection::{DUcbConfig, IntrinsicReward, SaggRiacConfig};
 /// use acps_learner::{BanditConfig, Baseline, Method, SelectorConfig};
+/// use acps_shared::{ContextSpace, Problem, ScoreAggregate};
 ///
-/// // The paper's proposal with its defaults: D-UCB with monotonic progress.
+/// let problem = Problem {
+///     name: "five contexts".into(),
+///     training_contexts: (0..5).map(|i| vec![i as f64 / 4.0]).collect(),
+///     test_contexts: vec![],
+///     space: ContextSpace::new_box(vec![0.0], vec![1.0])?,
+///     theta0: vec![0.0],
+///     score: ScoreAggregate::Mean,
+///     metric: "error".into(),
+/// };
+///
+/// // The paper's proposal with the defaults: D-UCB with monotonic progress.
 /// let proposal = SelectorConfig::default();
 /// assert_eq!(proposal, SelectorConfig::monotonic_progress());
 /// assert_eq!(proposal.method(), Method::MonotonicProgress);
 ///
-/// // A baseline takes no parameters.
+/// // A baseline takes no parameters; every method can also be named.
 /// let random = SelectorConfig::from(Baseline::Random);
 /// assert_eq!(random, SelectorConfig::from(Method::Random));
 ///
-/// // D-UCB for returns in units of 100: B is the intrinsic reward's range (see DUcbConfig).
-/// let scaled = SelectorConfig::Bandit(BanditConfig {
+/// // D-UCB for returns that vary over about 100: B is their range (see DUcbConfig).
+/// let scaled = SelectorConfig::from(BanditConfig {
 ///     ducb: DUcbConfig { b: 100.0, ..DUcbConfig::default() },
 ///     ..BanditConfig::new(IntrinsicReward::OneStepProgress)
 /// });
-/// assert_eq!(scaled.method(), Method::OneStepProgress);
 ///
-/// // SAGG-RIAC with a larger interest window.
+/// // SAGG-RIAC with a longer interest window.
 /// let sagg_riac = SelectorConfig::from(SaggRiacConfig { window: 20, ..SaggRiacConfig::default() });
-/// assert_eq!(sagg_riac.method(), Method::SaggRiac);
+///
+/// for config in [proposal, random, scaled, sagg_riac] {
+///     let mut selector = config.build(&problem)?;
+///     let choice = selector.choose(&mut rand::rng());
+///     assert!(choice.arm.is_some_and(|arm| arm < 5));
+/// }
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -71,7 +71,7 @@ pub struct Stamp {
     pub job: u64,
 }
 
-/// Why [`write`] failed, naming the file.
+/// Why [`write()`] failed, naming the file.
 #[derive(Debug, thiserror::Error)]
 #[error("checkpoint {}: {source}", path.display())]
 pub struct CheckpointWriteError {

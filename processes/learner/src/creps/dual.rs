@@ -72,7 +72,7 @@ const CENTRING: f64 = 0.1;
 pub const DEFAULT_ETA_MIN: f64 = 1e-5;
 
 /// Accepted `eta_min` (relative to the returns' standard deviation): below 1e-8 the log-weights
-/// carry less than 7 significant digits (see [`ROUNDING`]); above 1 the floor would override
+/// carry less than 7 significant digits (see `ROUNDING`); above 1 the floor would override
 /// the KL bound for any epsilon above about 0.5.
 pub const ETA_MIN_RANGE: (f64, f64) = (1e-8, 1.0);
 
