@@ -1,8 +1,7 @@
 //! The ask/tell core: determinism, in-flight window, reordering, bad input.
 
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
-use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
-use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, TellError};
+use acps_learner::{Learner, LearnerConfig, LearnerTellError, Method, SelectorConfig};
 use acps_models::contextual_function::ContextualFunction;
 use acps_shared::{Environment, Outcome, TaskKind};
 use rand::SeedableRng;
@@ -11,18 +10,7 @@ use rand::seq::SliceRandom;
 fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) -> (Learner, ContextualFunction) {
     let function = ContextualFunction::new(2, 6, seed).unwrap();
     let problem = function.grid_problem().unwrap();
-    let selector = SelectorConfig {
-        method,
-        ducb: DUcbConfig {
-            gamma: 0.99,
-            xi: 1e-8,
-            b: 1.0,
-        },
-        first_visit: FirstVisit::InitialReturn,
-        sagg_riac: SaggRiacConfig::default(),
-    }
-    .build(&problem)
-    .unwrap();
+    let selector = SelectorConfig::from(method).build(&problem).unwrap();
     let creps = CRepsConfig {
         epsilon: 1.0,
         eta_min: DEFAULT_ETA_MIN,
@@ -178,18 +166,18 @@ fn unknown_and_duplicate_outcomes_are_refused() {
     let second = learner.ask().unwrap();
     assert_eq!(
         learner.tell(Outcome::new(999, 0.0, 0.0)),
-        Err(TellError::UnknownTask { task_id: 999 })
+        Err(LearnerTellError::UnknownTask { task_id: 999 })
     );
     learner.tell(env.rollout(&second)).unwrap();
     assert_eq!(
         learner.tell(env.rollout(&second)),
-        Err(TellError::Duplicate { task_id: second.id })
+        Err(LearnerTellError::Duplicate { task_id: second.id })
     );
     learner.tell(env.rollout(&first)).unwrap();
     // Consumed now: a late copy is unknown.
     assert_eq!(
         learner.tell(env.rollout(&first)),
-        Err(TellError::UnknownTask { task_id: first.id })
+        Err(LearnerTellError::UnknownTask { task_id: first.id })
     );
 }
 
@@ -207,20 +195,7 @@ fn reissued_tasks_come_out_again_unchanged() {
 #[test]
 fn bad_configs_are_refused_with_the_field_name() {
     let problem = ContextualFunction::new(2, 6, 0).unwrap().grid_problem().unwrap();
-    let selector = || {
-        SelectorConfig {
-            method: Method::Random,
-            ducb: DUcbConfig {
-                gamma: 0.99,
-                xi: 1e-8,
-                b: 1.0,
-            },
-            first_visit: FirstVisit::InitialReturn,
-            sagg_riac: SaggRiacConfig::default(),
-        }
-        .build(&problem)
-        .unwrap()
-    };
+    let selector = || SelectorConfig::from(Method::Random).build(&problem).unwrap();
     let config = LearnerConfig {
         seed: 0,
         episodes: 10,

@@ -4,7 +4,6 @@
 
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
-use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
 use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, run_in_process};
 use acps_models::contextual_function::ContextualFunction;
 use acps_models::learning_model::{LearningModel, LearningModelConfig};
@@ -13,19 +12,6 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 
 const STAMP: Stamp = Stamp { identity: 1, job: 0 };
-
-fn selector_config(method: Method) -> SelectorConfig {
-    SelectorConfig {
-        method,
-        ducb: DUcbConfig {
-            gamma: 0.99,
-            xi: 1e-8,
-            b: 1.0,
-        },
-        first_visit: FirstVisit::InitialReturn,
-        sagg_riac: SaggRiacConfig::default(),
-    }
-}
 
 /// The contextual function, failing every rollout of a task whose id is 5 mod 13 (so that
 /// retries and failed episodes are part of the state).
@@ -82,7 +68,7 @@ impl Setup {
             } => {
                 let function = ContextualFunction::new(2, 6, seed).unwrap();
                 let problem = function.grid_problem().unwrap();
-                let selector = selector_config(method).build(&problem).unwrap();
+                let selector = SelectorConfig::from(method).build(&problem).unwrap();
                 let memory = if per_task {
                     MemoryConfig::BestPerTask { per_task: 3 }
                 } else {
@@ -119,7 +105,7 @@ impl Setup {
                 )
                 .unwrap();
                 let problem = model.problem();
-                let selector = selector_config(method).build(&problem).unwrap();
+                let selector = SelectorConfig::from(method).build(&problem).unwrap();
                 let config = LearnerConfig {
                     seed,
                     episodes: 200,

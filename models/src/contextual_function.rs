@@ -8,7 +8,7 @@
 //!
 //! n_theta is not stated in the paper; the default is 20 (documented in docs/EXPERIMENTS.md).
 
-use crate::{ModelError, check};
+use crate::{InvalidArgument, check};
 use acps_shared::{
     ContextSpace, Environment, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Stream, Task, derive_seed,
     random_unit_vector,
@@ -23,6 +23,11 @@ pub const DEFAULT_N_THETA: usize = 20;
 /// The name of the function's environment; its parameters are [n_s, n_theta, problem seed].
 pub const ENVIRONMENT: &str = "contextual-function";
 
+/// Why [`ContextualFunction::new`] refuses its dimensions.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("contextual function: {0}")]
+pub struct ContextualFunctionCreateError(#[from] pub InvalidArgument);
+
 /// The contextual function of one run.
 #[derive(Debug, Clone)]
 pub struct ContextualFunction {
@@ -33,9 +38,9 @@ pub struct ContextualFunction {
 
 impl ContextualFunction {
     /// Draw A (n_s x n_theta) uniformly in [0, 1] from `problem_seed` until it has rank n_s.
-    pub fn new(n_s: usize, n_theta: usize, problem_seed: u64) -> Result<Self, ModelError> {
-        check(n_s >= 1, "contextual function", "n_s", ">= 1", n_s)?;
-        check(n_theta > n_s, "contextual function", "n_theta", "> n_s", n_theta)?;
+    pub fn new(n_s: usize, n_theta: usize, problem_seed: u64) -> Result<Self, ContextualFunctionCreateError> {
+        check(n_s >= 1, "n_s", ">= 1", n_s)?;
+        check(n_theta > n_s, "n_theta", "> n_s", n_theta)?;
         let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(problem_seed, Stream::Problem, 0));
         loop {
             let a = DMatrix::from_fn(n_s, n_theta, |_, _| rng.random::<f64>());
@@ -67,9 +72,9 @@ impl ContextualFunction {
     /// Section 5.1.2 for this function (n_s = 2): the 25 training contexts on the grid
     /// {-1, -1/2, 0, 1/2, 1}^2 and 100 test contexts uniform in [-1, 1]^2; the score is
     /// ln(mean cost).
-    pub fn grid_problem(&self) -> Result<Problem, ModelError> {
+    pub fn grid_problem(&self) -> Result<Problem, ContextualFunctionCreateError> {
         let n_s = self.a.nrows();
-        check(n_s == 2, "contextual function", "n_s", "2 for the grid problem", n_s)?;
+        check(n_s == 2, "n_s", "2 for the grid problem", n_s)?;
         let ticks = [-1.0, -0.5, 0.0, 0.5, 1.0];
         let training_contexts = ticks
             .iter()

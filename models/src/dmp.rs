@@ -17,6 +17,7 @@
 //! shapes the path and fades with z.
 
 use crate::trajectory::JointTrajectory;
+use crate::{InvalidArgument, check, check_len};
 use nalgebra::DMatrix;
 
 /// Time step (s) of BOLeRo's discretised phase z(t) = b^(t / PHASE_DT); independent of the integration substep.
@@ -35,71 +36,49 @@ const MAX_TABULATED_SUBSTEPS: usize = 100_000;
 /// Relative tolerance for "tau is an integer multiple of control_dt" and similar ratio roundings.
 const RATIO_TOLERANCE: f64 = 1e-9;
 
-/// An argument outside its accepted range, or a rollout that left the floating-point range.
+/// Why [`Dmp::new`] (or [`DmpConfig::validate`]) refuses its arguments.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum DmpError {
-    /// A value outside its accepted range.
-    #[error("{argument} must be {accepted}, got {got}")]
-    OutOfRange {
-        /// The argument's name.
-        argument: &'static str,
-        /// The accepted range, in words.
-        accepted: &'static str,
-        /// The value that was given.
-        got: String,
-    },
-    /// A vector or matrix of the wrong size.
-    #[error("{argument} must have {expected} entries, got {got}")]
-    WrongLength {
-        /// The argument's name.
-        argument: &'static str,
-        /// The required size.
-        expected: usize,
-        /// The given size.
-        got: usize,
-    },
+#[error(transparent)]
+pub struct DmpCreateError(#[from] pub InvalidArgument);
+
+/// Why [`Dmp::imitate`] cannot learn from a demonstration.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DmpImitateError {
+    /// The demonstration, the accelerations or the regularisation is outside its range.
+    #[error(transparent)]
+    Invalid(#[from] InvalidArgument),
+    /// The demonstration's duration or the configuration makes no DMP.
+    #[error(transparent)]
+    Dmp(#[from] DmpCreateError),
+    /// The regression of the forcing weights did not give finite weights.
+    #[error("demonstration must be data whose regression converges to finite weights, got a failed fit")]
+    NoFit,
+}
+
+/// Why [`Dmp::rollout`] produces no trajectory.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DmpRolloutError {
+    /// The start state, the goal or the control period is outside its range.
+    #[error(transparent)]
+    Invalid(#[from] InvalidArgument),
     /// The integration overflowed, e.g. because weights or meta-parameters are huge.
     #[error("rollout diverged: the state became non-finite (weights, goal or start values too large?)")]
     Diverged,
 }
 
-fn check(
-    ok: bool,
-    argument: &'static str,
-    accepted: &'static str,
-    got: impl std::fmt::Display,
-) -> Result<(), DmpError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(DmpError::OutOfRange {
-            argument,
-            accepted,
-            got: got.to_string(),
-        })
-    }
-}
+/// Why [`chain`] cannot join two trajectories.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(transparent)]
+pub struct TrajectoryChainError(#[from] pub InvalidArgument);
 
-fn check_len(argument: &'static str, expected: usize, got: usize) -> Result<(), DmpError> {
-    if expected == got {
-        Ok(())
-    } else {
-        Err(DmpError::WrongLength {
-            argument,
-            expected,
-            got,
-        })
-    }
-}
-
-fn check_finite<'a>(argument: &'static str, values: impl IntoIterator<Item = &'a f64>) -> Result<(), DmpError> {
+fn check_finite<'a>(argument: &'static str, values: impl IntoIterator<Item = &'a f64>) -> Result<(), InvalidArgument> {
     match values.into_iter().find(|v| !v.is_finite()) {
         None => Ok(()),
         Some(v) => check(false, argument, "finite", v),
     }
 }
 
-fn check_vector(argument: &'static str, values: &[f64], n_dims: usize) -> Result<(), DmpError> {
+fn check_vector(argument: &'static str, values: &[f64], n_dims: usize) -> Result<(), InvalidArgument> {
     check_len(argument, n_dims, values.len())?;
     check_finite(argument, values)
 }
@@ -129,7 +108,7 @@ impl Default for DmpConfig {
 
 impl DmpConfig {
     /// Checks every field against its accepted range.
-    pub fn validate(&self) -> Result<(), DmpError> {
+    pub fn validate(&self) -> Result<(), DmpCreateError> {
         check(self.n_weights >= 2, "n_weights", "at least 2", self.n_weights)?;
         check(
             self.alpha_y.is_finite() && self.alpha_y > 0.0,
@@ -142,7 +121,8 @@ impl DmpConfig {
             "substep",
             "finite and > 0 (s)",
             self.substep,
-        )
+        )?;
+        Ok(())
     }
 
     /// Spring constant beta_y = alpha_y / 4 (critical damping).
@@ -249,7 +229,12 @@ impl Dmp {
     /// n = ceil(tau / substep) equal substeps; rollouts whose control period is a multiple of the substep use that
     /// grid and skip the basis functions entirely (7 dimensions over 0.5 s: about 50 instead of 300 us). Other grids
     /// compute it on the fly, with the same function, so both paths give the same bits on the same grid.
-    pub fn new(n_dims: usize, execution_time: f64, weights: DMatrix<f64>, config: DmpConfig) -> Result<Self, DmpError> {
+    pub fn new(
+        n_dims: usize,
+        execution_time: f64,
+        weights: DMatrix<f64>,
+        config: DmpConfig,
+    ) -> Result<Self, DmpCreateError> {
         config.validate()?;
         check(n_dims >= 1, "n_dims", "at least 1", n_dims)?;
         check(
@@ -326,7 +311,7 @@ impl Dmp {
         accelerations: Option<&[Vec<f64>]>,
         config: DmpConfig,
         regularization: f64,
-    ) -> Result<Self, DmpError> {
+    ) -> Result<Self, DmpImitateError> {
         let n_samples = demonstration.len();
         check(n_samples >= 3, "demonstration", "at least 3 samples long", n_samples)?;
         check_len("demonstration.velocities", n_samples, demonstration.velocities.len())?;
@@ -382,13 +367,9 @@ impl Dmp {
         let design = DMatrix::from_row_slice(n_samples, config.n_weights, &features);
         let fit = ridge_regression(design, &targets, regularization).filter(|w| w.iter().all(|v| v.is_finite()));
         let Some(weights) = fit else {
-            return Err(DmpError::OutOfRange {
-                argument: "demonstration",
-                accepted: "data whose regression converges to finite weights",
-                got: "a failed fit".to_string(),
-            });
+            return Err(DmpImitateError::NoFit);
         };
-        Self::new(n_dims, tau, weights.transpose(), config)
+        Ok(Self::new(n_dims, tau, weights.transpose(), config)?)
     }
 
     /// Number of dimensions.
@@ -468,7 +449,7 @@ impl Dmp {
         goal: &[f64],
         goal_velocity: &[f64],
         control_dt: f64,
-    ) -> Result<(JointTrajectory, DmpState), DmpError> {
+    ) -> Result<(JointTrajectory, DmpState), DmpRolloutError> {
         let n_dims = self.n_dims();
         check_vector("start.position", &start.position, n_dims)?;
         check_vector("start.velocity", &start.velocity, n_dims)?;
@@ -555,7 +536,7 @@ impl Dmp {
             .iter()
             .any(|v| v.iter().any(|x| !x.is_finite()))
         {
-            return Err(DmpError::Diverged);
+            return Err(DmpRolloutError::Diverged);
         }
         let trajectory = JointTrajectory {
             dt: control_dt,
@@ -568,7 +549,7 @@ impl Dmp {
 
 /// Joins two rollouts of chained DMPs: `second` must start where `first` ends (as a rollout from `first`'s final
 /// state does) and share its control period; the duplicate junction sample is kept once.
-pub fn chain(first: &JointTrajectory, second: &JointTrajectory) -> Result<JointTrajectory, DmpError> {
+pub fn chain(first: &JointTrajectory, second: &JointTrajectory) -> Result<JointTrajectory, TrajectoryChainError> {
     check(second.dt == first.dt, "second.dt", "equal to first.dt", second.dt)?;
     let starts_at_end = match (first.last(), second.positions.first(), second.velocities.first()) {
         (Some((position, velocity)), Some(p), Some(v)) => position == p.as_slice() && velocity == v.as_slice(),
@@ -726,7 +707,7 @@ mod tests {
         }
     }
 
-    fn message(result: Result<impl std::fmt::Debug, DmpError>) -> String {
+    fn message(result: Result<impl std::fmt::Debug, impl std::error::Error>) -> String {
         result.unwrap_err().to_string()
     }
 
@@ -1161,7 +1142,7 @@ mod tests {
         // A finite but huge goal overflows the goal quintic.
         assert_eq!(
             dmp.rollout(&start, &[f64::MAX, 0.0], &ok, 0.001).unwrap_err(),
-            DmpError::Diverged
+            DmpRolloutError::Diverged
         );
 
         let (demonstration, _) = sample(TAU, 0.01, 2, |d, t| [d as f64 * t, d as f64, 0.0]);

@@ -3,14 +3,13 @@
 //! theirs with the same constructors. The spec of what was built then says whether it is the
 //! environment asked for: a build with other settings builds another one.
 
-use crate::ModelError;
-use crate::contextual_function::{self, ContextualFunction};
-use crate::rapier_sim::{RapierArm, RapierConfig};
+use crate::contextual_function::{self, ContextualFunction, ContextualFunctionCreateError};
+use crate::rapier_sim::{RapierArm, RapierArmCreateError, RapierConfig};
 use crate::robot::Robot;
 use crate::targets;
 use crate::throw::{
     DARTBOARD_ENVIRONMENT, GRID_ENVIRONMENT, PARAMS, Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy,
-    ThrowingEnvironment,
+    ThrowPolicyCreateError, ThrowingEnvironment,
 };
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
 
@@ -32,7 +31,27 @@ pub fn dartboard_fields() -> Vec<targets::Field> {
     targets::dartboard(analytic.landing(&[0.0; PARAMS]).expect("theta_0 lands"))
 }
 
-fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironment, ModelError> {
+/// Why [`build`] cannot build the environment a spec names.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EnvironmentBuildError {
+    /// A name that names none of the project's models.
+    #[error("environment spec: name must be contextual-function, throw-grid, throw-dartboard or trivial, got {0}")]
+    UnknownName(String),
+    /// A simulator code (a throwing spec's parameter 0) that names no simulator.
+    #[error("environment spec: simulator (parameter 0) must be 0 (analytic) or 1 (rapier), got {0}")]
+    UnknownSimulator(u64),
+    /// The contextual function refuses the spec's dimensions.
+    #[error(transparent)]
+    ContextualFunction(#[from] ContextualFunctionCreateError),
+    /// The rapier arm cannot be built.
+    #[error(transparent)]
+    Rapier(#[from] RapierArmCreateError),
+    /// The throw design does not roll out with the simulator's control period.
+    #[error("throw: the design does not roll out: {0}")]
+    Throw(#[from] ThrowPolicyCreateError),
+}
+
+fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironment, EnvironmentBuildError> {
     let robot = Robot::pa10();
     let (simulator, control_dt) = match sim {
         Sim::Analytic => (Simulator::Analytic, ANALYTIC_CONTROL_DT),
@@ -41,12 +60,7 @@ fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironmen
             RAPIER_CONTROL_DT,
         ),
     };
-    let policy = ThrowPolicy::new(ThrowDesign::pa10(), control_dt).map_err(|e| ModelError {
-        model: "throw",
-        field: "design",
-        accepted: "a design that rolls out",
-        got: e.to_string(),
-    })?;
+    let policy = ThrowPolicy::new(ThrowDesign::pa10(), control_dt)?;
     Ok(ThrowingEnvironment::new(
         robot,
         policy,
@@ -57,29 +71,24 @@ fn throwing_environment(sim: Sim, targets: Targets) -> Result<ThrowingEnvironmen
 }
 
 /// The PA-10 throwing at the grid problem's targets.
-pub fn grid(sim: Sim) -> Result<ThrowingEnvironment, ModelError> {
+pub fn grid(sim: Sim) -> Result<ThrowingEnvironment, EnvironmentBuildError> {
     throwing_environment(sim, Targets::Grid)
 }
 
 /// The PA-10 throwing at the dartboard's fields.
-pub fn dartboard(sim: Sim) -> Result<ThrowingEnvironment, ModelError> {
+pub fn dartboard(sim: Sim) -> Result<ThrowingEnvironment, EnvironmentBuildError> {
     throwing_environment(sim, Targets::Dartboard(dartboard_fields()))
 }
 
 /// The simulator a throwing environment's spec names (its first parameter).
-fn sim_of(spec: &EnvironmentSpec) -> Result<Sim, ModelError> {
+fn sim_of(spec: &EnvironmentSpec) -> Result<Sim, EnvironmentBuildError> {
     let [parameter, ..] = spec.parameters();
-    Sim::from_parameter(parameter).ok_or_else(|| ModelError {
-        model: "environment spec",
-        field: "simulator (parameter 0)",
-        accepted: "0 (analytic) or 1 (rapier)",
-        got: parameter.to_string(),
-    })
+    Sim::from_parameter(parameter).ok_or(EnvironmentBuildError::UnknownSimulator(parameter))
 }
 
 /// Build the environment `spec` names from its name and parameters; the settings hash is for the
 /// caller to compare with the built environment's.
-pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, ModelError> {
+pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, EnvironmentBuildError> {
     Ok(match spec.name() {
         contextual_function::ENVIRONMENT => {
             let [n_s, n_theta, problem_seed] = spec.parameters();
@@ -89,21 +98,14 @@ pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, ModelError>
         GRID_ENVIRONMENT => Box::new(grid(sim_of(spec)?)?),
         DARTBOARD_ENVIRONMENT => Box::new(dartboard(sim_of(spec)?)?),
         TRIVIAL_ENVIRONMENT => Box::new(TrivialEnvironment::new()),
-        other => {
-            return Err(ModelError {
-                model: "environment spec",
-                field: "name",
-                accepted: "contextual-function, throw-grid, throw-dartboard or trivial",
-                got: other.to_string(),
-            });
-        }
+        other => return Err(EnvironmentBuildError::UnknownName(other.to_string())),
     })
 }
 
 /// For a dartboard spec, the same throws scored against any target as on the grid (reward
 /// -||s - b||^2): the dartboard's reward is defined at field centres only. `None` for other
 /// specs.
-pub fn free_targets(spec: &EnvironmentSpec) -> Result<Option<ThrowingEnvironment>, ModelError> {
+pub fn free_targets(spec: &EnvironmentSpec) -> Result<Option<ThrowingEnvironment>, EnvironmentBuildError> {
     if spec.name() == DARTBOARD_ENVIRONMENT {
         grid(sim_of(spec)?).map(Some)
     } else {

@@ -13,9 +13,10 @@
 //! - evaluation and baseline rollouts read the noise-free r(s) and do not learn;
 //! - the model has no policy parameters: theta is empty.
 
-use crate::{ModelError, check};
+use crate::{InvalidArgument, check};
 use acps_shared::{
-    ContextSpace, Environment, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Stream, Task, TaskKind, derive_seed,
+    ContextSpace, Environment, EnvironmentRestoreError, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Stream,
+    Task, TaskKind, derive_seed,
 };
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -37,6 +38,11 @@ pub struct LearningModelConfig {
     pub sigma_b: f64,
 }
 
+/// Why [`LearningModel::new`] or [`LearningModel::with_learning_factors`] refuses a parameter.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("learning model: {0}")]
+pub struct LearningModelCreateError(#[from] pub InvalidArgument);
+
 /// One instance of the model: baselines and learning factors drawn from a seed.
 #[derive(Debug, Clone)]
 pub struct LearningModel {
@@ -49,17 +55,15 @@ pub struct LearningModel {
 
 impl LearningModel {
     /// A model whose baselines and learning-factor permutation come from `problem_seed`.
-    pub fn new(config: LearningModelConfig, problem_seed: u64) -> Result<Self, ModelError> {
+    pub fn new(config: LearningModelConfig, problem_seed: u64) -> Result<Self, LearningModelCreateError> {
         check(
             config.sigma_r.is_finite() && config.sigma_r >= 0.0,
-            "learning model",
             "sigma_r",
             "finite and >= 0",
             config.sigma_r,
         )?;
         check(
             config.sigma_b.is_finite() && config.sigma_b >= 0.0,
-            "learning model",
             "sigma_b",
             "finite and >= 0",
             config.sigma_b,
@@ -89,11 +93,13 @@ impl LearningModel {
     }
 
     /// Replace the drawn learning factors, for example by the permutation of the paper's Fig. 3.
-    pub fn with_learning_factors(mut self, learning_factors: [f64; CONTEXTS]) -> Result<Self, ModelError> {
+    pub fn with_learning_factors(
+        mut self,
+        learning_factors: [f64; CONTEXTS],
+    ) -> Result<Self, LearningModelCreateError> {
         let valid = learning_factors.iter().all(|w| w.is_finite() && *w >= 0.0);
         check(
             valid,
-            "learning model",
             "learning_factors",
             "finite and >= 0",
             format!("{learning_factors:?}"),
@@ -193,13 +199,12 @@ impl Environment for LearningModel {
         self.competence.iter().flat_map(|l| l.to_le_bytes()).collect()
     }
 
-    fn restore_state(&mut self, state: &[u8]) -> Result<(), String> {
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), EnvironmentRestoreError> {
         if state.len() != 8 * CONTEXTS {
-            return Err(format!(
-                "a learning-model state has {} bytes (ten competences), got {}",
-                8 * CONTEXTS,
-                state.len()
-            ));
+            return Err(EnvironmentRestoreError::Length {
+                expected: 8 * CONTEXTS,
+                got: state.len(),
+            });
         }
         for (l, bytes) in self.competence.iter_mut().zip(state.chunks_exact(8)) {
             *l = f64::from_le_bytes(bytes.try_into().expect("chunks of 8 bytes"));

@@ -27,6 +27,7 @@
 
 use crate::robot::Robot;
 use crate::trajectory::JointTrajectory;
+use crate::{InvalidArgument, check};
 use nalgebra::{DVector, Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use rapier3d_f64::prelude::{
     ColliderBuilder, FixedJointBuilder, JointAxis, MassProperties, MultibodyJointHandle, PhysicsWorld, RevoluteJoint,
@@ -94,59 +95,57 @@ impl Default for RapierConfig {
 
 impl RapierConfig {
     /// Check every field against its accepted range.
-    pub fn validate(&self) -> Result<(), crate::ModelError> {
-        const MODEL: &str = "rapier";
-        crate::check(
+    pub fn validate(&self) -> Result<(), RapierArmCreateError> {
+        check(
             self.dt.is_finite() && self.dt >= 1e-5 && self.dt <= 0.02,
-            MODEL,
             "dt",
             "in [1e-5, 0.02] s",
             self.dt,
         )?;
-        crate::check(
+        check(
             (1..=1000).contains(&self.solver_iterations),
-            MODEL,
             "solver_iterations",
             "in 1..=1000",
             self.solver_iterations,
         )?;
-        crate::check(
+        check(
             self.motor_stiffness.is_finite() && self.motor_stiffness >= 0.0,
-            MODEL,
             "motor_stiffness",
             "finite and >= 0",
             self.motor_stiffness,
         )?;
-        crate::check(
+        check(
             self.motor_damping.is_finite() && self.motor_damping >= 0.0,
-            MODEL,
             "motor_damping",
             "finite and >= 0",
             self.motor_damping,
         )?;
-        crate::check(
+        check(
             self.motor_stiffness + self.motor_damping > 0.0,
-            MODEL,
             "motor_damping",
             "> 0 when motor_stiffness is 0",
             self.motor_damping,
         )?;
-        crate::check(
+        check(
             self.max_tracking_error.is_finite() && self.max_tracking_error > 0.0,
-            MODEL,
             "max_tracking_error",
             "finite and > 0",
             self.max_tracking_error,
         )?;
-        crate::check(
+        check(
             self.max_release_speed.is_finite() && self.max_release_speed > 0.0,
-            MODEL,
             "max_release_speed",
             "finite and > 0",
             self.max_release_speed,
-        )
+        )?;
+        Ok(())
     }
 }
+
+/// Why [`RapierArm::new`] (or [`RapierConfig::validate`]) refuses its configuration or robot.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("rapier: {0}")]
+pub struct RapierArmCreateError(#[from] pub InvalidArgument);
 
 /// Why a throw failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -253,7 +252,7 @@ fn revolute(origin: &Vector3<f64>, axis: &Vector3<f64>) -> RevoluteJoint {
 }
 
 impl ArmWorld {
-    fn build(robot: &Robot, config: &RapierConfig) -> Result<Self, crate::ModelError> {
+    fn build(robot: &Robot, config: &RapierConfig) -> Result<Self, RapierArmCreateError> {
         let mut world = PhysicsWorld::new();
         world.gravity = RVector::new(0.0, 0.0, -robot.gravity);
         let params = &mut world.integration_parameters;
@@ -336,7 +335,7 @@ impl ArmWorld {
         Ok(arm)
     }
 
-    fn attach_ball(&mut self, robot: &Robot) -> Result<(), crate::ModelError> {
+    fn attach_ball(&mut self, robot: &Robot) -> Result<(), RapierArmCreateError> {
         let last = self.last_link_body();
         let joint = FixedJointBuilder::new()
             .local_anchor1(to_rapier(&robot.tool_offset))
@@ -381,13 +380,12 @@ impl ArmWorld {
     }
 }
 
-fn invalid_robot(field: &'static str, accepted: &'static str, got: &str) -> crate::ModelError {
-    crate::ModelError {
-        model: "rapier",
-        field,
+fn invalid_robot(field: &'static str, accepted: &'static str, got: &str) -> RapierArmCreateError {
+    RapierArmCreateError(InvalidArgument::OutOfRange {
+        name: field,
         accepted,
         got: got.to_string(),
-    }
+    })
 }
 
 /// Positions and velocities of a trajectory at any time in its span, by cubic Hermite
@@ -466,7 +464,7 @@ impl std::fmt::Debug for RapierArm {
 
 impl RapierArm {
     /// Build the simulated arm of `robot`.
-    pub fn new(robot: &Robot, config: RapierConfig) -> Result<Self, crate::ModelError> {
+    pub fn new(robot: &Robot, config: RapierConfig) -> Result<Self, RapierArmCreateError> {
         config.validate()?;
         let arm = ArmWorld::build(robot, &config)?;
         Ok(Self {

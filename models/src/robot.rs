@@ -12,9 +12,9 @@ use std::path::Path;
 /// The description file of the PA10-7C, shipped with the crate.
 pub const PA10_FILE: &str = include_str!("../pa10.toml");
 
-/// A description file that cannot be used.
+/// Why [`Robot::from_file`] or [`Robot::from_toml`] cannot load a description.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum RobotFileError {
+pub enum RobotLoadError {
     /// The file could not be read.
     #[error("{file}: cannot read: {reason}")]
     Read {
@@ -163,11 +163,11 @@ impl Checker<'_> {
         field: String,
         accepted: &'static str,
         got: impl std::fmt::Debug,
-    ) -> Result<(), RobotFileError> {
+    ) -> Result<(), RobotLoadError> {
         if ok {
             Ok(())
         } else {
-            Err(RobotFileError::Invalid {
+            Err(RobotLoadError::Invalid {
                 file: self.file.to_string(),
                 field,
                 accepted,
@@ -176,11 +176,11 @@ impl Checker<'_> {
         }
     }
 
-    fn finite(&self, values: &[f64], field: String) -> Result<(), RobotFileError> {
+    fn finite(&self, values: &[f64], field: String) -> Result<(), RobotLoadError> {
         self.check(values.iter().all(|v| v.is_finite()), field, "finite", values)
     }
 
-    fn positive(&self, value: f64, field: String) -> Result<(), RobotFileError> {
+    fn positive(&self, value: f64, field: String) -> Result<(), RobotLoadError> {
         self.check(value.is_finite() && value > 0.0, field, "finite and > 0", value)
     }
 }
@@ -192,9 +192,9 @@ impl Robot {
     }
 
     /// Read and validate a description file.
-    pub fn from_file(path: &Path) -> Result<Self, RobotFileError> {
+    pub fn from_file(path: &Path) -> Result<Self, RobotLoadError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| RobotFileError::Read {
+        let text = std::fs::read_to_string(path).map_err(|e| RobotLoadError::Read {
             file: file.clone(),
             reason: e.to_string(),
         })?;
@@ -202,8 +202,8 @@ impl Robot {
     }
 
     /// Parse and validate a description; `file` names it in errors.
-    pub fn from_toml(text: &str, file: &str) -> Result<Self, RobotFileError> {
-        let raw: RobotFile = toml::from_str(text).map_err(|e| RobotFileError::Syntax {
+    pub fn from_toml(text: &str, file: &str) -> Result<Self, RobotLoadError> {
+        let raw: RobotFile = toml::from_str(text).map_err(|e| RobotLoadError::Syntax {
             file: file.to_string(),
             message: e.to_string(),
         })?;

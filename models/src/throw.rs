@@ -15,7 +15,7 @@
 //! fully set by the meta-parameters the learner adapts; there is no demonstration to imitate.
 //! g2 and the durations stay fixed, as in the paper.
 
-use crate::dmp::{Dmp, DmpConfig, DmpError, DmpState, chain};
+use crate::dmp::{Dmp, DmpConfig, DmpCreateError, DmpRolloutError, DmpState, TrajectoryChainError, chain};
 use crate::rapier_sim::RapierArm;
 use crate::robot::Robot;
 use crate::targets::{self, Field, Point};
@@ -71,6 +71,36 @@ impl ThrowDesign {
     }
 }
 
+/// Why [`ThrowPolicy::new`] refuses a design or control period.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ThrowPolicyCreateError {
+    /// The strike-out's or the throw's DMP cannot be built.
+    #[error(transparent)]
+    Dmp(#[from] DmpCreateError),
+    /// The design's own throw (offset 0) does not roll out with this control period.
+    #[error(transparent)]
+    Trajectory(#[from] ThrowPolicyTrajectoryError),
+}
+
+/// Why [`ThrowPolicy::trajectory`] produces no trajectory.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ThrowPolicyTrajectoryError {
+    /// An offset of another length than [`PARAMS`].
+    #[error("theta must have {expected} entries, got {got}")]
+    Length {
+        /// [`PARAMS`].
+        expected: usize,
+        /// The offset's length.
+        got: usize,
+    },
+    /// A DMP refused the goals or diverged.
+    #[error(transparent)]
+    Rollout(#[from] DmpRolloutError),
+    /// The throw does not continue where the strike-out ends.
+    #[error(transparent)]
+    Chain(#[from] TrajectoryChainError),
+}
+
 /// Turns the learner's offsets into joint trajectories.
 #[derive(Debug, Clone)]
 pub struct ThrowPolicy {
@@ -83,7 +113,7 @@ pub struct ThrowPolicy {
 
 impl ThrowPolicy {
     /// The policy of `design`, sampled every `control_dt` seconds (0.5 s must be a multiple).
-    pub fn new(design: ThrowDesign, control_dt: f64) -> Result<Self, DmpError> {
+    pub fn new(design: ThrowDesign, control_dt: f64) -> Result<Self, ThrowPolicyCreateError> {
         let config = DmpConfig::default();
         let zero = || DMatrix::zeros(JOINTS, config.n_weights);
         let strike = Dmp::new(JOINTS, STRIKE_DURATION, zero(), config)?;
@@ -111,10 +141,9 @@ impl ThrowPolicy {
     }
 
     /// The joint trajectory of theta_0 + `offset` from t = 0 to the release at t = 1.0 s.
-    pub fn trajectory(&self, offset: &[f64]) -> Result<JointTrajectory, DmpError> {
+    pub fn trajectory(&self, offset: &[f64]) -> Result<JointTrajectory, ThrowPolicyTrajectoryError> {
         if offset.len() != PARAMS {
-            return Err(DmpError::WrongLength {
-                argument: "theta",
+            return Err(ThrowPolicyTrajectoryError::Length {
                 expected: PARAMS,
                 got: offset.len(),
             });
@@ -127,7 +156,7 @@ impl ThrowPolicy {
         let (second, _) = self
             .throw
             .rollout(&junction, &self.design.throw_goal, g2dot, self.control_dt)?;
-        chain(&first, &second)
+        Ok(chain(&first, &second)?)
     }
 }
 

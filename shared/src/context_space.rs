@@ -22,9 +22,9 @@ pub enum ContextSpace {
     },
 }
 
-/// A context space that cannot be used.
+/// Why [`ContextSpace::new_box`] or [`ContextSpace::new_ball`] refuses its arguments.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum ContextSpaceError {
+pub enum ContextSpaceCreateError {
     /// Corners of different lengths, an empty box, or a non-finite or inverted bound.
     #[error(
         "context box: low and high must have the same non-zero length and finite low[i] < high[i]; got low {low:?}, high {high:?}"
@@ -47,7 +47,7 @@ pub enum ContextSpaceError {
 
 impl ContextSpace {
     /// A validated box.
-    pub fn new_box(low: Vec<f64>, high: Vec<f64>) -> Result<Self, ContextSpaceError> {
+    pub fn new_box(low: Vec<f64>, high: Vec<f64>) -> Result<Self, ContextSpaceCreateError> {
         let valid = !low.is_empty()
             && low.len() == high.len()
             && low
@@ -57,16 +57,16 @@ impl ContextSpace {
         if valid {
             Ok(Self::Box { low, high })
         } else {
-            Err(ContextSpaceError::InvalidBox { low, high })
+            Err(ContextSpaceCreateError::InvalidBox { low, high })
         }
     }
 
     /// A validated ball around the origin.
-    pub fn new_ball(dim: usize, radius: f64) -> Result<Self, ContextSpaceError> {
+    pub fn new_ball(dim: usize, radius: f64) -> Result<Self, ContextSpaceCreateError> {
         if dim >= 1 && radius.is_finite() && radius > 0.0 {
             Ok(Self::Ball { dim, radius })
         } else {
-            Err(ContextSpaceError::InvalidBall { dim, radius })
+            Err(ContextSpaceCreateError::InvalidBall { dim, radius })
         }
     }
 

@@ -120,14 +120,14 @@ pub trait Environment: Send {
 
     /// Continue from a state saved by [`save_state`](Environment::save_state) of an environment
     /// built the same way. The default accepts only the empty state.
-    fn restore_state(&mut self, state: &[u8]) -> Result<(), String> {
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), EnvironmentRestoreError> {
         if state.is_empty() {
             Ok(())
         } else {
-            Err(format!(
-                "a state of {} bytes for an environment that keeps none",
-                state.len()
-            ))
+            Err(EnvironmentRestoreError::Length {
+                expected: 0,
+                got: state.len(),
+            })
         }
     }
 }
@@ -154,14 +154,59 @@ impl<E: Environment + ?Sized> Environment for Box<E> {
         (**self).save_state()
     }
 
-    fn restore_state(&mut self, state: &[u8]) -> Result<(), String> {
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), EnvironmentRestoreError> {
         (**self).restore_state(state)
     }
+}
+
+/// A saved state that [`Environment::restore_state`] refuses.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EnvironmentRestoreError {
+    /// The state has another length than this environment's states: it was saved by another
+    /// kind of environment (0 bytes: this environment keeps no state).
+    #[error("a saved environment state of {got} bytes, but this environment's state has {expected}")]
+    Length {
+        /// The length of this environment's states.
+        expected: usize,
+        /// The length of the saved state.
+        got: usize,
+    },
+    /// The state has a fitting length but contents this environment cannot continue from; the
+    /// environment says why.
+    #[error("the saved environment state does not fit: {0}")]
+    Invalid(String),
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    struct Stateless;
+
+    impl Environment for Stateless {
+        fn spec(&self) -> EnvironmentSpec {
+            EnvironmentSpec::new("stateless", [0; 3], &()).unwrap()
+        }
+        fn context_dim(&self) -> usize {
+            1
+        }
+        fn param_dim(&self) -> usize {
+            0
+        }
+        fn rollout(&mut self, task: &Task) -> Outcome {
+            Outcome::new(task.id, 0.0, 0.0)
+        }
+    }
+
+    #[test]
+    fn a_stateless_environment_accepts_only_the_empty_state() {
+        let mut environment = Stateless;
+        assert_eq!(environment.restore_state(&environment.save_state()), Ok(()));
+        assert_eq!(
+            environment.restore_state(&[1, 2]),
+            Err(EnvironmentRestoreError::Length { expected: 0, got: 2 })
+        );
+    }
 
     #[test]
     fn non_finite_values_make_a_failed_outcome() {

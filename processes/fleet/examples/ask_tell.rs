@@ -32,7 +32,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     if let Some(policy) = learner.policy() {
         let theta = policy.greedy(&[7.0, 0.0]);
-        println!("at a 7 m target in no wind: elevation {:.3} rad, speed {:.2} m/s, spin {:.3}", theta[0], theta[1], theta[2]);
+        println!(
+            "at a 7 m target in no wind: elevation {:.3} rad, speed {:.2} m/s, spin {:.3}",
+            theta[0], theta[1], theta[2]
+        );
     }
     Ok(())
 }

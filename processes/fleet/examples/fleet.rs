@@ -19,8 +19,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cannon = Cannon::new(CannonSettings::default());
     // Started by the fleet: be a worker.
     if let Some(run) = RunName::from_env()? {
-        let report = acps_worker::serve(&run, &WorkerOptions::default(), &mut Single(cannon), &AtomicBool::new(false))?;
-        eprintln!("worker {}: {:?} after {} rollouts", std::process::id(), report.exit, report.rollouts);
+        let report = acps_worker::serve(
+            &run,
+            &WorkerOptions::default(),
+            &mut Single(cannon),
+            &AtomicBool::new(false),
+        )?;
+        eprintln!(
+            "worker {}: {:?} after {} rollouts",
+            std::process::id(),
+            report.exit,
+            report.rollouts
+        );
         return Ok(());
     }
     let learner = || {
@@ -34,7 +44,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let mut jobs = vec![FleetJob::new(learner()?)?];
     let mut fleet = Fleet::builder(format!("cannon-{}", std::process::id()))
-        .spawn_workers(2, |_| Command::new(std::env::current_exe().expect("this program's path")))
+        .spawn_workers(2, |_| {
+            Command::new(std::env::current_exe().expect("this program's path"))
+        })
         .ctrl_c(true)
         .start()?;
     let mut shown = 0;

@@ -21,7 +21,7 @@
 //! another build or run, and workers serving an environment no job needs, are refused; a worker
 //! that serves one environment is handed only tasks of jobs that need it.
 
-use acps_learner::{Learner, LearningProgress, TellError};
+use acps_learner::{Learner, LearnerTellError, LearningProgress};
 use acps_shared::{EnvironmentSpec, Serves, SpecBuildError};
 use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
 use acps_wire::wire::{
@@ -358,7 +358,7 @@ pub(crate) fn serve(
                         .told(job as usize, &jobs[job as usize].learner)
                         .map_err(FleetError::Observer)?;
                 }
-                Some(Err(TellError::UnknownTask { .. } | TellError::Duplicate { .. })) | None => {
+                Some(Err(LearnerTellError::UnknownTask { .. } | LearnerTellError::Duplicate { .. })) | None => {
                     progress.duplicates += 1
                 }
             }

@@ -33,7 +33,11 @@ fn leftovers(prefix: &str) -> Vec<PathBuf> {
     let mut stack = vec![PathBuf::from("/dev/shm"), PathBuf::from("/tmp/iceoryx2")];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-            if entry.file_name().to_string_lossy().starts_with(&format!("acps_{prefix}")) {
+            if entry
+                .file_name()
+                .to_string_lossy()
+                .starts_with(&format!("acps_{prefix}"))
+            {
                 found.push(entry.path());
             } else if entry.path().is_dir() {
                 stack.push(entry.path());

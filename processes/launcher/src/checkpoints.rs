@@ -6,7 +6,9 @@
 //! experiment, so the resumed run ends exactly as an uninterrupted one would.
 
 use acps_learner::Learner;
-use acps_learner::checkpoint::{self, Checkpoint, CheckpointError, Stamp};
+use acps_learner::checkpoint::{
+    self, Checkpoint, CheckpointApplyError, CheckpointReadError, CheckpointWriteError, Stamp,
+};
 use acps_shared::Environment;
 use std::path::{Path, PathBuf};
 
@@ -25,9 +27,20 @@ pub struct Checkpoints {
 /// A checkpoint directory that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointsError {
-    /// A checkpoint file could not be written, read or applied.
+    /// A checkpoint file could not be written.
     #[error(transparent)]
-    File(#[from] CheckpointError),
+    Write(#[from] CheckpointWriteError),
+    /// A checkpoint file could not be read, or is not one of this job.
+    #[error(transparent)]
+    Read(#[from] CheckpointReadError),
+    /// A checkpoint file does not fit the job it was read for.
+    #[error("checkpoint {}: {source}", path.display())]
+    Apply {
+        /// The file.
+        path: PathBuf,
+        /// Why the job refused it.
+        source: CheckpointApplyError,
+    },
     /// The directory could not be created, listed or cleaned.
     #[error("checkpoint directory {}: {source}", path.display())]
     Dir {
@@ -111,7 +124,7 @@ impl Writer {
 
     /// Called after every outcome told to `learner`: writes a checkpoint when the learner has
     /// completed another `every` rounds, and once when it is done.
-    pub fn after_tell(&mut self, learner: &Learner, environment: &dyn Environment) -> Result<(), CheckpointError> {
+    pub fn after_tell(&mut self, learner: &Learner, environment: &dyn Environment) -> Result<(), CheckpointsError> {
         if self.every == 0 || self.finished {
             return Ok(());
         }
@@ -125,8 +138,12 @@ impl Writer {
     }
 
     /// Write the checkpoint now (for example when the run is interrupted).
-    pub fn write(&self, learner: &Learner, environment: &dyn Environment) -> Result<(), CheckpointError> {
-        checkpoint::write(&self.path, self.stamp, &Checkpoint::take(learner, environment))
+    pub fn write(&self, learner: &Learner, environment: &dyn Environment) -> Result<(), CheckpointsError> {
+        Ok(checkpoint::write(
+            &self.path,
+            self.stamp,
+            &Checkpoint::take(learner, environment),
+        )?)
     }
 
     /// Whether checkpoints are written at all.
@@ -142,13 +159,15 @@ pub(crate) fn restore(
     stamp: Stamp,
     learner: &mut Learner,
     environment: &mut dyn Environment,
-) -> Result<bool, CheckpointError> {
+) -> Result<bool, CheckpointsError> {
     let Some(saved) = checkpoint::read(path, stamp)? else {
         return Ok(false);
     };
-    saved.apply(learner, environment).map_err(|kind| CheckpointError {
-        path: path.to_path_buf(),
-        kind,
-    })?;
+    saved
+        .apply(learner, environment)
+        .map_err(|source| CheckpointsError::Apply {
+            path: path.to_path_buf(),
+            source,
+        })?;
     Ok(true)
 }

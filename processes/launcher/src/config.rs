@@ -8,9 +8,9 @@
 
 use crate::experiment::Experiment;
 use crate::paper::{self, Options, Overrides};
-use acps_learner::Method;
 use acps_learner::creps::MemoryConfig;
 use acps_learner::selection::FirstVisit;
+use acps_learner::{Method, SelectorConfig};
 use acps_wire::ipc;
 use acps_wire::wire::MAX_THETA;
 use serde::{Deserialize, Serialize};
@@ -497,7 +497,11 @@ impl Plan {
     /// the experiment's defaults.
     fn resolved_for(&self, experiment: &Experiment, panel: Option<char>, n_s: Option<usize>) -> ExperimentFile {
         let creps = experiment.learner.creps.as_ref();
-        let selector = &experiment.methods[0];
+        // The D-UCB settings as the summary records them: they are set for every experiment,
+        // also when none of its methods uses D-UCB.
+        let recorded = &experiment.settings;
+        let first_visit: FirstVisit = serde_json::from_value(recorded["first_visit"].clone())
+            .expect("every experiment records its first-visit rule");
         let throws = matches!(self.name, Grid | Dartboard);
         ExperimentFile {
             experiment: Some(self.name),
@@ -508,9 +512,9 @@ impl Plan {
             episodes: Some(experiment.learner.episodes),
             seed: Some(experiment.base_seed),
             in_flight: Some(experiment.learner.in_flight),
-            methods: Some(experiment.methods.iter().map(|s| s.method).collect()),
+            methods: Some(experiment.methods.iter().map(SelectorConfig::method).collect()),
             n_theta: experiment.settings["n_theta"].as_u64().map(|n| n as usize),
-            first_visit: Some(match selector.first_visit {
+            first_visit: Some(match first_visit {
                 FirstVisit::InitialReturn => FirstVisitName::InitialReturn,
                 FirstVisit::Zero => FirstVisitName::Zero,
                 FirstVisit::Optimistic => FirstVisitName::Optimistic,
@@ -521,7 +525,7 @@ impl Plan {
             }),
             initial_sigma: creps.map(|c| c.initial_sigma),
             epsilon: creps.map(|c| c.epsilon),
-            xi: Some(selector.ducb.xi),
+            xi: recorded["ducb"]["xi"].as_f64(),
             fig3_learning_factors: (self.name == Toy).then(|| self.settings.fig3_learning_factors == Some(true)),
         }
     }
@@ -861,6 +865,42 @@ mod tests {
         };
         let message = Plan::new(None, &cli).err().unwrap().to_string();
         assert_eq!(message, "--xi must be a finite number >= 0, got inf");
+    }
+
+    /// The resolved file's xi and first-visit rule are read from the recorded settings; they
+    /// must be what the D-UCB methods run with, by default and when set.
+    #[test]
+    fn resolved_d_ucb_settings_are_the_methods() {
+        for name in ALL {
+            for (xi, first_visit) in [(None, None), (Some(0.5), Some(FirstVisitName::Zero))] {
+                let cli = ExperimentFile {
+                    experiment: Some(*name),
+                    xi,
+                    first_visit,
+                    ..Default::default()
+                };
+                for job in Plan::new(None, &cli).unwrap().jobs(Path::new("out")) {
+                    let bandits: Vec<_> = job
+                        .experiment
+                        .methods
+                        .iter()
+                        .filter_map(|m| match m {
+                            SelectorConfig::Bandit(bandit) => Some(bandit),
+                            _ => None,
+                        })
+                        .collect();
+                    assert!(!bandits.is_empty(), "{name:?}");
+                    for bandit in bandits {
+                        assert_eq!(job.config.xi, Some(bandit.ducb.xi), "{name:?}");
+                        let rule = serde_json::to_value(bandit.first_visit).unwrap();
+                        assert_eq!(serde_json::to_value(job.config.first_visit).unwrap(), rule, "{name:?}");
+                    }
+                    if let Some(xi) = xi {
+                        assert_eq!(job.config.xi, Some(xi));
+                    }
+                }
+            }
+        }
     }
 
     #[test]

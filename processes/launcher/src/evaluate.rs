@@ -235,8 +235,9 @@ pub fn check_render(saved: &SavedPolicy, path: &Path) -> anyhow::Result<()> {
 /// Draw the side view of the throw at `throw`'s target into `path` (.svg or .png).
 pub fn render(saved: &SavedPolicy, throw: &Throw, path: &Path) -> anyhow::Result<()> {
     check_render(saved, path)?;
-    let trajectory = ThrowPolicy::new(ThrowDesign::pa10(), 0.01)
-        .and_then(|policy| policy.trajectory(&throw.theta))
+    let policy = ThrowPolicy::new(ThrowDesign::pa10(), 0.01)?;
+    let trajectory = policy
+        .trajectory(&throw.theta)
         .map_err(|e| anyhow::anyhow!("rolling out the throw: {e}"))?;
     let title = format!(
         "{} run {}: throw at ({:.3}, {:.3}), arm every 0.1 s, ball after release",

@@ -10,7 +10,7 @@ use acps_fleet::{Fleet, FleetError, FleetJob, FleetJobBuildError, FleetProgress,
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::{
-    Episode, Learner, LearnerConfig, LearnerError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
+    Episode, Learner, LearnerConfig, LearnerCreateError, LearnerStats, LearningProgress, SelectorConfig, UpdateRecord,
     run_in_process,
 };
 use acps_shared::{Environment, EnvironmentMatchError, Problem};
@@ -272,7 +272,7 @@ impl Job {
 pub enum RunError {
     /// A learner refused its configuration.
     #[error(transparent)]
-    Learner(#[from] LearnerError),
+    Learner(#[from] LearnerCreateError),
     /// An instance's environment is not the one its problem is defined for.
     #[error(transparent)]
     Environment(#[from] EnvironmentMatchError),
@@ -309,11 +309,7 @@ impl Experiment {
             keeps_state,
         } = (self.instance)(seed);
         problem.check_environment(environment.as_ref())?;
-        let selector = selector.build(&problem).map_err(|e| LearnerError::Problem {
-            problem: problem.name.clone(),
-            reason: e.to_string(),
-        })?;
-        let learner = Learner::new(
+        let learner = Learner::with_selector(
             LearnerConfig {
                 seed,
                 ..self.learner.clone()
@@ -402,7 +398,7 @@ impl Experiment {
         let files: Vec<_> = self
             .methods
             .iter()
-            .flat_map(|m| (0..self.runs).map(move |r| checkpoints.file(m.method.name(), r)))
+            .flat_map(|m| (0..self.runs).map(move |r| checkpoints.file(m.method().name(), r)))
             .collect();
         let jobs = self.jobs()?;
         checkpoints.prepare(&files)?;
@@ -411,8 +407,7 @@ impl Experiment {
             .enumerate()
             .map(|(index, (mut job, file))| {
                 if checkpoints.resume {
-                    restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())
-                        .map_err(CheckpointsError::from)?;
+                    restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())?;
                 }
                 let writer = Writer::new(file, self.stamp(index), checkpoints.every, &job.learner);
                 Ok((job, writer))
@@ -468,9 +463,7 @@ impl Experiment {
             // Tasks out with workers are handed out again after a restore, so nothing is lost.
             for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {
                 if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner().is_done()) {
-                    writer
-                        .write(job.learner(), environment.as_ref())
-                        .map_err(CheckpointsError::from)?;
+                    writer.write(job.learner(), environment.as_ref())?;
                 }
             }
         }
@@ -514,14 +507,14 @@ impl Experiment {
         let mut run_results = BTreeMap::new();
         for selector in &self.methods {
             let runs: Vec<RunResult> = results.drain(..self.runs).collect();
-            let name = selector.method.name().to_string();
+            let name = selector.method().name().to_string();
             methods.insert(name.clone(), self.summarise(&runs, problem.training_contexts.len()));
             run_results.insert(name, runs);
         }
         let best_policy = if self.best_policy {
             // In the methods' order, so ties do not depend on the map's.
             BestPolicy::find(self.methods.iter().map(|selector| {
-                let name = selector.method.name();
+                let name = selector.method().name();
                 (name, run_results[name].as_slice())
             }))
         } else {

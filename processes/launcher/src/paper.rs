@@ -4,9 +4,9 @@
 //! `settings` and explained in docs/CHOICES.md.
 
 use crate::experiment::{Experiment, Instance, RunResult, mean};
-use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
+use acps_learner::creps::{CRepsConfig, MemoryConfig};
 use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
-use acps_learner::{LearnerConfig, Method, SelectorConfig};
+use acps_learner::{BanditConfig, LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::environment;
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
@@ -78,15 +78,19 @@ impl Options {
         self.overrides.first_visit.unwrap_or(FirstVisit::InitialReturn)
     }
 
+    /// The selected methods (else `defaults`), the D-UCB ones with `ducb(method)` and this
+    /// run's first-visit rule.
     fn methods(&self, defaults: &[Method], ducb: impl Fn(Method) -> DUcbConfig) -> Vec<SelectorConfig> {
         let methods = self.methods.clone().unwrap_or_else(|| defaults.to_vec());
         methods
             .into_iter()
-            .map(|method| SelectorConfig {
-                method,
-                ducb: ducb(method),
-                first_visit: self.first_visit(),
-                sagg_riac: SaggRiacConfig::default(),
+            .map(|method| match SelectorConfig::from(method) {
+                SelectorConfig::Bandit(bandit) => SelectorConfig::Bandit(BanditConfig {
+                    ducb: ducb(method),
+                    first_visit: self.first_visit(),
+                    ..bandit
+                }),
+                other => other,
             })
             .collect()
     }
@@ -181,9 +185,7 @@ pub fn function(options: &Options) -> Experiment {
         Method::Random,
     ];
     let setting = FunctionSetting {
-        epsilon: 2.0,
-        samples: 50,
-        update_every: 25,
+        creps: CRepsConfig::paper_function(),
         episodes: 2500,
         eval_every: 50,
     };
@@ -198,11 +200,8 @@ pub fn function(options: &Options) -> Experiment {
 /// 25 n_s^2 rollouts, an update every 13 n_s^2; D-UCB with monotonic progress.
 pub fn dims(n_s: usize, options: &Options) -> Experiment {
     let defaults = [Method::MonotonicProgress, Method::Random, Method::RandomContinuous];
-    let n2 = n_s * n_s;
     let setting = FunctionSetting {
-        epsilon: 1.0,
-        samples: 25 * n2,
-        update_every: 13 * n2,
+        creps: CRepsConfig::paper_dims(n_s),
         episodes: 5000,
         eval_every: 100,
     };
@@ -216,11 +215,9 @@ pub fn dims(n_s: usize, options: &Options) -> Experiment {
     )
 }
 
-/// The C-REPS schedule of a Section 5.1 experiment.
+/// The C-REPS setting and schedule of a Section 5.1 experiment.
 struct FunctionSetting {
-    epsilon: f64,
-    samples: usize,
-    update_every: usize,
+    creps: CRepsConfig,
     episodes: u64,
     eval_every: u64,
 }
@@ -236,24 +233,14 @@ fn function_experiment(
     let overrides = &options.overrides;
     let n_theta = overrides.n_theta.unwrap_or(DEFAULT_N_THETA);
     let n_tasks = 25;
-    let memory = if overrides.best_per_task == Some(true) {
-        MemoryConfig::BestPerTask {
-            per_task: (setting.samples / n_tasks).max(1),
+    let memory = match setting.creps.memory.clone() {
+        // The window of N as the paper's Section 5.2 memory of the best N/K per task.
+        MemoryConfig::SlidingWindow { capacity } if overrides.best_per_task == Some(true) => {
+            MemoryConfig::best_per_task(capacity, n_tasks)
         }
-    } else {
-        MemoryConfig::SlidingWindow {
-            capacity: setting.samples,
-        }
+        memory => memory,
     };
-    let creps = CRepsConfig {
-        epsilon: overrides.epsilon.unwrap_or(setting.epsilon),
-        eta_min: DEFAULT_ETA_MIN,
-        ridge: 1e-4,
-        update_every: setting.update_every,
-        memory,
-        features: FeatureMap::Quadratic,
-        initial_sigma: overrides.initial_sigma.unwrap_or(1.0),
-    };
+    let creps = with_overrides(setting.creps, overrides, memory);
     let ducb = DUcbConfig {
         gamma: 0.99,
         xi: overrides.xi.unwrap_or(1e-8),
@@ -311,24 +298,27 @@ fn stateless(problem: Problem, environment: Box<dyn Environment>) -> Instance {
     }
 }
 
-/// Section 5.2.2's C-REPS for K tasks: epsilon 0.5, an update every 50 trials on a memory of the
-/// best 300/K trials per task (rounded down), polar-quadratic features, W = 0 around theta_0,
-/// Sigma_0 = 0.02 I.
-fn throwing_creps(tasks: usize, options: &Options) -> CRepsConfig {
-    let per_task = (300 / tasks).max(1);
+/// `preset` with the run's overrides of epsilon and Sigma_0, and `memory`.
+fn with_overrides(preset: CRepsConfig, overrides: &Overrides, memory: MemoryConfig) -> CRepsConfig {
     CRepsConfig {
-        epsilon: options.overrides.epsilon.unwrap_or(0.5),
-        eta_min: DEFAULT_ETA_MIN,
-        ridge: 1e-4,
-        update_every: 50,
-        memory: if options.overrides.best_per_task == Some(false) {
-            MemoryConfig::SlidingWindow { capacity: 300 }
-        } else {
-            MemoryConfig::BestPerTask { per_task }
-        },
-        features: FeatureMap::PolarQuadratic,
-        initial_sigma: options.overrides.initial_sigma.unwrap_or(0.02),
+        epsilon: overrides.epsilon.unwrap_or(preset.epsilon),
+        initial_sigma: overrides.initial_sigma.unwrap_or(preset.initial_sigma),
+        memory,
+        ..preset
     }
+}
+
+/// Section 5.2.2's C-REPS for K tasks ([`CRepsConfig::paper_throwing`]: epsilon 0.5, an update
+/// every 50 trials on a memory of the best 300/K trials per task, polar-quadratic features,
+/// Sigma_0 = 0.02 I), W = 0 around theta_0.
+fn throwing_creps(tasks: usize, options: &Options) -> CRepsConfig {
+    let preset = CRepsConfig::paper_throwing(tasks);
+    let memory = if options.overrides.best_per_task == Some(false) {
+        MemoryConfig::SlidingWindow { capacity: 300 }
+    } else {
+        preset.memory.clone()
+    };
+    with_overrides(preset, &options.overrides, memory)
 }
 
 fn throwing_settings(

@@ -30,8 +30,9 @@
 //! exactly as the original would have. Tasks that were handed out but whose outcome had not
 //! arrived are handed out again (same task, same seed), before the tasks never handed out.
 
-use crate::creps::{CReps, CRepsConfig, CRepsError, CRepsState, Rejection, UpdateReport};
-use crate::selection::{Choice, ContextSelector, SelectionError, SelectorState};
+use crate::SelectorConfig;
+use crate::creps::{CReps, CRepsConfig, CRepsCreateError, CRepsRestoreError, CRepsState, Rejection, UpdateReport};
+use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::{EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -39,49 +40,100 @@ use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, VecDeque};
 
 /// How the learner runs, independent of the selection method.
+///
+/// [`Default`] is a sequential run of 1000 episodes with [`CRepsConfig::default`]; set the
+/// fields that matter for the problem:
+///
+/// ```
+/// use acps_learner::LearnerConfig;
+///
+/// let config = LearnerConfig { episodes: 2000, ..Default::default() };
+/// assert_eq!((config.in_flight, config.eval_every), (1, 50));
+/// ```
 #[derive(Debug, Clone)]
 pub struct LearnerConfig {
-    /// Seed of every random stream of the run.
+    /// Seed of every random stream of the run (default 0).
     pub seed: u64,
-    /// Number of training episodes (rollouts), >= 1.
+    /// Number of training episodes (rollouts), >= 1 (default 1000, the length of the paper's
+    /// shortest runs, Sec. 4; its others run 2500 to 50,000).
     pub episodes: u64,
-    /// Training tasks in flight, P >= 1: task t is created after outcome t - P is consumed.
+    /// Training tasks in flight, P >= 1: task t is created after outcome t - P is consumed
+    /// (default 1, the paper's sequential algorithm; raise it to keep parallel simulators busy).
     pub in_flight: usize,
-    /// Evaluate the greedy policy every this many consumed training episodes, >= 1.
+    /// Evaluate the greedy policy on the problem's test contexts every this many consumed
+    /// training episodes, >= 1 (default 50, as the paper's Sec. 5.1.2; each evaluation costs one
+    /// rollout per test context).
     pub eval_every: u64,
-    /// The upper-level policy search; `None` for problems without policy parameters.
+    /// The upper-level policy search (default [`CRepsConfig::default`]); `None` for problems
+    /// without policy parameters (an empty theta0).
     pub creps: Option<CRepsConfig>,
 }
 
-/// A configuration the learner cannot run with.
-#[derive(Debug, thiserror::Error)]
-pub enum LearnerError {
-    /// A field outside its accepted range.
-    #[error("learner config: {field} must be {accepted}, got {got}")]
-    Config {
-        /// The offending field.
-        field: &'static str,
-        /// The accepted range.
-        accepted: &'static str,
-        /// The given value.
-        got: String,
-    },
-    /// The problem and the policy configuration do not fit together.
-    #[error("problem '{problem}': {reason}")]
-    Problem {
-        /// The problem's name.
-        problem: String,
-        /// What does not fit.
-        reason: String,
-    },
-    /// C-REPS refused its configuration.
-    #[error(transparent)]
-    CReps(#[from] CRepsError),
+impl Default for LearnerConfig {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            episodes: 1000,
+            in_flight: 1,
+            eval_every: 50,
+            creps: Some(CRepsConfig::default()),
+        }
+    }
 }
 
-/// An outcome the learner cannot accept.
+/// Why [`Learner::new`] or [`Learner::with_selector`] refuses to create a learner.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LearnerCreateError {
+    /// A count of the [`LearnerConfig`] that must be at least 1 is 0.
+    #[error("learner config: {field} must be >= 1, got 0")]
+    Zero {
+        /// The field: `episodes`, `in_flight` or `eval_every`.
+        field: &'static str,
+    },
+    /// The problem has no training contexts to choose from.
+    #[error("problem '{problem}' has no training contexts")]
+    NoTrainingContexts {
+        /// The problem's name.
+        problem: String,
+    },
+    /// A training or test context whose dimension is not the context space's.
+    #[error("problem '{problem}': context {context:?} does not have the space's dimension {dim}")]
+    ContextDim {
+        /// The problem's name.
+        problem: String,
+        /// The offending context.
+        context: Vec<f64>,
+        /// The context space's dimension.
+        dim: usize,
+    },
+    /// The problem has no policy parameters (`theta0` is empty), but the config has a C-REPS
+    /// configuration: set `creps` to `None`.
+    #[error(
+        "problem '{problem}' has no policy parameters (theta0 is empty), so the learner config must have no C-REPS configuration"
+    )]
+    UnusedCReps {
+        /// The problem's name.
+        problem: String,
+    },
+    /// The problem has policy parameters, but the config has no C-REPS configuration.
+    #[error("problem '{problem}' has {n_theta} policy parameters but the learner config has no C-REPS configuration")]
+    MissingCReps {
+        /// The problem's name.
+        problem: String,
+        /// The number of policy parameters.
+        n_theta: usize,
+    },
+    /// C-REPS refuses its configuration for this problem.
+    #[error(transparent)]
+    CReps(#[from] CRepsCreateError),
+    /// The selector cannot be built for this problem ([`Learner::with_selector`] only).
+    #[error(transparent)]
+    Selector(#[from] SelectorCreateError),
+}
+
+/// Why [`Learner::tell`] refuses an outcome. The learner is left unchanged.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum TellError {
+pub enum LearnerTellError {
     /// No task with this id is waiting for its outcome (never issued, or already consumed).
     #[error("outcome for task {task_id}, which is not waiting for an outcome")]
     UnknownTask {
@@ -176,9 +228,10 @@ pub struct UpdateRecord {
     pub report: UpdateReport,
 }
 
-/// A snapshot that does not belong to the learner it is restored into.
+/// Why [`Learner::restore`] refuses a snapshot: it does not belong to this learner. The learner
+/// is left unchanged.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum RestoreError {
+pub enum LearnerRestoreError {
     /// The snapshot was taken of a learner of another configuration or problem.
     #[error("the checkpoint is of a learner with {what} {checkpoint}, this one has {what} {learner}")]
     Mismatch {
@@ -191,10 +244,10 @@ pub enum RestoreError {
     },
     /// The selector refused its saved state.
     #[error(transparent)]
-    Selector(#[from] SelectionError),
+    Selector(#[from] SelectorRestoreError),
     /// C-REPS refused its saved state.
     #[error(transparent)]
-    Policy(#[from] CRepsError),
+    Policy(#[from] CRepsRestoreError),
     /// The snapshot contradicts itself.
     #[error("the checkpoint's learner state is inconsistent: {0}")]
     Inconsistent(String),
@@ -245,9 +298,9 @@ impl Fit {
     }
 
     /// The first field in which `self` (the snapshot's) differs from `learner` (this one's).
-    fn check(&self, learner: &Fit) -> Result<(), RestoreError> {
+    fn check(&self, learner: &Fit) -> Result<(), LearnerRestoreError> {
         let mismatch = |what, checkpoint: &dyn ToString, learner: &dyn ToString| {
-            Err(RestoreError::Mismatch {
+            Err(LearnerRestoreError::Mismatch {
                 what,
                 checkpoint: checkpoint.to_string(),
                 learner: learner.to_string(),
@@ -362,6 +415,42 @@ impl LearnerSnapshot {
 }
 
 /// The learner: context selection plus C-REPS behind an ask/tell interface.
+///
+/// A problem of your own, the defaults, and a loop that performs each task the learner asks
+/// for (here a closure stands in for the simulator):
+///
+/// ```
+/// use acps_learner::{Learner, LearnerConfig, SelectorConfig};
+/// use acps_shared::{ContextSpace, Outcome, Problem, ScoreAggregate, Task};
+///
+/// // Learn theta(s) = (s, -s) for contexts s in [0, 1]; the return is minus the squared error.
+/// let problem = Problem {
+///     name: "line".into(),
+///     training_contexts: (0..5).map(|i| vec![i as f64 / 4.0]).collect(),
+///     test_contexts: vec![vec![0.1], vec![0.6]],
+///     space: ContextSpace::new_box(vec![0.0], vec![1.0])?,
+///     theta0: vec![0.0, 0.0],
+///     score: ScoreAggregate::Mean,
+///     metric: "mean squared error".into(),
+/// };
+/// let simulate = |task: &Task| {
+///     let s = task.context[0];
+///     let error = (task.theta[0] - s).powi(2) + (task.theta[1] + s).powi(2);
+///     Outcome::new(task.id, -error, error)
+/// };
+///
+/// let config = LearnerConfig { episodes: 500, ..Default::default() };
+/// // D-UCB with monotonic progress: the paper's proposal.
+/// let mut learner = Learner::with_selector(config, problem, &SelectorConfig::default())?;
+/// while let Some(task) = learner.ask() {
+///     learner.tell(simulate(&task))?;
+/// }
+/// assert!(learner.is_done());
+/// let before = learner.evaluations()[0].score.unwrap();
+/// let after = learner.latest_score().unwrap();
+/// assert!(after < before / 100.0, "{before} -> {after}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub struct Learner {
     config: LearnerConfig,
     problem: Problem,
@@ -385,33 +474,34 @@ pub struct Learner {
 }
 
 impl Learner {
-    /// A learner for `problem` choosing contexts with `selector`.
+    /// A learner for `problem` choosing contexts with the selector `selector` builds for it.
+    pub fn with_selector(
+        config: LearnerConfig,
+        problem: Problem,
+        selector: &SelectorConfig,
+    ) -> Result<Self, LearnerCreateError> {
+        let selector = selector.build(&problem)?;
+        Self::new(config, problem, selector)
+    }
+
+    /// A learner for `problem` choosing contexts with `selector` (any [`ContextSelector`], a
+    /// custom one included).
     pub fn new(
         config: LearnerConfig,
         problem: Problem,
         selector: Box<dyn ContextSelector>,
-    ) -> Result<Self, LearnerError> {
-        let check = |ok: bool, field, accepted, got: String| {
-            if ok {
-                Ok(())
-            } else {
-                Err(LearnerError::Config { field, accepted, got })
-            }
-        };
-        check(config.episodes >= 1, "episodes", ">= 1", config.episodes.to_string())?;
-        check(config.in_flight >= 1, "in_flight", ">= 1", config.in_flight.to_string())?;
-        check(
-            config.eval_every >= 1,
-            "eval_every",
-            ">= 1",
-            config.eval_every.to_string(),
-        )?;
-        let problem_error = |reason: String| LearnerError::Problem {
-            problem: problem.name.clone(),
-            reason,
-        };
+    ) -> Result<Self, LearnerCreateError> {
+        let counts = [
+            ("episodes", config.episodes),
+            ("in_flight", config.in_flight as u64),
+            ("eval_every", config.eval_every),
+        ];
+        if let Some((field, _)) = counts.into_iter().find(|&(_, count)| count == 0) {
+            return Err(LearnerCreateError::Zero { field });
+        }
+        let name = || problem.name.clone();
         if problem.training_contexts.is_empty() {
-            return Err(problem_error("has no training contexts".into()));
+            return Err(LearnerCreateError::NoTrainingContexts { problem: name() });
         }
         if let Some(bad) = problem
             .training_contexts
@@ -419,10 +509,11 @@ impl Learner {
             .chain(&problem.test_contexts)
             .find(|s| s.len() != problem.context_dim())
         {
-            return Err(problem_error(format!(
-                "context {bad:?} does not have the space's dimension {}",
-                problem.context_dim()
-            )));
+            return Err(LearnerCreateError::ContextDim {
+                problem: name(),
+                context: bad.clone(),
+                dim: problem.context_dim(),
+            });
         }
         let policy = match (&config.creps, problem.theta0.is_empty()) {
             (Some(creps), false) => Some(CReps::new(
@@ -432,16 +523,12 @@ impl Learner {
                 problem.training_contexts.len(),
             )?),
             (None, true) => None,
-            (Some(_), true) => {
-                return Err(problem_error(
-                    "has no policy parameters, so C-REPS cannot be configured".into(),
-                ));
-            }
+            (Some(_), true) => return Err(LearnerCreateError::UnusedCReps { problem: name() }),
             (None, false) => {
-                return Err(problem_error(format!(
-                    "has {} policy parameters but no C-REPS configuration",
-                    problem.theta0.len()
-                )));
+                return Err(LearnerCreateError::MissingCReps {
+                    problem: name(),
+                    n_theta: problem.theta0.len(),
+                });
             }
         };
         let mut learner = Self {
@@ -499,13 +586,13 @@ impl Learner {
 
     /// Report the outcome of a task. Outcomes may arrive in any order; they are consumed in task
     /// order, and consuming them may create new tasks.
-    pub fn tell(&mut self, outcome: Outcome) -> Result<(), TellError> {
+    pub fn tell(&mut self, outcome: Outcome) -> Result<(), LearnerTellError> {
         let task_id = outcome.task_id;
         if !self.pending.contains_key(&task_id) {
-            return Err(TellError::UnknownTask { task_id });
+            return Err(LearnerTellError::UnknownTask { task_id });
         }
         if self.arrived.contains_key(&task_id) {
-            return Err(TellError::Duplicate { task_id });
+            return Err(LearnerTellError::Duplicate { task_id });
         }
         self.outbox.retain(|id| *id != task_id);
         if !outcome.is_ok() && self.retried.insert(task_id) {
@@ -638,9 +725,9 @@ impl Learner {
     /// taken of (configuration, problem, selector); nothing is kept of its own progress. A
     /// snapshot of another seed, length, P, problem or selector kind is refused and leaves the
     /// learner unchanged.
-    pub fn restore(&mut self, snapshot: LearnerSnapshot) -> Result<(), RestoreError> {
+    pub fn restore(&mut self, snapshot: LearnerSnapshot) -> Result<(), LearnerRestoreError> {
         snapshot.fit.check(&Fit::of(self))?;
-        snapshot.check().map_err(RestoreError::Inconsistent)?;
+        snapshot.check().map_err(LearnerRestoreError::Inconsistent)?;
         let policy = match (&self.policy, snapshot.policy) {
             (Some(policy), Some(state)) => {
                 let mut policy = policy.clone();
@@ -649,7 +736,7 @@ impl Learner {
             }
             (None, None) => None,
             (_, saved) => {
-                return Err(RestoreError::Inconsistent(format!(
+                return Err(LearnerRestoreError::Inconsistent(format!(
                     "it {} a C-REPS state, this learner {} a policy",
                     if saved.is_some() { "has" } else { "lacks" },
                     if saved.is_some() { "has no" } else { "has" }

@@ -1,6 +1,19 @@
-//! The acps learner: C-REPS (paper Appendix A), context selection (D-UCB with intrinsic rewards,
-//! baselines, SAGG-RIAC; paper Sections 2.2 and 3) and the deterministic ask/tell core that every
-//! way of running an experiment drives.
+//! The acps learner: active contextual policy search (Fabisch & Metzen, JMLR 2014) as a
+//! library. You bring a [`Problem`](acps_shared::Problem) and something that performs rollouts;
+//! a [`Learner`] asks for tasks and is told their outcomes (see its docs for a complete example).
+//!
+//! - [`learner`]: the deterministic ask/tell core, [`Learner`] and [`LearnerConfig`].
+//! - [`method`]: the paper's methods by name ([`Method`]) and their configurations
+//!   ([`SelectorConfig`]: baselines, D-UCB with an intrinsic reward, SAGG-RIAC).
+//! - [`selection`]: the context selectors themselves (D-UCB, intrinsic rewards, baselines,
+//!   SAGG-RIAC; paper Sections 2.2 and 3) and the [`ContextSelector`](selection::ContextSelector)
+//!   trait for selectors of your own.
+//! - [`creps`]: contextual relative entropy policy search (paper Appendix A): the upper-level
+//!   policy, its sample memory and its update.
+//! - [`checkpoint`]: a learner's state in a file, to resume a run bit for bit.
+//!
+//! Every fallible operation has an error type of its own, named after the object and the
+//! operation (`LearnerCreateError`, `SelectorCreateError`, `CRepsUpdateError`, ...).
 #![warn(missing_docs)]
 
 pub mod checkpoint;
@@ -10,7 +23,7 @@ pub mod method;
 pub mod selection;
 
 pub use learner::{
-    Episode, Evaluation, Learner, LearnerConfig, LearnerError, LearnerSnapshot, LearnerStats, LearningProgress,
-    RestoreError, TellError, UpdateRecord, run_in_process,
+    Episode, Evaluation, Learner, LearnerConfig, LearnerCreateError, LearnerRestoreError, LearnerSnapshot,
+    LearnerStats, LearnerTellError, LearningProgress, UpdateRecord, run_in_process,
 };
-pub use method::{Method, SelectorConfig, UnknownMethod};
+pub use method::{BanditConfig, Baseline, Method, MethodParseError, SelectorConfig};

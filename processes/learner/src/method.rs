@@ -1,8 +1,9 @@
-//! The paper's context-selection methods by name, and how each is built for a problem.
+//! The paper's context-selection methods by name, their configurations (each with only the
+//! parameters it uses), and how each is built for a problem.
 
 use crate::selection::{
     BanditSelector, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward, RoundRobin, SaggRiac, SaggRiacConfig,
-    SelectionError, UniformContinuous, UniformDiscrete,
+    SelectorCreateError, UniformContinuous, UniformDiscrete,
 };
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
@@ -80,63 +81,211 @@ impl fmt::Display for Method {
     }
 }
 
-/// A method name that does not exist.
+/// A name that [`Method::from_str`] does not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac"
 )]
-pub struct UnknownMethod(pub String);
+pub struct MethodParseError(pub String);
 
 impl FromStr for Method {
-    type Err = UnknownMethod;
+    type Err = MethodParseError;
 
     fn from_str(name: &str) -> Result<Self, Self::Err> {
         Method::ALL
             .into_iter()
             .find(|m| m.name() == name)
-            .ok_or_else(|| UnknownMethod(name.to_string()))
+            .ok_or_else(|| MethodParseError(name.to_string()))
     }
 }
 
-/// A method with its parameters.
+/// One of the paper's non-adaptive baselines; they take no parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Baseline {
+    /// Training contexts in a fixed cyclic order ([`RoundRobin::all`]).
+    RoundRobin,
+    /// Uniform over the training contexts ([`UniformDiscrete`]).
+    Random,
+    /// Uniform over the continuous context space ([`UniformContinuous`]).
+    RandomContinuous,
+    /// Round robin over the training contexts of largest norm ([`RoundRobin::farthest`]).
+    Corners,
+}
+
+/// D-UCB over the training contexts, rewarded with an intrinsic reward (paper Sec. 3): the
+/// paper's active context selection.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SelectorConfig {
-    /// Which method.
-    pub method: Method,
-    /// D-UCB parameters (used by the intrinsic-reward methods).
+pub struct BanditConfig {
+    /// What the bandit maximises.
+    pub intrinsic_reward: IntrinsicReward,
+    /// The bandit's parameters; their scale must match the intrinsic reward's (see
+    /// [`DUcbConfig`]).
     pub ducb: DUcbConfig,
-    /// Baseline of a context's first visit (progress heuristics).
+    /// What a progress heuristic compares a context's first return with (ignored by best
+    /// reward and diversity, which have no baseline).
     pub first_visit: FirstVisit,
-    /// SAGG-RIAC parameters.
-    pub sagg_riac: SaggRiacConfig,
+}
+
+impl Default for BanditConfig {
+    /// Monotonic progress, the heuristic the paper recommends (Sec. 5.1.2: "favorable in the long run"), with
+    /// [`DUcbConfig::default`] and [`FirstVisit::default`].
+    fn default() -> Self {
+        Self::new(IntrinsicReward::MonotonicProgress)
+    }
+}
+
+impl BanditConfig {
+    /// `intrinsic_reward` with the default D-UCB parameters and first-visit rule.
+    pub fn new(intrinsic_reward: IntrinsicReward) -> Self {
+        Self {
+            intrinsic_reward,
+            ducb: DUcbConfig::default(),
+            first_visit: FirstVisit::default(),
+        }
+    }
+}
+
+/// A context-selection method with the parameters it needs, and only those. Build the selector
+/// for a problem with [`build`](Self::build), or hand the configuration to
+/// [`Learner::with_selector`](crate::Learner::with_selector).
+///
+/// ```
+/// use acps_learner::selection::{DUcbConfig, IntrinsicReward, SaggRiacConfig};
+/// use acps_learner::{BanditConfig, Baseline, Method, SelectorConfig};
+/// use acps_shared::{ContextSpace, Problem, ScoreAggregate};
+///
+/// let problem = Problem {
+///     name: "five contexts".into(),
+///     training_contexts: (0..5).map(|i| vec![i as f64 / 4.0]).collect(),
+///     test_contexts: vec![],
+///     space: ContextSpace::new_box(vec![0.0], vec![1.0])?,
+///     theta0: vec![0.0],
+///     score: ScoreAggregate::Mean,
+///     metric: "error".into(),
+/// };
+///
+/// // The paper's proposal with the defaults: D-UCB with monotonic progress.
+/// let proposal = SelectorConfig::default();
+/// assert_eq!(proposal, SelectorConfig::monotonic_progress());
+/// assert_eq!(proposal.method(), Method::MonotonicProgress);
+///
+/// // A baseline takes no parameters; every method can also be named.
+/// let random = SelectorConfig::from(Baseline::Random);
+/// assert_eq!(random, SelectorConfig::from(Method::Random));
+///
+/// // D-UCB for returns that vary over about 100: B is their range (see DUcbConfig).
+/// let scaled = SelectorConfig::from(BanditConfig {
+///     ducb: DUcbConfig { b: 100.0, ..DUcbConfig::default() },
+///     ..BanditConfig::new(IntrinsicReward::OneStepProgress)
+/// });
+///
+/// // SAGG-RIAC with a longer interest window.
+/// let sagg_riac = SelectorConfig::from(SaggRiacConfig { window: 20, ..SaggRiacConfig::default() });
+///
+/// for config in [proposal, random, scaled, sagg_riac] {
+///     let mut selector = config.build(&problem)?;
+///     let choice = selector.choose(&mut rand::rng());
+///     assert!(choice.arm.is_some_and(|arm| arm < 5));
+/// }
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SelectorConfig {
+    /// A non-adaptive baseline.
+    Baseline(Baseline),
+    /// D-UCB with an intrinsic reward.
+    Bandit(BanditConfig),
+    /// SAGG-RIAC goal generation over the continuous space, snapped to the training contexts
+    /// (paper Sec. 2.2 and 4).
+    SaggRiac(SaggRiacConfig),
+}
+
+impl Default for SelectorConfig {
+    /// [`SelectorConfig::monotonic_progress`], the paper's proposal.
+    fn default() -> Self {
+        Self::monotonic_progress()
+    }
+}
+
+impl From<Baseline> for SelectorConfig {
+    fn from(baseline: Baseline) -> Self {
+        Self::Baseline(baseline)
+    }
+}
+
+impl From<BanditConfig> for SelectorConfig {
+    fn from(bandit: BanditConfig) -> Self {
+        Self::Bandit(bandit)
+    }
+}
+
+impl From<SaggRiacConfig> for SelectorConfig {
+    fn from(config: SaggRiacConfig) -> Self {
+        Self::SaggRiac(config)
+    }
+}
+
+impl From<Method> for SelectorConfig {
+    /// The method with default parameters: [`BanditConfig::new`] for the D-UCB methods,
+    /// [`SaggRiacConfig::default`] for SAGG-RIAC.
+    fn from(method: Method) -> Self {
+        match method {
+            Method::RoundRobin => Baseline::RoundRobin.into(),
+            Method::Random => Baseline::Random.into(),
+            Method::RandomContinuous => Baseline::RandomContinuous.into(),
+            Method::Corners => Baseline::Corners.into(),
+            Method::SaggRiac => SaggRiacConfig::default().into(),
+            Method::BestReward | Method::Diversity | Method::OneStepProgress | Method::MonotonicProgress => {
+                let reward = method
+                    .intrinsic_reward()
+                    .expect("a D-UCB method has an intrinsic reward");
+                BanditConfig::new(reward).into()
+            }
+        }
+    }
 }
 
 impl SelectorConfig {
-    /// Build the selector for `problem`.
-    pub fn build(&self, problem: &Problem) -> Result<Box<dyn ContextSelector>, SelectionError> {
+    /// D-UCB with monotonic progress and default parameters ([`BanditConfig::default`]).
+    pub fn monotonic_progress() -> Self {
+        BanditConfig::default().into()
+    }
+
+    /// The method's name.
+    pub fn method(&self) -> Method {
+        match self {
+            Self::Baseline(Baseline::RoundRobin) => Method::RoundRobin,
+            Self::Baseline(Baseline::Random) => Method::Random,
+            Self::Baseline(Baseline::RandomContinuous) => Method::RandomContinuous,
+            Self::Baseline(Baseline::Corners) => Method::Corners,
+            Self::Bandit(bandit) => match bandit.intrinsic_reward {
+                IntrinsicReward::BestReward => Method::BestReward,
+                IntrinsicReward::Diversity => Method::Diversity,
+                IntrinsicReward::OneStepProgress => Method::OneStepProgress,
+                IntrinsicReward::MonotonicProgress => Method::MonotonicProgress,
+            },
+            Self::SaggRiac(_) => Method::SaggRiac,
+        }
+    }
+
+    /// Build the selector for `problem`: over its training contexts, or its context space for
+    /// random (continuous) and SAGG-RIAC.
+    pub fn build(&self, problem: &Problem) -> Result<Box<dyn ContextSelector>, SelectorCreateError> {
         let contexts = problem.training_contexts.clone();
-        Ok(match self.method {
-            Method::RoundRobin => Box::new(RoundRobin::all(contexts)?),
-            Method::Corners => Box::new(RoundRobin::farthest(contexts)?),
-            Method::Random => Box::new(UniformDiscrete::new(contexts)?),
-            Method::RandomContinuous => Box::new(UniformContinuous::new(problem.space.clone())?),
-            Method::SaggRiac => Box::new(SaggRiac::new(
-                problem.space.clone(),
-                Some(contexts),
-                self.sagg_riac.clone(),
+        Ok(match self {
+            Self::Baseline(Baseline::RoundRobin) => Box::new(RoundRobin::all(contexts)?),
+            Self::Baseline(Baseline::Corners) => Box::new(RoundRobin::farthest(contexts)?),
+            Self::Baseline(Baseline::Random) => Box::new(UniformDiscrete::new(contexts)?),
+            Self::Baseline(Baseline::RandomContinuous) => Box::new(UniformContinuous::new(problem.space.clone())?),
+            Self::Bandit(bandit) => Box::new(BanditSelector::new(
+                contexts,
+                bandit.ducb.clone(),
+                bandit.intrinsic_reward,
+                bandit.first_visit,
             )?),
-            Method::BestReward | Method::Diversity | Method::OneStepProgress | Method::MonotonicProgress => {
-                let heuristic = self
-                    .method
-                    .intrinsic_reward()
-                    .expect("a D-UCB method has an intrinsic reward");
-                Box::new(BanditSelector::new(
-                    contexts,
-                    self.ducb.clone(),
-                    heuristic,
-                    self.first_visit,
-                )?)
-            }
+            Self::SaggRiac(config) => Box::new(SaggRiac::new(problem.space.clone(), Some(contexts), config.clone())?),
         })
     }
 }
@@ -144,6 +293,13 @@ impl SelectorConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_method_maps_to_a_config_and_back() {
+        for method in Method::ALL {
+            assert_eq!(SelectorConfig::from(method).method(), method);
+        }
+    }
 
     #[test]
     fn cli_and_serde_names_agree() {

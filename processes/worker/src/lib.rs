@@ -16,7 +16,10 @@
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 
 use acps_shared::{Environment, EnvironmentSpec, Serves};
-use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, RunName, TICK};
+/// A run's name, which a worker joins by; [`RunName::from_env`] reads the one a fleet gives the
+/// worker processes it starts.
+pub use acps_wire::ipc::RunName;
+use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, TICK};
 use acps_wire::wire::{
     Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireOutcome, WireTask, WorkerMessage,
 };

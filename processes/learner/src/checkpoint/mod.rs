@@ -21,8 +21,8 @@
 //! self-describing. Files are written to a temporary file beside the target and renamed over it,
 //! so a process killed during a write leaves the previous checkpoint intact.
 
-use crate::learner::{Learner, LearnerSnapshot, RestoreError};
-use acps_shared::{Environment, FNV_OFFSET, fnv1a};
+use crate::learner::{Learner, LearnerRestoreError, LearnerSnapshot};
+use acps_shared::{Environment, EnvironmentRestoreError, FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -56,11 +56,9 @@ impl Checkpoint {
 
     /// Continue `learner` and `environment`, freshly built as the ones the checkpoint was taken
     /// of, from this checkpoint.
-    pub fn apply(self, learner: &mut Learner, environment: &mut dyn Environment) -> Result<(), ErrorKind> {
+    pub fn apply(self, learner: &mut Learner, environment: &mut dyn Environment) -> Result<(), CheckpointApplyError> {
         learner.restore(self.learner)?;
-        environment
-            .restore_state(&self.environment)
-            .map_err(ErrorKind::Environment)
+        Ok(environment.restore_state(&self.environment)?)
     }
 }
 
@@ -73,22 +71,52 @@ pub struct Stamp {
     pub job: u64,
 }
 
-/// A checkpoint that could not be written, read or applied, naming the file.
+/// Why [`write()`] failed, naming the file.
 #[derive(Debug, thiserror::Error)]
-#[error("checkpoint {}: {kind}", path.display())]
-pub struct CheckpointError {
+#[error("checkpoint {}: {source}", path.display())]
+pub struct CheckpointWriteError {
     /// The checkpoint file.
     pub path: PathBuf,
-    /// What went wrong.
-    pub kind: ErrorKind,
+    /// Creating, writing or renaming the file failed.
+    pub source: std::io::Error,
 }
 
-/// What is wrong with a checkpoint.
+/// Why [`read`] failed, naming the file.
 #[derive(Debug, thiserror::Error)]
-pub enum ErrorKind {
-    /// Reading or writing failed.
+pub enum CheckpointReadError {
+    /// The file exists but could not be read.
+    #[error("checkpoint {}: {source}", path.display())]
+    Io {
+        /// The checkpoint file.
+        path: PathBuf,
+        /// What failed.
+        source: std::io::Error,
+    },
+    /// The file is not an intact checkpoint of this job.
+    #[error("checkpoint {}: {source}", path.display())]
+    Decode {
+        /// The checkpoint file.
+        path: PathBuf,
+        /// What is wrong with its contents.
+        source: CheckpointDecodeError,
+    },
+}
+
+/// Why [`Checkpoint::apply`] failed. The learner is unchanged when the learner's part is
+/// refused; the environment's part is applied after it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CheckpointApplyError {
+    /// The learner refused the snapshot.
     #[error(transparent)]
-    Io(#[from] std::io::Error),
+    Learner(#[from] LearnerRestoreError),
+    /// The environment refused its state.
+    #[error("environment state: {0}")]
+    Environment(#[from] EnvironmentRestoreError),
+}
+
+/// Why [`decode`] refuses bytes as a checkpoint of a job.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CheckpointDecodeError {
     /// The file does not start with [`MAGIC`].
     #[error("not an acps checkpoint (it does not start with the magic bytes \"ACPSCKPT\")")]
     NotACheckpoint,
@@ -131,13 +159,7 @@ pub enum ErrorKind {
     },
     /// The payload does not decode (a build with another payload layout under the same version).
     #[error("the payload cannot be decoded: {0}")]
-    Decode(String),
-    /// The learner refused the snapshot.
-    #[error(transparent)]
-    Restore(#[from] RestoreError),
-    /// The environment refused its state.
-    #[error("environment state: {0}")]
-    Environment(String),
+    Payload(String),
 }
 
 fn config() -> bincode::config::Configuration {
@@ -161,13 +183,13 @@ pub fn encode(stamp: Stamp, checkpoint: &Checkpoint) -> Vec<u8> {
 }
 
 /// The checkpoint in `bytes`, if they are a complete, intact checkpoint of `stamp`.
-pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, ErrorKind> {
+pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, CheckpointDecodeError> {
     let magic_len = bytes.len().min(MAGIC.len());
     if bytes[..magic_len] != MAGIC[..magic_len] {
-        return Err(ErrorKind::NotACheckpoint);
+        return Err(CheckpointDecodeError::NotACheckpoint);
     }
     if bytes.len() < HEADER_LEN {
-        return Err(ErrorKind::Truncated {
+        return Err(CheckpointDecodeError::Truncated {
             len: bytes.len() as u64,
             expected: HEADER_LEN as u64,
         });
@@ -176,7 +198,7 @@ pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, ErrorKind> {
     let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
     let version = u32_at(8);
     if version != FORMAT_VERSION {
-        return Err(ErrorKind::Version {
+        return Err(CheckpointDecodeError::Version {
             found: version,
             supported: FORMAT_VERSION,
         });
@@ -185,38 +207,42 @@ pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, ErrorKind> {
     let expected = (HEADER_LEN as u64).saturating_add(payload_len);
     let len = bytes.len() as u64;
     if len < expected {
-        return Err(ErrorKind::Truncated { len, expected });
+        return Err(CheckpointDecodeError::Truncated { len, expected });
     }
     if len > expected {
-        return Err(ErrorKind::Corrupt(format!(
+        return Err(CheckpointDecodeError::Corrupt(format!(
             "{} bytes follow the {payload_len}-byte payload",
             len - expected
         )));
     }
     let payload = &bytes[HEADER_LEN..];
     if fnv1a(fnv1a(FNV_OFFSET, &bytes[..40]), payload) != u64_at(40) {
-        return Err(ErrorKind::Corrupt("the checksum does not match the contents".into()));
+        return Err(CheckpointDecodeError::Corrupt(
+            "the checksum does not match the contents".into(),
+        ));
     }
     if u32_at(12) != 0 {
-        return Err(ErrorKind::Corrupt("reserved header bytes are not zero".into()));
+        return Err(CheckpointDecodeError::Corrupt(
+            "reserved header bytes are not zero".into(),
+        ));
     }
     let (identity, job) = (u64_at(16), u64_at(24));
     if identity != stamp.identity {
-        return Err(ErrorKind::Foreign {
+        return Err(CheckpointDecodeError::Foreign {
             found: identity,
             expected: stamp.identity,
         });
     }
     if job != stamp.job {
-        return Err(ErrorKind::WrongJob {
+        return Err(CheckpointDecodeError::WrongJob {
             found: job,
             expected: stamp.job,
         });
     }
     let (checkpoint, used) = bincode::serde::decode_from_slice::<Checkpoint, _>(payload, config())
-        .map_err(|e| ErrorKind::Decode(e.to_string()))?;
+        .map_err(|e| CheckpointDecodeError::Payload(e.to_string()))?;
     if used != payload.len() {
-        return Err(ErrorKind::Decode(format!(
+        return Err(CheckpointDecodeError::Payload(format!(
             "{} of {} payload bytes decode to a checkpoint",
             used,
             payload.len()
@@ -229,11 +255,7 @@ pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, ErrorKind> {
 /// reader, or a process killed at any moment, sees the old file or the new one, never a mix. The
 /// file is not synced to disk (that would cost milliseconds per checkpoint); after a crash of
 /// the whole machine a damaged file is refused on reading, as truncated or corrupted.
-pub fn write(path: &Path, stamp: Stamp, checkpoint: &Checkpoint) -> Result<(), CheckpointError> {
-    let error = |kind: ErrorKind| CheckpointError {
-        path: path.to_path_buf(),
-        kind,
-    };
+pub fn write(path: &Path, stamp: Stamp, checkpoint: &Checkpoint) -> Result<(), CheckpointWriteError> {
     let bytes = encode(stamp, checkpoint);
     let mut temporary = path.as_os_str().to_owned();
     temporary.push(".tmp");
@@ -243,19 +265,27 @@ pub fn write(path: &Path, stamp: Stamp, checkpoint: &Checkpoint) -> Result<(), C
         file.write_all(&bytes)?;
         std::fs::rename(&temporary, path)
     })();
-    written.map_err(|e| error(e.into()))
+    written.map_err(|source| CheckpointWriteError {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// The checkpoint at `path` if there is a file, checked against `stamp`; `None` without one.
-pub fn read(path: &Path, stamp: Stamp) -> Result<Option<Checkpoint>, CheckpointError> {
-    let error = |kind: ErrorKind| CheckpointError {
-        path: path.to_path_buf(),
-        kind,
-    };
+pub fn read(path: &Path, stamp: Stamp) -> Result<Option<Checkpoint>, CheckpointReadError> {
+    let path_buf = || path.to_path_buf();
     match std::fs::read(path) {
-        Ok(bytes) => decode(&bytes, stamp).map(Some).map_err(error),
+        Ok(bytes) => decode(&bytes, stamp)
+            .map(Some)
+            .map_err(|source| CheckpointReadError::Decode {
+                path: path_buf(),
+                source,
+            }),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(error(e.into())),
+        Err(source) => Err(CheckpointReadError::Io {
+            path: path_buf(),
+            source,
+        }),
     }
 }
 

@@ -142,7 +142,7 @@ fn files_are_written_atomically_and_read_back() {
 }
 
 /// The error `bytes` give when read from a file, and its message.
-fn refused(dir: &Path, bytes: &[u8], stamp: Stamp) -> (ErrorKind, String) {
+fn refused(dir: &Path, bytes: &[u8], stamp: Stamp) -> (CheckpointDecodeError, String) {
     let path = dir.join("bad.ckpt");
     std::fs::write(&path, bytes).unwrap();
     let error = read(&path, stamp).unwrap_err();
@@ -151,7 +151,10 @@ fn refused(dir: &Path, bytes: &[u8], stamp: Stamp) -> (ErrorKind, String) {
         message.starts_with(&format!("checkpoint {}: ", path.display())),
         "the message names the file: {message}"
     );
-    (error.kind, message)
+    match error {
+        CheckpointReadError::Decode { source, .. } => (source, message),
+        CheckpointReadError::Io { .. } => panic!("a file that exists is read: {message}"),
+    }
 }
 
 #[test]
@@ -171,7 +174,7 @@ fn truncated_files_are_refused_as_truncated() {
     ] {
         let (kind, message) = refused(&dir, &bytes[..len], STAMP);
         assert!(
-            matches!(kind, ErrorKind::Truncated { len: l, .. } if l == len as u64),
+            matches!(kind, CheckpointDecodeError::Truncated { len: l, .. } if l == len as u64),
             "{len} bytes: {message}"
         );
         assert!(message.contains("truncated"), "{message}");
@@ -179,7 +182,7 @@ fn truncated_files_are_refused_as_truncated() {
     let mut longer = bytes.clone();
     longer.push(0);
     let (kind, message) = refused(&dir, &longer, STAMP);
-    assert!(matches!(kind, ErrorKind::Corrupt(_)), "{message}");
+    assert!(matches!(kind, CheckpointDecodeError::Corrupt(_)), "{message}");
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -192,11 +195,14 @@ fn every_flipped_byte_is_detected() {
             bad[at] ^= flip;
             let kind = decode(&bad, STAMP).unwrap_err();
             let expected = match at {
-                0..8 => matches!(kind, ErrorKind::NotACheckpoint),
-                8..12 => matches!(kind, ErrorKind::Version { .. }),
+                0..8 => matches!(kind, CheckpointDecodeError::NotACheckpoint),
+                8..12 => matches!(kind, CheckpointDecodeError::Version { .. }),
                 // The length: too long a file reads as corrupt, too short as truncated.
-                32..40 => matches!(kind, ErrorKind::Truncated { .. } | ErrorKind::Corrupt(_)),
-                _ => matches!(kind, ErrorKind::Corrupt(_)),
+                32..40 => matches!(
+                    kind,
+                    CheckpointDecodeError::Truncated { .. } | CheckpointDecodeError::Corrupt(_)
+                ),
+                _ => matches!(kind, CheckpointDecodeError::Corrupt(_)),
             };
             assert!(expected, "byte {at} ^ {flip:#x}: {kind}");
         }
@@ -212,7 +218,9 @@ fn foreign_wrong_job_wrong_magic_and_wrong_version_are_named() {
         ..STAMP
     };
     let (kind, message) = refused(&dir, &bytes, other_run);
-    assert!(matches!(kind, ErrorKind::Foreign { found, expected } if found == STAMP.identity && expected == 0xfeed));
+    assert!(
+        matches!(kind, CheckpointDecodeError::Foreign { found, expected } if found == STAMP.identity && expected == 0xfeed)
+    );
     assert!(
         message.contains("another experiment")
             && message.contains("123456789abcdef0")
@@ -221,12 +229,12 @@ fn foreign_wrong_job_wrong_magic_and_wrong_version_are_named() {
     );
     let (kind, message) = refused(&dir, &bytes, Stamp { job: 4, ..STAMP });
     assert!(
-        matches!(kind, ErrorKind::WrongJob { found: 3, expected: 4 }),
+        matches!(kind, CheckpointDecodeError::WrongJob { found: 3, expected: 4 }),
         "{message}"
     );
 
     let (kind, message) = refused(&dir, b"{\"not\": \"a checkpoint\"}", STAMP);
-    assert!(matches!(kind, ErrorKind::NotACheckpoint), "{message}");
+    assert!(matches!(kind, CheckpointDecodeError::NotACheckpoint), "{message}");
     assert!(message.contains("not an acps checkpoint"), "{message}");
 
     // A future version, with a consistent checksum: refused by version before anything else.
@@ -235,7 +243,9 @@ fn foreign_wrong_job_wrong_magic_and_wrong_version_are_named() {
     let checksum = fnv1a(fnv1a(FNV_OFFSET, &future[..40]), &future[HEADER_LEN..]);
     future[40..48].copy_from_slice(&checksum.to_le_bytes());
     let (kind, message) = refused(&dir, &future, STAMP);
-    assert!(matches!(kind, ErrorKind::Version { found, supported: FORMAT_VERSION } if found == FORMAT_VERSION + 1));
+    assert!(
+        matches!(kind, CheckpointDecodeError::Version { found, supported: FORMAT_VERSION } if found == FORMAT_VERSION + 1)
+    );
     assert!(
         message.contains(&format!("format version {}", FORMAT_VERSION + 1))
             && message.contains(&format!("version {FORMAT_VERSION}")),

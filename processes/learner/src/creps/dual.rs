@@ -45,7 +45,10 @@
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn, SVD};
 use serde::{Deserialize, Serialize};
 
-use super::error::{CRepsError, check_at_least_one, check_finite, check_len, check_positive, check_range};
+use super::error::{
+    DualEvaluateError, DualSolveError, InvalidValue, check_at_least_one, check_finite, check_len, check_positive,
+    check_range,
+};
 
 /// The largest factor by which one step on the path may raise or lower eta.
 const ETA_STEP_FACTOR: f64 = 8.0;
@@ -69,7 +72,7 @@ const CENTRING: f64 = 0.1;
 pub const DEFAULT_ETA_MIN: f64 = 1e-5;
 
 /// Accepted `eta_min` (relative to the returns' standard deviation): below 1e-8 the log-weights
-/// carry less than 7 significant digits (see [`ROUNDING`]); above 1 the floor would override
+/// carry less than 7 significant digits (see `ROUNDING`); above 1 the floor would override
 /// the KL bound for any epsilon above about 0.5.
 pub const ETA_MIN_RANGE: (f64, f64) = (1e-8, 1.0);
 
@@ -162,9 +165,12 @@ pub fn solve_dual(
     epsilon: f64,
     eta_min: f64,
     options: &DualOptions,
-) -> Result<DualSolution, CRepsError> {
+) -> Result<DualSolution, DualSolveError> {
     check_data(phi, returns)?;
-    solve_valid(phi, returns, epsilon, eta_min, options)
+    if returns.is_empty() {
+        return Err(DualSolveError::NoSamples);
+    }
+    Ok(solve_valid(phi, returns, epsilon, eta_min, options)?)
 }
 
 /// [`solve_dual`] on data known to be consistent and finite (a [`Batch`](super::Batch)'s).
@@ -174,7 +180,7 @@ pub(crate) fn solve_valid(
     epsilon: f64,
     eta_min: f64,
     options: &DualOptions,
-) -> Result<DualSolution, CRepsError> {
+) -> Result<DualSolution, InvalidValue> {
     check_positive("epsilon", epsilon)?;
     check_eta_min(eta_min)?;
     check_options(options)?;
@@ -231,10 +237,13 @@ pub fn evaluate_dual(
     epsilon: f64,
     eta: f64,
     v: &[f64],
-) -> Result<DualValue, CRepsError> {
+) -> Result<DualValue, DualEvaluateError> {
     check_positive("epsilon", epsilon)?;
     check_positive("eta", eta)?;
     check_data(phi, returns)?;
+    if returns.is_empty() {
+        return Err(DualEvaluateError::NoSamples);
+    }
     check_len("the length of v", v.len(), "the number of phi columns", phi.ncols())?;
     check_finite("v", v)?;
     let v = DVector::from_column_slice(v);
@@ -276,25 +285,23 @@ fn attainable(tolerance: f64, eta: f64) -> f64 {
     tolerance.max(ROUNDING / eta)
 }
 
-pub(crate) fn check_eta_min(eta_min: f64) -> Result<(), CRepsError> {
+pub(crate) fn check_eta_min(eta_min: f64) -> Result<(), InvalidValue> {
     check_range("eta_min", eta_min, ETA_MIN_RANGE)
 }
 
-fn check_options(options: &DualOptions) -> Result<(), CRepsError> {
+fn check_options(options: &DualOptions) -> Result<(), InvalidValue> {
     check_range("tolerance", options.tolerance, TOLERANCE_RANGE)?;
     check_at_least_one("max_iterations", options.max_iterations)
 }
 
-fn check_data(phi: &DMatrix<f64>, returns: &[f64]) -> Result<(), CRepsError> {
+/// Consistent, finite data (perhaps empty: each caller has its own error for that).
+fn check_data(phi: &DMatrix<f64>, returns: &[f64]) -> Result<(), InvalidValue> {
     check_len(
         "the number of phi rows",
         phi.nrows(),
         "the number of returns",
         returns.len(),
     )?;
-    if returns.is_empty() {
-        return Err(CRepsError::NoSamples);
-    }
     check_finite("returns", returns)?;
     check_finite("phi", phi.as_slice())
 }

@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use nalgebra::DVector;
 
-use super::CRepsError;
+use super::FeatureMapValidateError;
 
 /// The signature of a user-supplied feature function.
 pub type FeatureFn = dyn Fn(&[f64]) -> Vec<f64> + Send + Sync;
@@ -36,9 +36,12 @@ impl fmt::Debug for CustomFeatures {
 }
 
 /// Which features of the context the policy mean is linear in.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub enum FeatureMap {
-    /// `[s_0, ..., s_{d-1}, 1]`.
+    /// `[s_0, ..., s_{d-1}, 1]`. The default: the fewest features (d + 1) with a constant one,
+    /// so the fewest rollouts per update are needed to fit W. Choose [`Quadratic`](Self::Quadratic)
+    /// when the best parameters bend with the context, as the paper does in Sec. 5.1.
+    #[default]
     Affine,
     /// All monomials of degree <= 2: the `d(d+1)/2` products `s_i s_j` (i <= j, lexicographic:
     /// `s_0^2, s_0 s_1, ..., s_{d-1}^2`), then `s_0, ..., s_{d-1}`, then 1 (P Sec. 2.1: "linear
@@ -103,8 +106,8 @@ impl FeatureMap {
 
     /// Checks that this map works for `context_dim`-dimensional contexts and for the initial
     /// mean `theta0`.
-    pub(crate) fn validate(&self, context_dim: usize, theta0: &[f64]) -> Result<(), CRepsError> {
-        let context_dim_error = |feature_map, expected| CRepsError::ContextDim {
+    pub(crate) fn validate(&self, context_dim: usize, theta0: &[f64]) -> Result<(), FeatureMapValidateError> {
+        let context_dim_error = |feature_map, expected| FeatureMapValidateError::ContextDim {
             feature_map,
             expected,
             got: context_dim,
@@ -119,37 +122,33 @@ impl FeatureMap {
     }
 }
 
-fn validate_custom(custom: &CustomFeatures, context_dim: usize, theta0: &[f64]) -> Result<(), CRepsError> {
+fn validate_custom(custom: &CustomFeatures, context_dim: usize, theta0: &[f64]) -> Result<(), FeatureMapValidateError> {
     if context_dim == 0 {
-        return Err(CRepsError::ContextDim {
+        return Err(FeatureMapValidateError::ContextDim {
             feature_map: "Custom",
             expected: ">= 1",
             got: context_dim,
         });
     }
     if custom.dim == 0 {
-        return Err(CRepsError::Zero {
-            name: "custom feature dim",
-        });
+        return Err(FeatureMapValidateError::NoFeatures);
     }
     // One probe at the zero context catches a wrong declared dim or a constant that is not 1;
     // other non-finite values there are allowed (the function may be singular at 0).
     let probe = (custom.function)(&vec![0.0; context_dim]);
     if probe.len() != custom.dim {
-        return Err(CRepsError::LengthMismatch {
-            first: "the custom feature output length at the zero context",
-            first_len: probe.len(),
-            second: "the declared custom feature dim",
-            second_len: custom.dim,
+        return Err(FeatureMapValidateError::Length {
+            got: probe.len(),
+            dim: custom.dim,
         });
     }
     match custom.constant {
-        Some(index) if index >= custom.dim => Err(CRepsError::ConstantIndex { index, dim: custom.dim }),
-        Some(index) if probe[index] != 1.0 => Err(CRepsError::ConstantValue {
+        Some(index) if index >= custom.dim => Err(FeatureMapValidateError::ConstantIndex { index, dim: custom.dim }),
+        Some(index) if probe[index] != 1.0 => Err(FeatureMapValidateError::ConstantValue {
             index,
             value: probe[index],
         }),
-        None if theta0.iter().any(|&t| t != 0.0) => Err(CRepsError::NoConstantFeature),
+        None if theta0.iter().any(|&t| t != 0.0) => Err(FeatureMapValidateError::NoConstantFeature),
         _ => Ok(()),
     }
 }
@@ -216,7 +215,7 @@ mod tests {
         assert!(message(custom(3, Some(1))).contains("dim"));
         assert!(message(custom(2, Some(2))).contains("constant"));
         assert!(message(custom(2, Some(0))).contains("constant"));
-        assert!(message(custom(0, Some(0))).contains("custom feature dim"));
+        assert!(message(custom(0, Some(0))).contains("dim must be >= 1"));
     }
 
     #[test]

@@ -21,6 +21,25 @@ pub enum MemoryConfig {
     },
 }
 
+impl Default for MemoryConfig {
+    /// The last 100 rollouts: BOLeRo's `n_samples_per_update`. A window forgets rollouts of the
+    /// early, worse policies; with [`CRepsConfig::update_every`](super::CRepsConfig) = 25 each
+    /// rollout takes part in four updates.
+    fn default() -> Self {
+        Self::SlidingWindow { capacity: 100 }
+    }
+}
+
+impl MemoryConfig {
+    /// The paper's Sec. 5.2 memory of `samples` rollouts over `tasks` training tasks: the best
+    /// `samples / tasks` per task, rounded down, at least 1.
+    pub fn best_per_task(samples: usize, tasks: usize) -> Self {
+        Self::BestPerTask {
+            per_task: (samples / tasks.max(1)).max(1),
+        }
+    }
+}
+
 /// One stored rollout.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Sample {

@@ -59,11 +59,14 @@ pub use dual::{
     DEFAULT_ETA_MIN, DualOptions, DualSolution, DualValue, ETA_MIN_RANGE, TOLERANCE_RANGE, effective_sample_size,
     evaluate_dual, feature_matching_residual, kl_to_uniform, solve_dual,
 };
-pub use error::CRepsError;
+pub use error::{
+    BatchCreateError, CRepsCreateError, CRepsRestoreError, CRepsUpdateError, DualEvaluateError, DualSolveError,
+    FeatureMapValidateError, InvalidValue, PolicyCreateError, PolicyFitError,
+};
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
-pub use snapshot::{PolicySnapshot, RestoredPolicy, SnapshotError};
+pub use snapshot::{PolicySnapshot, PolicySnapshotRestoreError, RestoredPolicy};
 pub use update::{Batch, Rejection, UpdateReport, UpdateSettings, update};
 
 use nalgebra::{DMatrix, DVector};
@@ -73,7 +76,26 @@ use serde::{Deserialize, Serialize};
 use error::{check_at_least_one, check_finite, check_non_negative, check_positive};
 use memory::{Memory, Sample};
 
-/// C-REPS settings.
+/// C-REPS settings. [`Default`] is BOLeRo's `CREPSOptimizer`; the paper's three settings are
+/// [`paper_function`](Self::paper_function), [`paper_dims`](Self::paper_dims) and
+/// [`paper_throwing`](Self::paper_throwing).
+///
+/// Only `initial_sigma` has units (those of theta, squared): the update is invariant to the
+/// returns' units (see the module docs), so the other defaults hold for any problem. Set
+/// `initial_sigma` to the exploration variance wanted around theta0.
+///
+/// ```
+/// use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+///
+/// let config = CRepsConfig {
+///     features: FeatureMap::Quadratic,
+///     initial_sigma: 0.1,
+///     ..CRepsConfig::default()
+/// };
+/// assert_eq!(config.memory, MemoryConfig::SlidingWindow { capacity: 100 });
+/// // The paper's PA-10 setting for 25 targets keeps the best 12 throws of each.
+/// assert_eq!(CRepsConfig::paper_throwing(25).memory, MemoryConfig::BestPerTask { per_task: 12 });
+/// ```
 #[derive(Clone, Debug)]
 pub struct CRepsConfig {
     /// Bound on the KL divergence between successive sample weightings, finite and > 0.
@@ -95,16 +117,56 @@ pub struct CRepsConfig {
 
 impl Default for CRepsConfig {
     /// BOLeRo's `CREPSOptimizer` defaults (epsilon 2, ridge 1e-4, an update every 25 rollouts
-    /// on a sliding window of 100, affine features, Sigma_0 = I) and [`DEFAULT_ETA_MIN`].
+    /// on a sliding window of 100, Sigma_0 = I), [`FeatureMap::default`] (affine) and
+    /// [`DEFAULT_ETA_MIN`].
     fn default() -> Self {
         Self {
             epsilon: 2.0,
             eta_min: DEFAULT_ETA_MIN,
             ridge: 1e-4,
             update_every: 25,
-            memory: MemoryConfig::SlidingWindow { capacity: 100 },
-            features: FeatureMap::Affine,
+            memory: MemoryConfig::default(),
+            features: FeatureMap::default(),
             initial_sigma: 1.0,
+        }
+    }
+}
+
+impl CRepsConfig {
+    /// The paper's Sec. 5.1.2 (Fig. 4): epsilon 2, the last 50 rollouts, an update every 25,
+    /// quadratic features, Sigma_0 = I.
+    pub fn paper_function() -> Self {
+        Self {
+            memory: MemoryConfig::SlidingWindow { capacity: 50 },
+            features: FeatureMap::Quadratic,
+            ..Self::default()
+        }
+    }
+
+    /// The paper's Sec. 5.1.3 (Fig. 6) for `n_s`-dimensional contexts: epsilon 1, the last
+    /// 25 n_s^2 rollouts, an update every 13 n_s^2, quadratic features, Sigma_0 = I.
+    pub fn paper_dims(n_s: usize) -> Self {
+        let n2 = n_s * n_s;
+        Self {
+            epsilon: 1.0,
+            update_every: 13 * n2,
+            memory: MemoryConfig::SlidingWindow { capacity: 25 * n2 },
+            features: FeatureMap::Quadratic,
+            ..Self::default()
+        }
+    }
+
+    /// The paper's Sec. 5.2.2 (the PA-10 throws) for `tasks` training contexts: epsilon 0.5, an
+    /// update every 50 on the best 300/K rollouts per task ([`MemoryConfig::best_per_task`]),
+    /// polar-quadratic features of 2-D contexts, Sigma_0 = 0.02 I.
+    pub fn paper_throwing(tasks: usize) -> Self {
+        Self {
+            epsilon: 0.5,
+            update_every: 50,
+            memory: MemoryConfig::best_per_task(300, tasks),
+            features: FeatureMap::PolarQuadratic,
+            initial_sigma: 0.02,
+            ..Self::default()
         }
     }
 }
@@ -137,7 +199,12 @@ impl CReps {
     /// A learner for `context_dim`-dimensional contexts, initial mean `theta0` and `n_tasks`
     /// training contexts (the buckets of [`MemoryConfig::BestPerTask`]). Every field of `config`
     /// and every argument is validated.
-    pub fn new(config: CRepsConfig, context_dim: usize, theta0: &[f64], n_tasks: usize) -> Result<Self, CRepsError> {
+    pub fn new(
+        config: CRepsConfig,
+        context_dim: usize,
+        theta0: &[f64],
+        n_tasks: usize,
+    ) -> Result<Self, CRepsCreateError> {
         check_positive("epsilon", config.epsilon)?;
         dual::check_eta_min(config.eta_min)?;
         check_non_negative("ridge", config.ridge)?;
@@ -158,7 +225,8 @@ impl CReps {
             weights.row_mut(constant).copy_from_slice(theta0);
         }
         let covariance = DMatrix::identity(theta0.len(), theta0.len()) * config.initial_sigma;
-        let policy = LinearGaussianPolicy::new(weights, covariance)?;
+        let policy = LinearGaussianPolicy::new(weights, covariance)
+            .expect("W is finite (theta0 was checked) and Sigma_0 = initial_sigma I with a checked initial_sigma");
         let memory = Memory::new(&config.memory, n_tasks);
         Ok(Self {
             config,
@@ -274,31 +342,30 @@ impl CReps {
     /// Continue from `state`, saved by [`state`](CReps::state) of a learner built with the same
     /// configuration and dimensions. A state of other dimensions or another memory is refused
     /// and leaves the learner unchanged.
-    pub fn restore(&mut self, state: CRepsState) -> Result<(), CRepsError> {
+    pub fn restore(&mut self, state: CRepsState) -> Result<(), CRepsRestoreError> {
         let (n_phi, n_theta) = (self.policy.n_features(), self.policy.n_params());
         let shape = |m: &DMatrix<f64>| (m.nrows(), m.ncols());
-        let error = |reason: String| Err(CRepsError::State(reason));
         if shape(&state.weights) != (n_phi, n_theta)
             || shape(&state.covariance) != (n_theta, n_theta)
             || shape(&state.sampling_factor) != (n_theta, n_theta)
         {
-            return error(format!(
-                "W {:?}, Sigma {:?} and its factor {:?}; this policy has W {:?} and Sigma {:?}",
-                shape(&state.weights),
-                shape(&state.covariance),
-                shape(&state.sampling_factor),
-                (n_phi, n_theta),
-                (n_theta, n_theta)
-            ));
+            return Err(CRepsRestoreError::Shape {
+                weights: shape(&state.weights),
+                covariance: shape(&state.covariance),
+                factor: shape(&state.sampling_factor),
+                expected_weights: (n_phi, n_theta),
+                expected_covariance: (n_theta, n_theta),
+            });
         }
-        if let Err(reason) = state.memory.check_fits(&self.memory, n_phi, n_theta) {
-            return error(format!("the saved memory is {reason}"));
-        }
+        state
+            .memory
+            .check_fits(&self.memory, n_phi, n_theta)
+            .map_err(CRepsRestoreError::Memory)?;
         if state.since_update >= self.config.update_every {
-            return error(format!(
-                "{} rollouts since the last update, but an update runs every {}",
-                state.since_update, self.config.update_every
-            ));
+            return Err(CRepsRestoreError::Schedule {
+                since_update: state.since_update,
+                update_every: self.config.update_every,
+            });
         }
         self.policy = LinearGaussianPolicy::from_parts(state.weights, state.covariance, state.sampling_factor);
         self.memory = state.memory;

@@ -5,7 +5,7 @@ use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
 use rand::RngCore;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::error::{CRepsError, check_finite, check_len, check_non_negative};
+use super::error::{InvalidValue, PolicyCreateError, PolicyFitError, check_finite, check_len, check_non_negative};
 use super::update::Rejection;
 
 /// A Gaussian over parameter vectors whose mean is linear in the context features.
@@ -32,7 +32,7 @@ impl LinearGaussianPolicy {
     /// `multivariate_normal`, so refusing them (as a Cholesky factorisation would) would throw
     /// away most updates of the paper's Section 5.1 setting. A clearly negative eigenvalue
     /// (below -1e-9 times the largest) is still refused.
-    pub fn new(weights: DMatrix<f64>, covariance: DMatrix<f64>) -> Result<Self, CRepsError> {
+    pub fn new(weights: DMatrix<f64>, covariance: DMatrix<f64>) -> Result<Self, PolicyCreateError> {
         check_len(
             "the covariance's row count",
             covariance.nrows(),
@@ -47,7 +47,7 @@ impl LinearGaussianPolicy {
         )?;
         check_finite("W", weights.as_slice())?;
         check_finite("covariance", covariance.as_slice())?;
-        let not_psd = CRepsError::NotPositiveSemiDefinite { name: "covariance" };
+        let not_psd = PolicyCreateError::NotPositiveSemiDefinite;
         let asymmetry = (&covariance - covariance.transpose()).amax();
         if asymmetry > 1e-12 * covariance.amax() {
             return Err(not_psd);
@@ -134,14 +134,14 @@ impl LinearGaussianPolicy {
     ///   W it means; BOLeRo uses the old one, before the mean update).
     ///
     /// Returns the new policy. Inputs of the wrong shape or with non-finite or negative entries
-    /// are errors; a fit the data makes impossible is [`CRepsError::Rejected`] with the reason.
+    /// are errors; a fit the data makes impossible is [`PolicyFitError::Rejected`] with the reason.
     pub fn fit(
         &self,
         features: &DMatrix<f64>,
         thetas: &DMatrix<f64>,
         weights: &[f64],
         ridge: f64,
-    ) -> Result<Self, CRepsError> {
+    ) -> Result<Self, PolicyFitError> {
         check_len(
             "the number of feature rows",
             features.nrows(),
@@ -169,7 +169,7 @@ impl LinearGaussianPolicy {
         check_non_negative("ridge", ridge)?;
         check_finite("weights", weights)?;
         if let Some(&value) = weights.iter().find(|&&w| w < 0.0) {
-            return Err(CRepsError::Negative { name: "weights", value });
+            return Err(InvalidValue::Negative { name: "weights", value }.into());
         }
         check_finite("features", features.as_slice())?;
         check_finite("thetas", thetas.as_slice())?;
@@ -334,7 +334,7 @@ mod tests {
         let thetas = DMatrix::from_element(5, 1, 1e200);
         // Squared residuals of 1e200 overflow.
         let error = policy(2, 1).fit(&phi, &thetas, &[0.2; 5], 1e-4).unwrap_err();
-        assert_eq!(error, CRepsError::Rejected(Rejection::CovarianceNotFinite));
+        assert_eq!(error, PolicyFitError::Rejected(Rejection::CovarianceNotFinite));
         // One sample: sum d = sum d^2, the normaliser divides by zero.
         let one = policy(2, 1).fit(
             &phi.rows(0, 1).into_owned(),
@@ -348,7 +348,7 @@ mod tests {
         let error = policy(2, 1)
             .fit(&same, &DMatrix::zeros(5, 1), &[0.2; 5], 0.0)
             .unwrap_err();
-        assert_eq!(error, CRepsError::Rejected(Rejection::SingularRegression));
+        assert_eq!(error, PolicyFitError::Rejected(Rejection::SingularRegression));
         let error = policy(2, 1)
             .fit(&phi, &DMatrix::zeros(4, 1), &[0.2; 5], 0.0)
             .unwrap_err();

@@ -23,7 +23,7 @@ pub struct PolicySnapshot {
 /// must be.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("policy {field}: {reason}")]
-pub struct SnapshotError {
+pub struct PolicySnapshotRestoreError {
     /// The offending field.
     pub field: &'static str,
     /// What is wrong and what is accepted.
@@ -65,8 +65,8 @@ impl PolicySnapshot {
     /// The policy this snapshot describes, after checking every shape and value: a known
     /// feature map valid for `context_dim`, W with as many rows as features and equal rows,
     /// Sigma square of W's width, finite, symmetric and positive semi-definite.
-    pub fn restore(&self) -> Result<RestoredPolicy, SnapshotError> {
-        let error = |field, reason: String| SnapshotError { field, reason };
+    pub fn restore(&self) -> Result<RestoredPolicy, PolicySnapshotRestoreError> {
+        let error = |field, reason: String| PolicySnapshotRestoreError { field, reason };
         let features = [FeatureMap::Affine, FeatureMap::Quadratic, FeatureMap::PolarQuadratic]
             .into_iter()
             .find(|map| feature_map_name(map) == Some(self.features.as_str()))
@@ -102,8 +102,8 @@ fn matrix(
     field: &'static str,
     rows: usize,
     columns: Option<usize>,
-) -> Result<DMatrix<f64>, SnapshotError> {
-    let error = |reason: String| SnapshotError { field, reason };
+) -> Result<DMatrix<f64>, PolicySnapshotRestoreError> {
+    let error = |reason: String| PolicySnapshotRestoreError { field, reason };
     if data.len() != rows {
         return Err(error(format!("must have {rows} rows, got {}", data.len())));
     }

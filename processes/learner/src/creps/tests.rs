@@ -221,7 +221,7 @@ fn best_per_task_memory_bounds_the_update() {
 #[test]
 fn bad_batches_and_settings_are_errors_naming_the_argument() {
     let policy = LinearGaussianPolicy::new(DMatrix::zeros(2, 1), DMatrix::identity(1, 1)).unwrap();
-    let message = |result: Result<Batch, CRepsError>| result.unwrap_err().to_string();
+    let message = |result: Result<Batch, BatchCreateError>| result.unwrap_err().to_string();
     let rows = |n| DMatrix::from_element(n, 1, 0.5);
     assert_eq!(
         message(Batch::new(DMatrix::zeros(3, 2), rows(3), vec![0.0; 2])),
@@ -233,7 +233,7 @@ fn bad_batches_and_settings_are_errors_naming_the_argument() {
     );
     assert_eq!(
         message(Batch::new(DMatrix::zeros(0, 2), rows(0), vec![])),
-        CRepsError::NoSamples.to_string()
+        BatchCreateError::NoSamples.to_string()
     );
     let mut thetas = rows(2);
     thetas[(1, 0)] = f64::INFINITY;

@@ -4,7 +4,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::dual::{DualOptions, effective_sample_size, solve_valid};
-use super::error::{CRepsError, check_finite, check_len, check_non_negative, check_positive};
+use super::error::{BatchCreateError, CRepsUpdateError, check_finite, check_len, check_non_negative, check_positive};
 use super::{FeatureMap, LinearGaussianPolicy};
 
 /// The settings of one update.
@@ -112,7 +112,7 @@ pub struct Batch {
 
 impl Batch {
     /// A batch from feature rows (N x n_phi), parameter rows (N x n_theta) and N returns.
-    pub fn new(features: DMatrix<f64>, thetas: DMatrix<f64>, returns: Vec<f64>) -> Result<Self, CRepsError> {
+    pub fn new(features: DMatrix<f64>, thetas: DMatrix<f64>, returns: Vec<f64>) -> Result<Self, BatchCreateError> {
         let n = returns.len();
         check_len(
             "the number of feature rows",
@@ -122,7 +122,7 @@ impl Batch {
         )?;
         check_len("the number of theta rows", thetas.nrows(), "the number of returns", n)?;
         if returns.is_empty() {
-            return Err(CRepsError::NoSamples);
+            return Err(BatchCreateError::NoSamples);
         }
         check_finite("features", features.as_slice())?;
         check_finite("thetas", thetas.as_slice())?;
@@ -146,7 +146,7 @@ impl Batch {
         contexts: &[Vec<f64>],
         thetas: &[Vec<f64>],
         returns: &[f64],
-    ) -> Result<Self, CRepsError> {
+    ) -> Result<Self, BatchCreateError> {
         let context_dim = contexts.first().map_or(0, Vec::len);
         let n_theta = thetas.first().map_or(0, Vec::len);
         for context in contexts {
@@ -212,7 +212,7 @@ pub fn update(
     policy: &LinearGaussianPolicy,
     batch: &Batch,
     settings: &UpdateSettings,
-) -> Result<(LinearGaussianPolicy, UpdateReport), CRepsError> {
+) -> Result<(LinearGaussianPolicy, UpdateReport), CRepsUpdateError> {
     check_positive("epsilon", settings.epsilon)?;
     check_non_negative("ridge", settings.ridge)?;
     check_len(

@@ -10,8 +10,8 @@
 
 use super::validate::check_contexts;
 use super::{
-    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, SelectionError,
-    SelectorState,
+    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, SelectorCreateError,
+    SelectorRestoreError, SelectorState,
 };
 use rand::RngCore;
 use std::collections::VecDeque;
@@ -33,7 +33,7 @@ impl BanditSelector {
         ducb: DUcbConfig,
         heuristic: IntrinsicReward,
         first_visit: FirstVisit,
-    ) -> Result<Self, SelectionError> {
+    ) -> Result<Self, SelectorCreateError> {
         check_contexts(&contexts, None)?;
         let arms = contexts.len();
         let bound = ducb.b;
@@ -124,7 +124,7 @@ impl ContextSelector for BanditSelector {
         }
     }
 
-    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectorRestoreError> {
         let SelectorState::Bandit {
             ducb,
             baselines,
@@ -135,9 +135,7 @@ impl ContextSelector for BanditSelector {
         };
         let arms = self.contexts.len();
         if let Some(&arm) = pending.iter().find(|&&arm| arm >= arms) {
-            return Err(SelectionError::State(format!(
-                "pending arm {arm} of a D-UCB selector over {arms} arms"
-            )));
+            return Err(SelectorRestoreError::PendingArm { arm, arms });
         }
         // Check everything before changing anything.
         let mut restored = self.clone();
@@ -152,7 +150,7 @@ impl ContextSelector for BanditSelector {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::selection::RoundRobin;
+    use crate::selection::{DUcbCreateError, RoundRobin};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use std::collections::VecDeque;
@@ -225,11 +223,54 @@ mod tests {
         let config = paper_sec4(1.0);
         let new =
             |contexts, config| BanditSelector::new(contexts, config, IntrinsicReward::BestReward, FirstVisit::Zero);
-        assert_eq!(new(vec![], config.clone()).unwrap_err(), SelectionError::NoContexts);
+        assert_eq!(
+            new(vec![], config.clone()).unwrap_err(),
+            SelectorCreateError::NoContexts
+        );
         let bad = DUcbConfig { gamma: 1.5, ..config };
-        assert_eq!(new(grid(2), bad).unwrap_err(), SelectionError::Gamma(1.5));
+        assert_eq!(
+            new(grid(2), bad).unwrap_err(),
+            SelectorCreateError::DUcb(DUcbCreateError::Gamma(1.5))
+        );
         let best = new(grid(2), paper_sec4(1.0)).unwrap();
         assert!(!best.wants_initial_returns());
+    }
+
+    /// B carries the units of the intrinsic reward: returns and B scaled by the same factor make
+    /// the same choices, returns scaled alone do not (for the progress heuristics). (The factor is a power of 2, so the scaled
+    /// run's arithmetic is the original's, exactly.)
+    #[test]
+    fn b_scales_with_the_returns() {
+        let rates = fastest_last(6);
+        let choices = |heuristic, first_visit, returns: f64, b: f64| {
+            let config = DUcbConfig {
+                b,
+                xi: 1e-2,
+                ..DUcbConfig::default()
+            };
+            let mut selector = BanditSelector::new(grid(6), config, heuristic, first_visit).unwrap();
+            let (mut problem, mut noise, mut rng) = start(&mut selector, &rates, 5);
+            (0..300)
+                .map(|_| {
+                    let choice = selector.choose(&mut rng);
+                    let arm = choice.arm.unwrap();
+                    selector.observe(&choice, returns * problem.pull(arm, &mut noise));
+                    arm
+                })
+                .collect::<Vec<_>>()
+        };
+        for heuristic in IntrinsicReward::ALL {
+            for first_visit in [FirstVisit::InitialReturn, FirstVisit::Zero, FirstVisit::Optimistic] {
+                let original = choices(heuristic, first_visit, 1.0, 0.25);
+                let context = format!("{heuristic} {first_visit:?}");
+                assert_eq!(choices(heuristic, first_visit, 1024.0, 256.0), original, "{context}");
+                // Progress dies down as arms saturate, and the padding decides (best reward and
+                // diversity stay on the highest or lowest return whatever the padding).
+                if heuristic.has_baseline() {
+                    assert_ne!(choices(heuristic, first_visit, 1024.0, 0.25), original, "{context}");
+                }
+            }
+        }
     }
 
     /// A non-stationary toy problem: the return of arm i is min(1, rate_i * pulls_i) plus

@@ -3,7 +3,7 @@
 //! (Sec. 5.1.3, 5.2).
 
 use super::validate::{check_contexts, check_space};
-use super::{Choice, ContextSelector, SelectionError, SelectorState};
+use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
 
@@ -17,13 +17,13 @@ pub struct RoundRobin {
 
 impl RoundRobin {
     /// Cycle through `order`, a non-empty list of indices into `contexts`.
-    pub fn new(contexts: Vec<Vec<f64>>, order: Vec<usize>) -> Result<Self, SelectionError> {
+    pub fn new(contexts: Vec<Vec<f64>>, order: Vec<usize>) -> Result<Self, SelectorCreateError> {
         check_contexts(&contexts, None)?;
         if order.is_empty() {
-            return Err(SelectionError::EmptyOrder);
+            return Err(SelectorCreateError::EmptyOrder);
         }
         if let Some(&arm) = order.iter().find(|&&arm| arm >= contexts.len()) {
-            return Err(SelectionError::ArmOutOfRange {
+            return Err(SelectorCreateError::OrderOutOfRange {
                 arm,
                 arms: contexts.len(),
             });
@@ -36,7 +36,7 @@ impl RoundRobin {
     }
 
     /// Cycle through every context in index order.
-    pub fn all(contexts: Vec<Vec<f64>>) -> Result<Self, SelectionError> {
+    pub fn all(contexts: Vec<Vec<f64>>) -> Result<Self, SelectorCreateError> {
         let order = (0..contexts.len()).collect();
         Self::new(contexts, order)
     }
@@ -44,7 +44,7 @@ impl RoundRobin {
     /// Cycle, in index order, through the contexts of largest Euclidean norm (within 1e-12 of
     /// the largest). On the paper's 5x5 grid over [-1, 1]^2 these are the four corners, its
     /// "corners" baseline (Sec. 5.1).
-    pub fn farthest(contexts: Vec<Vec<f64>>) -> Result<Self, SelectionError> {
+    pub fn farthest(contexts: Vec<Vec<f64>>) -> Result<Self, SelectorCreateError> {
         check_contexts(&contexts, None)?;
         let norms: Vec<f64> = contexts
             .iter()
@@ -77,16 +77,16 @@ impl ContextSelector for RoundRobin {
         SelectorState::RoundRobin { next: self.next }
     }
 
-    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectorRestoreError> {
         match state {
             SelectorState::RoundRobin { next } if next < self.order.len() => {
                 self.next = next;
                 Ok(())
             }
-            SelectorState::RoundRobin { next } => Err(SelectionError::State(format!(
-                "round-robin position {next} is outside its order of {} arms",
-                self.order.len()
-            ))),
+            SelectorState::RoundRobin { next } => Err(SelectorRestoreError::Position {
+                next,
+                len: self.order.len(),
+            }),
             other => Err(other.wrong_kind("round-robin")),
         }
     }
@@ -100,7 +100,7 @@ pub struct UniformDiscrete {
 
 impl UniformDiscrete {
     /// Draw from `contexts` (at least one, all of one dimension, finite).
-    pub fn new(contexts: Vec<Vec<f64>>) -> Result<Self, SelectionError> {
+    pub fn new(contexts: Vec<Vec<f64>>) -> Result<Self, SelectorCreateError> {
         check_contexts(&contexts, None)?;
         Ok(Self { contexts })
     }
@@ -121,7 +121,7 @@ impl ContextSelector for UniformDiscrete {
         SelectorState::UniformDiscrete
     }
 
-    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectorRestoreError> {
         match state {
             SelectorState::UniformDiscrete => Ok(()),
             other => Err(other.wrong_kind("uniform over the training contexts")),
@@ -137,7 +137,7 @@ pub struct UniformContinuous {
 
 impl UniformContinuous {
     /// Draw from `space`.
-    pub fn new(space: ContextSpace) -> Result<Self, SelectionError> {
+    pub fn new(space: ContextSpace) -> Result<Self, SelectorCreateError> {
         check_space(&space)?;
         Ok(Self { space })
     }
@@ -157,7 +157,7 @@ impl ContextSelector for UniformContinuous {
         SelectorState::UniformContinuous
     }
 
-    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectorRestoreError> {
         match state {
             SelectorState::UniformContinuous => Ok(()),
             other => Err(other.wrong_kind("uniform over the context space")),
@@ -203,11 +203,11 @@ mod tests {
         assert_eq!(custom.choose(&mut rng).arm, Some(2));
         assert_eq!(
             RoundRobin::new(contexts.clone(), vec![]).unwrap_err(),
-            SelectionError::EmptyOrder
+            SelectorCreateError::EmptyOrder
         );
         assert_eq!(
             RoundRobin::new(contexts, vec![0, 3]).unwrap_err().to_string(),
-            "arm must be < 3 (the number of arms), got 3"
+            "round robin order must name arms < 3 (the number of contexts), got 3"
         );
     }
 

@@ -8,31 +8,114 @@
 //! means of the other arms do not change; storing means rather than discounted sums also avoids
 //! 0/0 once a count underflows.
 
-use super::SelectionError;
 use serde::{Deserialize, Serialize};
 
-/// D-UCB parameters (paper notation).
+/// Why [`DUcb::new`] (or [`DUcbConfig::validate`]) refuses its arguments.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DUcbCreateError {
+    /// The discount factor is outside (0, 1].
+    #[error("D-UCB gamma must be in (0, 1], got {0}")]
+    Gamma(f64),
+    /// The padding strength is not finite and positive.
+    #[error("D-UCB xi must be finite and > 0, got {0}")]
+    Xi(f64),
+    /// The reward bound is not finite and positive.
+    #[error("D-UCB b must be finite and > 0, got {0}")]
+    RewardBound(f64),
+    /// Zero arms.
+    #[error("D-UCB number of arms must be >= 1, got 0")]
+    NoArms,
+}
+
+/// Why [`DUcb::update`] refuses a reward. The bandit is left unchanged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DUcbUpdateError {
+    /// An arm index that does not name one of the arms.
+    #[error("arm must be < {arms} (the number of arms), got {arm}")]
+    ArmOutOfRange {
+        /// The offending index.
+        arm: usize,
+        /// The number of arms.
+        arms: usize,
+    },
+    /// A reward that is NaN or infinite.
+    #[error("reward must be finite, got {0}")]
+    NonFiniteReward(f64),
+}
+
+/// Why [`DUcb::restore`] refuses saved statistics: they are of a bandit with another number of
+/// arms. The bandit is left unchanged.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("D-UCB statistics for {counts} counts and {means} means, this bandit has {arms} arms")]
+pub struct DUcbRestoreError {
+    /// The number of saved counts.
+    pub counts: usize,
+    /// The number of saved means.
+    pub means: usize,
+    /// This bandit's number of arms.
+    pub arms: usize,
+}
+
+/// D-UCB parameters (paper Algorithm 1 and Sec. 3.3, in its notation).
+///
+/// The bandit picks the arm with the largest `m_i + 2 B sqrt(xi ln n / N_i)`: `m_i` is the
+/// discounted mean of the arm's intrinsic rewards, `N_i` its discounted pull count and `n` the
+/// discounted total. The intrinsic rewards are **not normalised**: they are in the units of the
+/// environment's returns (`r`, `-r`, a difference of returns, or its positive part; see
+/// [`IntrinsicReward`](super::IntrinsicReward)). Hence:
+///
+/// - `b` (B) carries the units of the intrinsic reward: the paper calls it "an upper bound on
+///   the rewards"; the range the returns vary over bounds every heuristic's. Scaling every
+///   return by c > 0 and B by c leaves every choice unchanged. B is also what a first visit
+///   scores under [`FirstVisit::Optimistic`](super::FirstVisit::Optimistic).
+/// - `xi` is dimensionless, and only `B sqrt(xi)` enters the padding: it is the exploration
+///   bonus in reward units. With xi = 1e-8 (the paper's Sec. 4 and 5.1) the padding is
+///   `2e-4 B sqrt(ln n / N_i)`, and D-UCB is greedy on its discounted means until an arm's
+///   count has decayed by orders of magnitude (at gamma = 0.99 an arm left alone for ~900
+///   selections gains a factor 100 of padding): the progress heuristics then stay on one
+///   context for hundreds of episodes while the policy forgets the others.
+/// - `gamma` sets the memory: rewards older than about `1 / (1 - gamma)` selections (100 at
+///   0.99) weigh little, and the discounted counts settle at about `1 / ((1 - gamma) K)` per
+///   arm for K arms, which should stay above 1.
+///
+/// The [`Default`] (gamma 0.99, xi 1e-2, B 1) is for returns that vary over about 1: B = 1
+/// says so, and xi = 1e-2 makes the padding `0.2 sqrt(ln n / N_i)`, about a fifth of that
+/// range, so contexts whose progress stalls are revisited. For returns of another scale set `b`
+/// to their range. docs/DUCB-PARAMETERS.md gives the evidence; the paper's own settings
+/// (gamma 0.95 or 0.99, xi 1e-8 or 1e-9, B 0.25 to 10,000) are what the `acps` experiments run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DUcbConfig {
     /// Discount factor gamma, in (0, 1]; 1 is plain UCB.
     pub gamma: f64,
-    /// Padding strength xi > 0.
+    /// Padding strength xi > 0 (dimensionless).
     pub xi: f64,
-    /// Upper bound B > 0 on the bandit's rewards; scales the padding.
+    /// The bound B > 0 of the intrinsic rewards, in their units; scales the padding.
     pub b: f64,
+}
+
+impl Default for DUcbConfig {
+    /// gamma 0.99 and B 1 as in the paper's Sec. 5.1; xi 1e-2 instead of its 1e-8, so that the
+    /// padding matters against rewards of about 1 (see the type's docs).
+    fn default() -> Self {
+        Self {
+            gamma: 0.99,
+            xi: 1e-2,
+            b: 1.0,
+        }
+    }
 }
 
 impl DUcbConfig {
     /// Check every parameter's range.
-    pub fn validate(&self) -> Result<(), SelectionError> {
+    pub fn validate(&self) -> Result<(), DUcbCreateError> {
         if !(self.gamma > 0.0 && self.gamma <= 1.0) {
-            return Err(SelectionError::Gamma(self.gamma));
+            return Err(DUcbCreateError::Gamma(self.gamma));
         }
         if !(self.xi.is_finite() && self.xi > 0.0) {
-            return Err(SelectionError::Xi(self.xi));
+            return Err(DUcbCreateError::Xi(self.xi));
         }
         if !(self.b.is_finite() && self.b > 0.0) {
-            return Err(SelectionError::RewardBound(self.b));
+            return Err(DUcbCreateError::RewardBound(self.b));
         }
         Ok(())
     }
@@ -67,10 +150,10 @@ pub struct DUcb {
 
 impl DUcb {
     /// A bandit over `arms` arms with no history.
-    pub fn new(arms: usize, config: DUcbConfig) -> Result<Self, SelectionError> {
+    pub fn new(arms: usize, config: DUcbConfig) -> Result<Self, DUcbCreateError> {
         config.validate()?;
         if arms == 0 {
-            return Err(SelectionError::NoArms);
+            return Err(DUcbCreateError::NoArms);
         }
         Ok(Self {
             config,
@@ -168,12 +251,12 @@ impl DUcb {
 
     /// Credit `reward` to `arm`: decay every count and the total by gamma, then add the new
     /// sample with weight 1.
-    pub fn update(&mut self, arm: usize, reward: f64) -> Result<(), SelectionError> {
+    pub fn update(&mut self, arm: usize, reward: f64) -> Result<(), DUcbUpdateError> {
         if arm >= self.arms() {
-            return Err(SelectionError::ArmOutOfRange { arm, arms: self.arms() });
+            return Err(DUcbUpdateError::ArmOutOfRange { arm, arms: self.arms() });
         }
         if !reward.is_finite() {
-            return Err(SelectionError::NonFiniteReward(reward));
+            return Err(DUcbUpdateError::NonFiniteReward(reward));
         }
         let gamma = self.config.gamma;
         self.counts.iter_mut().for_each(|n| *n *= gamma);
@@ -219,14 +302,13 @@ impl DUcb {
     }
 
     /// Continue from saved statistics, which must have one count and one mean per arm.
-    pub fn restore(&mut self, state: DUcbState) -> Result<(), SelectionError> {
+    pub fn restore(&mut self, state: DUcbState) -> Result<(), DUcbRestoreError> {
         if state.counts.len() != self.arms() || state.means.len() != self.arms() {
-            return Err(SelectionError::State(format!(
-                "D-UCB statistics for {} counts and {} means, this bandit has {} arms",
-                state.counts.len(),
-                state.means.len(),
-                self.arms()
-            )));
+            return Err(DUcbRestoreError {
+                counts: state.counts.len(),
+                means: state.means.len(),
+                arms: self.arms(),
+            });
         }
         self.counts = state.counts;
         self.means = state.means;
@@ -445,11 +527,11 @@ mod tests {
         );
         assert_eq!(
             ducb.update(0, f64::INFINITY),
-            Err(SelectionError::NonFiniteReward(f64::INFINITY))
+            Err(DUcbUpdateError::NonFiniteReward(f64::INFINITY))
         );
         assert!(matches!(
             ducb.update(0, f64::NAN),
-            Err(SelectionError::NonFiniteReward(_))
+            Err(DUcbUpdateError::NonFiniteReward(_))
         ));
         assert_eq!(ducb.counts(), [0.0, 0.0], "a refused update must not decay anything");
     }

@@ -1,36 +1,14 @@
-//! Why a selector could not be built or could not accept an input.
+//! Why a selector could not be created, or could not continue from a saved state.
 
-use acps_shared::ContextSpaceError;
+use super::{DUcbCreateError, DUcbRestoreError, IntrinsicTrackerRestoreError};
+use acps_shared::ContextSpaceCreateError;
 
-/// A configuration or input that a selector refuses. Each message names the parameter and the
-/// accepted range.
+/// Why a selector's constructor (or [`SelectorConfig::build`](crate::SelectorConfig::build))
+/// refuses its arguments. Each message names the parameter and the accepted range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
-pub enum SelectionError {
-    /// D-UCB's discount factor is outside (0, 1].
-    #[error("D-UCB gamma must be in (0, 1], got {0}")]
-    Gamma(f64),
-    /// D-UCB's padding strength is not finite and positive.
-    #[error("D-UCB xi must be finite and > 0, got {0}")]
-    Xi(f64),
-    /// D-UCB's reward bound is not finite and positive.
-    #[error("D-UCB b must be finite and > 0, got {0}")]
-    RewardBound(f64),
-    /// D-UCB was asked for zero arms.
-    #[error("D-UCB number of arms must be >= 1, got 0")]
-    NoArms,
-    /// An arm index that does not name one of the arms.
-    #[error("arm must be < {arms} (the number of arms), got {arm}")]
-    ArmOutOfRange {
-        /// The offending index.
-        arm: usize,
-        /// The number of arms.
-        arms: usize,
-    },
-    /// A reward that is NaN or infinite.
-    #[error("reward must be finite, got {0}")]
-    NonFiniteReward(f64),
-    /// An empty list of training contexts.
+pub enum SelectorCreateError {
+    /// The list of training contexts is empty.
     #[error("training contexts must number >= 1, got none")]
     NoContexts,
     /// A training context of the wrong dimension or with a non-finite coordinate.
@@ -46,12 +24,21 @@ pub enum SelectionError {
     /// A round-robin order that names no arm.
     #[error("round robin order must name >= 1 arm, got none")]
     EmptyOrder,
-    /// An unknown intrinsic-reward name.
-    #[error("intrinsic reward must be one of best-reward, diversity, one-step-progress, monotonic-progress, got {0:?}")]
-    UnknownIntrinsicReward(String),
-    /// An invalid context space.
+    /// A round-robin order that names an arm beyond the training contexts.
+    #[error("round robin order must name arms < {arms} (the number of contexts), got {arm}")]
+    OrderOutOfRange {
+        /// The offending arm.
+        arm: usize,
+        /// The number of training contexts.
+        arms: usize,
+    },
+    /// The context space is not a valid box or ball (its fields are public, so it may not have
+    /// come from a validating constructor).
     #[error(transparent)]
-    Space(#[from] ContextSpaceError),
+    Space(#[from] ContextSpaceCreateError),
+    /// D-UCB refuses its parameters.
+    #[error(transparent)]
+    DUcb(#[from] DUcbCreateError),
     /// SAGG-RIAC's split threshold is zero.
     #[error("SAGG-RIAC split_threshold must be >= 1, got 0")]
     SplitThreshold,
@@ -74,7 +61,47 @@ pub enum SelectionError {
     /// SAGG-RIAC's neighbourhood radius is negative or not finite.
     #[error("SAGG-RIAC near_radius must be finite and >= 0, got {0}")]
     NearRadius(f64),
-    /// A saved selector state that does not fit the selector it is restored into.
+}
+
+/// Why [`ContextSelector::restore_state`](super::ContextSelector::restore_state) refuses a saved
+/// state. The selector is left unchanged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SelectorRestoreError {
+    /// The state was saved by a selector of another kind.
+    #[error("selector state: a {state} state cannot restore a {selector} selector")]
+    WrongKind {
+        /// The kind of selector that saved the state.
+        state: &'static str,
+        /// The kind of selector it was restored into.
+        selector: &'static str,
+    },
+    /// A round-robin position beyond the selector's order.
+    #[error("selector state: round-robin position {next} is outside its order of {len} arms")]
+    Position {
+        /// The saved position.
+        next: usize,
+        /// The length of this selector's order.
+        len: usize,
+    },
+    /// D-UCB statistics for another number of arms.
     #[error("selector state: {0}")]
-    State(String),
+    DUcb(#[from] DUcbRestoreError),
+    /// Intrinsic-reward baselines for another number of arms.
+    #[error("selector state: {0}")]
+    Baselines(#[from] IntrinsicTrackerRestoreError),
+    /// A pending choice of an arm this selector does not have.
+    #[error("selector state: pending arm {arm} of a D-UCB selector over {arms} arms")]
+    PendingArm {
+        /// The saved arm.
+        arm: usize,
+        /// This selector's number of arms.
+        arms: usize,
+    },
+    /// A SAGG-RIAC region tree that is not one of this selector's space; says why.
+    #[error("selector state: SAGG-RIAC: {0}")]
+    Regions(String),
+    /// A state a selector defined outside this crate refuses; its message says why.
+    #[error("selector state: {0}")]
+    Custom(String),
 }

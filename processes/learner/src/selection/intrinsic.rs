@@ -1,10 +1,36 @@
 //! Intrinsic rewards r_beta = f(r - b_s) of the paper's Section 3.2, with their per-context
 //! baselines b_s.
 
-use super::SelectionError;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
+
+/// A name that [`IntrinsicReward::from_str`] does not know.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("intrinsic reward must be one of best-reward, diversity, one-step-progress, monotonic-progress, got {0:?}")]
+pub struct IntrinsicRewardParseError(pub String);
+
+/// Why [`IntrinsicTracker::prime`] or [`IntrinsicTracker::reward`] refuses an arm: it does not
+/// name one of the tracker's arms. The tracker is left unchanged.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("arm must be < {arms} (the number of arms), got {arm}")]
+pub struct IntrinsicTrackerUpdateError {
+    /// The offending index.
+    pub arm: usize,
+    /// The number of arms.
+    pub arms: usize,
+}
+
+/// Why [`IntrinsicTracker::restore_baselines`] refuses saved baselines: they are of a tracker
+/// with another number of arms. The tracker is left unchanged.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{saved} intrinsic-reward baselines, this tracker has {arms} arms")]
+pub struct IntrinsicTrackerRestoreError {
+    /// The number of saved baselines.
+    pub saved: usize,
+    /// This tracker's number of arms.
+    pub arms: usize,
+}
 
 /// Which proxy for learning progress the bandit maximises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -52,13 +78,13 @@ impl fmt::Display for IntrinsicReward {
 }
 
 impl FromStr for IntrinsicReward {
-    type Err = SelectionError;
+    type Err = IntrinsicRewardParseError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         Self::ALL
             .into_iter()
             .find(|h| h.name() == s)
-            .ok_or_else(|| SelectionError::UnknownIntrinsicReward(s.to_owned()))
+            .ok_or_else(|| IntrinsicRewardParseError(s.to_owned()))
     }
 }
 
@@ -112,13 +138,13 @@ impl IntrinsicTracker {
 
     /// Start `arm`'s baseline at the initial policy's return. Ignored when initial returns are
     /// not wanted, for a non-finite return, or once the arm has a baseline.
-    pub fn prime(&mut self, arm: usize, initial_return: f64) -> Result<(), SelectionError> {
+    pub fn prime(&mut self, arm: usize, initial_return: f64) -> Result<(), IntrinsicTrackerUpdateError> {
         let wanted = self.wants_initial_returns();
         let arms = self.baselines.len();
         let baseline = self
             .baselines
             .get_mut(arm)
-            .ok_or(SelectionError::ArmOutOfRange { arm, arms })?;
+            .ok_or(IntrinsicTrackerUpdateError { arm, arms })?;
         if wanted && initial_return.is_finite() && baseline.is_none() {
             *baseline = Some(initial_return);
         }
@@ -127,12 +153,12 @@ impl IntrinsicTracker {
 
     /// The intrinsic reward for return `r` in `arm`; the baseline is updated afterwards, so a
     /// return is never part of its own baseline.
-    pub fn reward(&mut self, arm: usize, r: f64) -> Result<f64, SelectionError> {
+    pub fn reward(&mut self, arm: usize, r: f64) -> Result<f64, IntrinsicTrackerUpdateError> {
         let arms = self.baselines.len();
         let baseline = self
             .baselines
             .get_mut(arm)
-            .ok_or(SelectionError::ArmOutOfRange { arm, arms })?;
+            .ok_or(IntrinsicTrackerUpdateError { arm, arms })?;
         let first = if self.first_visit == FirstVisit::Optimistic {
             self.optimistic_value
         } else {
@@ -175,13 +201,12 @@ impl IntrinsicTracker {
     }
 
     /// Continue from saved baselines, one per arm.
-    pub fn restore_baselines(&mut self, baselines: Vec<Option<f64>>) -> Result<(), SelectionError> {
+    pub fn restore_baselines(&mut self, baselines: Vec<Option<f64>>) -> Result<(), IntrinsicTrackerRestoreError> {
         if baselines.len() != self.baselines.len() {
-            return Err(SelectionError::State(format!(
-                "{} intrinsic-reward baselines, this tracker has {} arms",
-                baselines.len(),
-                self.baselines.len()
-            )));
+            return Err(IntrinsicTrackerRestoreError {
+                saved: baselines.len(),
+                arms: self.baselines.len(),
+            });
         }
         self.baselines = baselines;
         Ok(())

@@ -18,10 +18,12 @@ mod validate;
 
 pub use bandit::BanditSelector;
 pub use baselines::{RoundRobin, UniformContinuous, UniformDiscrete};
-pub use ducb::DUcbState;
-pub use ducb::{DUcb, DUcbConfig};
-pub use error::SelectionError;
-pub use intrinsic::{FirstVisit, IntrinsicReward, IntrinsicTracker};
+pub use ducb::{DUcb, DUcbConfig, DUcbCreateError, DUcbRestoreError, DUcbState, DUcbUpdateError};
+pub use error::{SelectorCreateError, SelectorRestoreError};
+pub use intrinsic::{
+    FirstVisit, IntrinsicReward, IntrinsicRewardParseError, IntrinsicTracker, IntrinsicTrackerRestoreError,
+    IntrinsicTrackerUpdateError,
+};
 pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig, SaggRiacState};
 
 use rand::RngCore;
@@ -67,7 +69,7 @@ pub trait ContextSelector: Send {
     /// Continue from `state`, saved by [`save_state`](ContextSelector::save_state) of a selector
     /// built the same way. A state of another kind of selector, or one that does not fit this
     /// selector's arms or space, is refused and leaves the selector unchanged.
-    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError>;
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectorRestoreError>;
 }
 
 /// The evolving state of a context selector (see [`ContextSelector::save_state`]).
@@ -112,7 +114,10 @@ impl SelectorState {
     }
 
     /// The error for restoring this state into a selector of kind `expected`.
-    pub(crate) fn wrong_kind(&self, expected: &'static str) -> SelectionError {
-        SelectionError::State(format!("a {} state cannot restore a {expected} selector", self.kind()))
+    pub(crate) fn wrong_kind(&self, expected: &'static str) -> SelectorRestoreError {
+        SelectorRestoreError::WrongKind {
+            state: self.kind(),
+            selector: expected,
+        }
     }
 }

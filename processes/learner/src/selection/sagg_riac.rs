@@ -14,7 +14,7 @@
 //! |R1| |R2| |interest(R1) - interest(R2)| and the (interest - minimum) leaf weights.
 
 use super::validate::{check_contexts, check_space};
-use super::{Choice, ContextSelector, SelectionError, SelectorState};
+use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
@@ -54,23 +54,23 @@ impl Default for SaggRiacConfig {
 
 impl SaggRiacConfig {
     /// Check every parameter's range.
-    pub fn validate(&self) -> Result<(), SelectionError> {
+    pub fn validate(&self) -> Result<(), SelectorCreateError> {
         if self.split_threshold == 0 {
-            return Err(SelectionError::SplitThreshold);
+            return Err(SelectorCreateError::SplitThreshold);
         }
         if self.window < 2 {
-            return Err(SelectionError::Window(self.window));
+            return Err(SelectorCreateError::Window(self.window));
         }
         let p = [self.p_interest_uniform, self.p_global, self.p_near_lowest];
         if !p.iter().all(|p| (0.0..=1.0).contains(p)) || (p.iter().sum::<f64>() - 1.0).abs() > 1e-9 {
-            return Err(SelectionError::ModeProbabilities {
+            return Err(SelectorCreateError::ModeProbabilities {
                 p_interest_uniform: self.p_interest_uniform,
                 p_global: self.p_global,
                 p_near_lowest: self.p_near_lowest,
             });
         }
         if !(self.near_radius.is_finite() && self.near_radius >= 0.0) {
-            return Err(SelectionError::NearRadius(self.near_radius));
+            return Err(SelectorCreateError::NearRadius(self.near_radius));
         }
         Ok(())
     }
@@ -159,7 +159,7 @@ impl SaggRiac {
         space: ContextSpace,
         snap_to: Option<Vec<Vec<f64>>>,
         config: SaggRiacConfig,
-    ) -> Result<Self, SelectionError> {
+    ) -> Result<Self, SelectorCreateError> {
         check_space(&space)?;
         if let Some(contexts) = &snap_to {
             check_contexts(contexts, Some(space.dim()))?;
@@ -398,12 +398,12 @@ impl ContextSelector for SaggRiac {
         })
     }
 
-    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectionError> {
+    fn restore_state(&mut self, state: SelectorState) -> Result<(), SelectorRestoreError> {
         let SelectorState::SaggRiac(state) = state else {
             return Err(state.wrong_kind("SAGG-RIAC"));
         };
         self.check_regions(&state.regions)
-            .map_err(|reason| SelectionError::State(format!("SAGG-RIAC: {reason}")))?;
+            .map_err(SelectorRestoreError::Regions)?;
         self.regions = state.regions;
         self.last_goal = state.last_goal;
         Ok(())
@@ -914,7 +914,10 @@ mod tests {
             p_near_lowest: 0.0,
             ..default.clone()
         };
-        assert!(matches!(new(negative), Err(SelectionError::ModeProbabilities { .. })));
+        assert!(matches!(
+            new(negative),
+            Err(SelectorCreateError::ModeProbabilities { .. })
+        ));
         assert_eq!(
             message(SaggRiacConfig {
                 near_radius: -0.1,
@@ -926,7 +929,7 @@ mod tests {
         let wrong_dim = SaggRiac::new(unit_box(2), Some(vec![vec![0.5]]), default.clone());
         assert!(matches!(
             wrong_dim,
-            Err(SelectionError::InvalidContext {
+            Err(SelectorCreateError::InvalidContext {
                 index: 0,
                 expected_dim: 2,
                 ..
@@ -938,7 +941,7 @@ mod tests {
         };
         assert!(matches!(
             SaggRiac::new(inverted, None, default),
-            Err(SelectionError::Space(_))
+            Err(SelectorCreateError::Space(_))
         ));
     }
 

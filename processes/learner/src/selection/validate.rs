@@ -1,18 +1,18 @@
 //! Input checks shared by the selectors' constructors.
 
-use super::SelectionError;
+use super::SelectorCreateError;
 use acps_shared::ContextSpace;
 
 /// Check that `contexts` is non-empty and that every context has `expected_dim` finite
 /// coordinates (by default the dimension of context 0, which must be at least 1).
-pub(crate) fn check_contexts(contexts: &[Vec<f64>], expected_dim: Option<usize>) -> Result<(), SelectionError> {
-    let first = contexts.first().ok_or(SelectionError::NoContexts)?;
+pub(crate) fn check_contexts(contexts: &[Vec<f64>], expected_dim: Option<usize>) -> Result<(), SelectorCreateError> {
+    let first = contexts.first().ok_or(SelectorCreateError::NoContexts)?;
     let expected_dim = expected_dim.unwrap_or(first.len()).max(1);
     match contexts
         .iter()
         .position(|c| c.len() != expected_dim || !c.iter().all(|x| x.is_finite()))
     {
-        Some(index) => Err(SelectionError::InvalidContext {
+        Some(index) => Err(SelectorCreateError::InvalidContext {
             index,
             expected_dim,
             context: contexts[index].clone(),
@@ -23,7 +23,7 @@ pub(crate) fn check_contexts(contexts: &[Vec<f64>], expected_dim: Option<usize>)
 
 /// Check a context space again: its fields are public, so it may not have come from a validating
 /// constructor, and sampling from an inverted box would panic.
-pub(crate) fn check_space(space: &ContextSpace) -> Result<(), SelectionError> {
+pub(crate) fn check_space(space: &ContextSpace) -> Result<(), SelectorCreateError> {
     match space {
         ContextSpace::Box { low, high } => ContextSpace::new_box(low.clone(), high.clone())?,
         ContextSpace::Ball { dim, radius } => ContextSpace::new_ball(*dim, *radius)?,
@@ -37,7 +37,7 @@ mod tests {
 
     #[test]
     fn contexts_must_be_non_empty_finite_and_of_one_dimension() {
-        assert_eq!(check_contexts(&[], None), Err(SelectionError::NoContexts));
+        assert_eq!(check_contexts(&[], None), Err(SelectorCreateError::NoContexts));
         assert!(check_contexts(&[vec![0.0, 1.0], vec![2.0, 3.0]], None).is_ok());
         let err = check_contexts(&[vec![0.0, 1.0], vec![2.0]], None).unwrap_err();
         assert_eq!(
@@ -55,7 +55,7 @@ mod tests {
             low: vec![1.0],
             high: vec![0.0],
         };
-        assert!(matches!(check_space(&inverted), Err(SelectionError::Space(_))));
+        assert!(matches!(check_space(&inverted), Err(SelectorCreateError::Space(_))));
         let flat = ContextSpace::Ball { dim: 2, radius: 0.0 };
         assert!(check_space(&flat).is_err());
         assert!(check_space(&ContextSpace::new_ball(2, 1.0).unwrap()).is_ok());

@@ -475,7 +475,7 @@ fn bad_inputs_are_errors_naming_the_argument() {
     assert_eq!(error.to_string(), "returns must be finite, got NaN at index 3");
     assert_eq!(
         solve_dual(&DMatrix::zeros(0, 2), &[], 0.5, 1e-8, &defaults).unwrap_err(),
-        CRepsError::NoSamples
+        DualSolveError::NoSamples
     );
     let error = evaluate_dual(&phi, &returns, 0.5, 1.0, &[0.0]).unwrap_err();
     assert_eq!(
