@@ -36,8 +36,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let learner = || {
         let config = LearnerConfig {
             episodes: 1500,
-            // Eight training tasks in flight keep both workers busy.
-            in_flight: 8,
+            // Two training tasks in flight keep both workers busy.
+            in_flight: 2,
             ..LearnerConfig::default()
         };
         Learner::with_selector(config, cannon.problem(), &SelectorConfig::monotonic_progress())
