@@ -3,6 +3,8 @@
 
 pub mod bench;
 pub mod checkpoints;
+pub mod cli;
+pub mod commands;
 pub mod config;
 pub mod evaluate;
 pub mod experiment;

@@ -224,14 +224,22 @@ struct SlowRun {
 }
 
 fn slow_run(name: &str) -> SlowRun {
+    slow_run_with(name, &[])
+}
+
+/// [`slow_run`] with `extra` arguments.
+fn slow_run_with(name: &str, extra: &[&str]) -> SlowRun {
     let dir = temp_dir(name);
     SlowRun {
-        reference: in_process(&SLOW, &dir.join("in-process")),
+        reference: in_process(&[&SLOW[..], extra].concat(), &dir.join("in-process")),
         run: run_name(name),
         out: dir.join("fleet"),
         dir,
     }
 }
+
+/// Eight tasks in flight per job: a worker that has joined nearly always holds some.
+const KILL_WORKER_P: [&str; 2] = ["--in-flight", "8"];
 
 #[test]
 fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
@@ -240,12 +248,13 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
         reference,
         run,
         out,
-    } = slow_run("kill-worker");
+    } = slow_run_with("kill-worker", &KILL_WORKER_P);
     // Not quiet: the learner reports how many tasks it re-issued.
     let loud: Vec<&str> = SLOW.iter().copied().filter(|a| *a != "-q").collect();
     let learner = watched()
         .arg("run")
         .args(&loud)
+        .args(KILL_WORKER_P)
         .args(["--workers", "1", "--run", run.as_str()])
         .arg("--out")
         .arg(&out)
@@ -255,7 +264,7 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
         .unwrap();
     // A worker started by hand joins the running learner by its run name.
     let mut victim = acps()
-        .args(["worker", "--run", run.as_str(), "--name", "victim", "-q"])
+        .args(["worker", "--run", run.as_str(), "--name", "victim", "--in-flight", "8", "-q"])
         .spawn()
         .unwrap();
     // The learner, its worker and the victim are in, and learning has begun.

@@ -1,0 +1,267 @@
+//! The command line's arguments: what `acps --help` shows. `Cli::run` carries a command out
+//! ([`crate::commands`]).
+
+use crate::config::{self, ExperimentFile};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+/// The `acps` command line, parsed.
+#[derive(Parser)]
+#[command(
+    long_about = None,
+    name = "acps",
+    version,
+    about = "Active contextual policy search (Fabisch & Metzen, JMLR 2014): C-REPS learns one policy over task contexts while D-UCB chooses which context to practise next."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+    /// More log lines on stderr: -v info, -vv debug (e.g. rejected C-REPS updates), -vvv
+    /// trace. The ACPS_LOG variable takes tracing filter directives instead (e.g.
+    /// ACPS_LOG=acps_learner=debug); IOX2_LOG_LEVEL sets iceoryx2's own log (default error).
+    #[arg(long, short, action = clap::ArgAction::Count, global = true)]
+    pub(crate) verbose: u8,
+}
+
+#[derive(Subcommand)]
+pub(crate) enum Command {
+    /// The main job with its defaults: the PA-10 learns to throw at the grid problem's 25
+    /// targets (paper Section 5.2.3) through a fleet of simulator workers (rapier3d physics),
+    /// choosing targets with D-UCB and monotonic progress. Shows the test error falling and
+    /// writes DIR (default runs/learn). The same as `acps run grid --sim rapier --method
+    /// monotonic-progress --runs 4 --episodes 10000 --in-flight 8 --out runs/learn`.
+    Learn(LearnArgs),
+    /// Run one of the paper's experiments in this process, for several methods x seeds in
+    /// parallel, and write DIR/summary.json, the plots and DIR/config.toml. Name the experiment
+    /// (`acps experiment grid --runs 5`) or give an experiment file (`acps experiment --config
+    /// experiments/grid-fig8.toml`).
+    Experiment(ExperimentArgs),
+    /// Run an experiment through a worker fleet: this process is the learner and serves tasks
+    /// over iceoryx2 shared memory to worker processes it starts. Writes the same DIR/summary.json
+    /// as `acps experiment` with the same --in-flight and --seed.
+    Run(RunArgs),
+    /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.
+    Worker(WorkerArgs),
+    /// Measure rollouts per second in-process and through fleets of 1 ..= cores workers, for a
+    /// trivial environment (the transport's cost) and the analytic and rapier PA-10, in
+    /// interleaved rounds; print a table and write DIR/bench.json, bench.svg and bench.png.
+    Bench(BenchArgs),
+    /// Replay a learned policy from a run directory greedily (its mean, exploration off) at
+    /// --target points or at the problem's test contexts, printing the landing point, error and
+    /// reward of every throw (the return of every context for the contextual function).
+    Evaluate(EvaluateArgs),
+}
+
+#[derive(clap::Args)]
+pub(crate) struct EvaluateArgs {
+    /// A run directory written by `acps experiment` or `acps run` (or one of its
+    /// policies/METHOD-runR.json files).
+    pub(crate) dir: PathBuf,
+    /// The method whose policy to replay (default: the first by name).
+    #[arg(long)]
+    pub(crate) method: Option<String>,
+    /// The run whose policy to replay (default 0).
+    #[arg(long)]
+    pub(crate) run: Option<usize>,
+    /// A target X,Y to throw at (repeatable; default: the problem's test contexts).
+    #[arg(long, value_name = "X,Y", allow_hyphen_values = true, value_parser = crate::evaluate::parse_target)]
+    pub(crate) target: Vec<Vec<f64>>,
+    /// Draw the side view of the first throw into FILE (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) render: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct LearnArgs {
+    /// Worker processes (default: the number of cores).
+    #[arg(long)]
+    pub(crate) workers: Option<usize>,
+    /// Independent learning runs (seeds 0 .. runs - 1), for the SEM band of the curve.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) runs: usize,
+    /// Training episodes (throws) per run.
+    #[arg(long, default_value_t = 10_000)]
+    pub(crate) episodes: u64,
+    /// How throws are simulated.
+    #[arg(long, value_enum, default_value = "rapier")]
+    pub(crate) sim: config::SimName,
+    /// Output directory.
+    #[arg(long, default_value = "runs/learn")]
+    pub(crate) out: PathBuf,
+    /// The run's name, for workers started by hand to join (default: grid-PID).
+    #[arg(long)]
+    pub(crate) run: Option<String>,
+    /// No progress line.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+}
+
+impl LearnArgs {
+    /// The `acps run` this stands for.
+    fn run_args(self) -> RunArgs {
+        let settings = ExperimentFile {
+            experiment: Some(config::ExperimentName::Grid),
+            sim: Some(self.sim),
+            runs: Some(self.runs),
+            episodes: Some(self.episodes),
+            in_flight: Some(8),
+            methods: Some(vec![acps_learner::Method::MonotonicProgress]),
+            ..ExperimentFile::default()
+        };
+        RunArgs {
+            experiment: ExperimentArgs {
+                config: None,
+                settings,
+                save_config: None,
+                out: Some(self.out),
+                checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
+                resume: None,
+                quiet: self.quiet,
+            },
+            workers: self.workers,
+            worker_in_flight: DEFAULT_WORKER_IN_FLIGHT,
+            worker_nice: WorkerNiceArg { worker_nice: None },
+            run: self.run,
+        }
+    }
+}
+
+#[derive(clap::Args)]
+pub(crate) struct BenchArgs {
+    /// Output directory.
+    #[arg(long, default_value = "runs/bench")]
+    pub(crate) out: PathBuf,
+    /// Largest fleet (default: the number of cores).
+    #[arg(long)]
+    pub(crate) max_workers: Option<usize>,
+    /// Tasks each worker keeps in flight, asked for or queued (1..=128; at most 8 of rollouts
+    /// slower than a batch's 800 us, which travel alone).
+    #[arg(long, default_value_t = 128)]
+    pub(crate) worker_in_flight: usize,
+    /// Multiplies the work per measurement (1: a few seconds per row and round; the default
+    /// bench takes about a minute on 2 cores).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) scale: f64,
+    /// Times every mode is measured, interleaved (1..=100): rows report the median round, and
+    /// the table the range of the ratio over rounds.
+    #[arg(long, default_value_t = 3)]
+    pub(crate) rounds: usize,
+    /// Environments to measure, comma separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "trivial,analytic,rapier")]
+    pub(crate) env: Vec<crate::bench::BenchEnv>,
+    #[command(flatten)]
+    pub(crate) worker_nice: WorkerNiceArg,
+}
+
+/// `--worker-nice` of `acps run` and `acps bench`.
+#[derive(clap::Args)]
+pub(crate) struct WorkerNiceArg {
+    /// Niceness of the started workers (0..=19; default: 10 when the workers and the learner
+    /// outnumber the cores, else 0). The learner gates every worker, so it should get a core as
+    /// soon as it wakes; 0 keeps the workers at full priority next to other programs.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=acps_fleet::processes::MAX_NICE as i64))]
+    pub(crate) worker_nice: Option<u8>,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct RunArgs {
+    #[command(flatten)]
+    pub(crate) experiment: ExperimentArgs,
+    /// Worker processes to start (default: the number of cores).
+    #[arg(long)]
+    pub(crate) workers: Option<usize>,
+    /// Tasks each started worker keeps in flight, asked for or queued (1..=128; at most 8 of
+    /// rollouts slower than a batch's 800 us, which travel alone).
+    #[arg(long, default_value_t = DEFAULT_WORKER_IN_FLIGHT)]
+    pub(crate) worker_in_flight: usize,
+    #[command(flatten)]
+    pub(crate) worker_nice: WorkerNiceArg,
+    /// The run's name (letters, digits and '-'): its shared-memory prefix, and how workers
+    /// started by hand join it (default: EXPERIMENT-PID).
+    #[arg(long)]
+    pub(crate) run: Option<String>,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct WorkerArgs {
+    /// The run to join (the learner's --run) [default: the ACPS_RUN environment variable, which
+    /// a learner sets for the workers it starts].
+    #[arg(long)]
+    pub(crate) run: Option<String>,
+    /// Tasks kept in flight, asked for or queued (1..=128): more hides the wake-up latency
+    /// between processes; cheap rollouts travel in batches of up to half of them, and at most 8
+    /// of rollouts slower than a batch's 800 us, which travel alone, are in flight.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) in_flight: usize,
+    /// The worker's name in iceoryx2's node list (default: worker-PID).
+    #[arg(long)]
+    pub(crate) name: Option<String>,
+    /// Seconds to wait for the run's learner to appear.
+    #[arg(long, default_value_t = 30.0)]
+    pub(crate) startup_timeout: f64,
+    /// Microseconds to poll for an answer before blocking (0 when processes outnumber cores).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) spin_us: u64,
+    /// Lower this worker's priority to niceness N (0..=19), so that a learner sharing its
+    /// cores gets the CPU first; a worker already at N or above keeps its niceness.
+    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=acps_fleet::processes::MAX_NICE as i64))]
+    pub(crate) nice: u8,
+    /// Print nothing unless something goes wrong.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct ExperimentArgs {
+    /// Read the experiment from an experiment file (one per paper figure in experiments/); options
+    /// given as well override the file's values.
+    #[arg(long, short, value_name = "FILE")]
+    pub(crate) config: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) settings: ExperimentFile,
+    /// Write the resolved experiment file (every setting, defaults filled in) to FILE and exit
+    /// without running; `--config FILE` runs it. Every run also writes DIR/config.toml.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) save_config: Option<PathBuf>,
+    /// Output directory [default: runs/NAME, or runs/STEM for --config STEM.toml].
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+    /// Write each (method, run) job's checkpoint to DIR/checkpoints after every N learning
+    /// rounds (C-REPS updates; evaluations for the toy model, which has no policy) and when the
+    /// job ends; 0: no checkpoints. A run started without --resume removes old checkpoints there.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CHECKPOINT_EVERY)]
+    pub(crate) checkpoint_every: u64,
+    /// Continue the run whose output directory is DIR from its checkpoints, after a crash, a
+    /// kill or Ctrl-C; give the arguments the run was started with. The result is bit for bit
+    /// that of an uninterrupted run.
+    #[arg(long, value_name = "DIR")]
+    pub(crate) resume: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+}
+
+/// Default of `acps run --worker-in-flight`.
+pub(crate) const DEFAULT_WORKER_IN_FLIGHT: usize = 4;
+/// Default of `--checkpoint-every`.
+pub(crate) const DEFAULT_CHECKPOINT_EVERY: u64 = 10;
+
+impl Cli {
+    /// Carry out the command.
+    pub fn run(self) -> anyhow::Result<()> {
+        use crate::commands;
+        match self.command {
+            Command::Experiment(args) => commands::experiment(args),
+            Command::Learn(args) => commands::fleet(args.run_args()),
+            Command::Run(args) => commands::fleet(args),
+            Command::Worker(args) => commands::worker(args),
+            Command::Bench(args) => commands::bench(args),
+            Command::Evaluate(args) => commands::evaluate(args),
+        }
+    }
+
+    /// How many -v were given.
+    pub fn verbosity(&self) -> u8 {
+        self.verbose
+    }
+}
