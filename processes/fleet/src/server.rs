@@ -12,6 +12,7 @@
 //! re-issued task is recognised as a duplicate and dropped. Workers of another build or run are
 //! refused.
 
+use crate::wake::Waker;
 use acps_learner::{Learner, LearningProgress, TellError};
 use acps_shared::EnvironmentSpec;
 use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
@@ -117,11 +118,7 @@ pub fn serve(
         .listener_builder()
         .create()
         .map_err(|e| IpcError::new("creating the learner's listener", e))?;
-    let notifier = services
-        .to_workers
-        .notifier_builder()
-        .create()
-        .map_err(|e| IpcError::new("creating the learner's notifier", e))?;
+    let mut waker = Waker::new(&services)?;
 
     let mut progress = FleetProgress::default();
     let mut parked = VecDeque::new();
@@ -190,10 +187,11 @@ pub fn serve(
         // whose outcomes waited for a free slot may be asleep: it is woken at once.
         unannounced += answered;
         if wake_now || (unannounced > 0 && (outcomes.is_empty() || unannounced >= 8)) {
-            notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
+            waker.wake_all()?;
             unannounced = 0;
             wake_now = false;
         }
+        waker.heartbeat()?;
         // Tell queued outcomes until `TELL_BUDGET` is spent, then look for requests again: an
         // answer waits for at most the budget plus one C-REPS update, and cheap outcomes do not
         // each pay for a look at every request channel (telling one per pass capped the learner
@@ -225,7 +223,7 @@ pub fn serve(
             for (request, _) in parked.drain(..) {
                 let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
             }
-            let _ = notifier.notify();
+            let _ = waker.wake_all();
             progress.serving_seconds = serving();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
             observe(&progress);
@@ -270,7 +268,7 @@ pub fn serve(
             std::thread::yield_now();
         } else {
             idle_since = None;
-            match listener.timed_wait(|_| {}, TICK) {
+            match listener.timed_wait(|_| {}, waker.until_heartbeat()) {
                 // Any signal interrupts the wait, also SIGSTOP and SIGCONT (a paused and resumed
                 // run): the loop goes on, and only `stop`, which the host's Ctrl-C handler sets,
                 // ends it.

@@ -203,6 +203,7 @@ pub fn serve(
     let mut batching = Batching::new(options.in_flight);
     let mut rollouts = 0;
     let mut idle_since = None;
+    let mut silence = Silence::default();
     // Requests sent since the learner was last woken.
     let mut unannounced = false;
     loop {
@@ -325,6 +326,8 @@ pub fn serve(
                 .push(wire_outcome)
                 .expect("a full outbox stops the simulation until it is sent");
             idle_since = None;
+            // A task came from a live learner.
+            silence.heard();
             continue;
         }
         let idle = *idle_since.get_or_insert_with(Instant::now);
@@ -339,12 +342,65 @@ pub fn serve(
             Err(ListenerWaitError::InterruptSignal) => 0,
             Err(error) => return Err(IpcError::new("waiting for the learner", error).into()),
         };
-        if woken == 0 && !learner_alive(run, &services)? {
-            return Ok(WorkerReport {
-                exit: WorkerExit::LearnerGone,
-                rollouts,
-            });
+        if woken > 0 {
+            silence.heard();
+        } else if silence.look_due() {
+            if !learner_alive(run, &services)? {
+                return Ok(WorkerReport {
+                    exit: WorkerExit::LearnerGone,
+                    rollouts,
+                });
+            }
+            silence.looked();
         }
+    }
+}
+
+/// How long a waiting worker hears nothing from the learner before it looks whether the learner
+/// still lives. The look lists the run's nodes, reading each node's files (10 ms at 129 nodes),
+/// so it cannot be every silent wait's: at W = 128 the idle workers' looks every tick took more
+/// CPU than 2 cores have, and starved the learner (docs/FLEET.md#oversubscription). A live
+/// learner wakes every worker at least once per tick; so a worker looks only after
+/// [`Silence::FIRST_LOOK`] silent waits in a row, and a learner found alive but silent (paused,
+/// or starved itself) is looked at again after twice as many, up to [`Silence::LAST_LOOK`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Silence {
+    /// Waits that timed out since the learner was last heard or looked at.
+    waits: u32,
+    /// Timed-out waits after which the next look is due.
+    look_after: u32,
+}
+
+impl Default for Silence {
+    fn default() -> Self {
+        Self {
+            waits: 0,
+            look_after: Self::FIRST_LOOK,
+        }
+    }
+}
+
+impl Silence {
+    /// Two ticks: one heartbeat may come late.
+    const FIRST_LOOK: u32 = 2;
+    /// 32 ticks (1.6 s) between looks at a learner that stays silent.
+    const LAST_LOOK: u32 = 32;
+
+    /// The learner woke this worker.
+    fn heard(&mut self) {
+        *self = Self::default();
+    }
+
+    /// A wait timed out; true when the learner should be looked at now.
+    fn look_due(&mut self) -> bool {
+        self.waits += 1;
+        self.waits >= self.look_after
+    }
+
+    /// The look found the learner alive.
+    fn looked(&mut self) {
+        self.waits = 0;
+        self.look_after = (2 * self.look_after).min(Self::LAST_LOOK);
     }
 }
 
@@ -412,6 +468,29 @@ mod tests {
         // Rapier throws travel alone.
         assert!(!wakes_learner(2, 1, false));
         assert!(wakes_learner(1, 1, false), "one throw left");
+    }
+
+    #[test]
+    fn a_silent_learner_is_looked_at_after_two_silent_waits_then_ever_more_rarely() {
+        let mut silence = Silence::default();
+        let looks_in = |silence: &mut Silence, waits: u32| {
+            (1..=waits)
+                .filter(|_| {
+                    let due = silence.look_due();
+                    if due {
+                        silence.looked();
+                    }
+                    due
+                })
+                .count()
+        };
+        assert!(!silence.look_due(), "one late heartbeat is no reason to look");
+        assert!(silence.look_due());
+        silence.looked();
+        // Then after 4, 8, 16 and every 32 silent waits.
+        assert_eq!(looks_in(&mut silence, 4 + 8 + 16 + 32 * 3), 6);
+        silence.heard();
+        assert_eq!(silence, Silence::default(), "a heartbeat starts over");
     }
 
     #[test]
