@@ -169,6 +169,7 @@ pub fn serve(
                 0 => {
                     ipc::reply(&request, Answer::new(Response::Task, identity), &[])?;
                     progress.delivered += 1;
+                    waker.answered(request.origin());
                     wake_now = true;
                 }
                 want => parked.push_back((request, want)),
@@ -178,16 +179,25 @@ pub fn serve(
         // workers get them without waiting for the C-REPS updates (a millisecond each) of the
         // outcomes queued before theirs.
         let answered = if serving_since.is_some() {
-            answer(jobs, &mut parked, &mut holders, &mut next_job, identity, &mut progress)?
+            answer(
+                jobs,
+                &mut parked,
+                &mut holders,
+                &mut next_job,
+                identity,
+                &mut progress,
+                &mut waker,
+            )?
         } else {
             0
         };
         // Workers that are simulating need no wake-up; one per 8 tasks answered, or once the
         // queued outcomes are told, reaches those that wait without a syscall per task. A worker
-        // whose outcomes waited for a free slot may be asleep: it is woken at once.
+        // whose outcomes waited for a free slot may be asleep: it is woken at once. Only the
+        // answered workers are woken.
         unannounced += answered;
         if wake_now || (unannounced > 0 && (outcomes.is_empty() || unannounced >= 8)) {
-            waker.wake_all()?;
+            waker.wake_answered(&services.tasks)?;
             unannounced = 0;
             wake_now = false;
         }
@@ -324,6 +334,7 @@ fn answer(
     next_job: &mut usize,
     identity: u64,
     progress: &mut FleetProgress,
+    waker: &mut Waker,
 ) -> Result<usize, FleetError> {
     let mut answered = 0;
     // Allocated only when a request is waiting: most passes have none.
@@ -348,6 +359,7 @@ fn answer(
             break;
         }
         ipc::reply(&request, Answer::new(Response::Task, identity), &tasks)?;
+        waker.answered(request.origin());
         answered += tasks.len();
     }
     Ok(answered)
