@@ -6,8 +6,8 @@
 //! the cores that have one ready, so even P = 1 runs keep many workers busy, and every core's
 //! trajectory stays the one it has in-process.
 //!
-//! Faults: on a tick (50 ms) after which a connected worker has been silent, or a worker holding
-//! tasks is no longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live
+//! Faults: on a tick (50 ms) after which a worker holding tasks has been silent since its answer,
+//! or is no longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live
 //! clients, and re-issues exactly the tasks held by clients that are gone. A late outcome of a
 //! re-issued task is recognised as a duplicate and dropped. Workers of another build or run are
 //! refused.
@@ -186,7 +186,12 @@ pub fn serve(
                 &mut next_job,
                 identity,
                 &mut progress,
-                &mut waker,
+                // An answered worker is woken, and until the next tick counts as heard: it has
+                // had no time yet to send anything for the tasks it now holds.
+                |client| {
+                    waker.answered(client);
+                    heard.insert(client);
+                },
             )?
         } else {
             0
@@ -243,18 +248,12 @@ pub fn serve(
             last_tick = Instant::now();
             progress.serving_seconds = serving();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
-            // Looking for dead workers lists the run's nodes, twice (about 0.3 ms each, 1% of
-            // the learner's time at a 50 ms tick). A worker that sent a request since the last
-            // tick is alive, so the look is due only once a connected worker fell silent (one
-            // that died is found a tick or two later), or a worker holding tasks is no longer
-            // connected (another process cleaned up after it).
             let mut connected = HashSet::new();
             services.tasks.dynamic_config().list_clients(|client| {
                 connected.insert(client.client_id);
                 CallbackProgression::Continue
             });
-            let look = connected.iter().any(|client| !heard.contains(client))
-                || holders.values().any(|client| !connected.contains(client));
+            let look = look_is_due(&holders, &heard, &connected);
             heard.clear();
             if look {
                 let Some(live) =
@@ -287,6 +286,25 @@ pub fn serve(
             }
         }
     }
+}
+
+/// Whether the tick looks for dead workers. The look lists the run's nodes, twice, reading each
+/// node's files: 0.3 ms with 3 nodes, 11 ms with 129. A worker that sent a request since the last
+/// tick is alive (as is one answered since: `heard` has those too), and only the tasks of a dead
+/// worker need the look; so it is due only once a worker holding tasks fell silent for a tick
+/// after its answer (one that died is found a tick or two later), or is no longer
+/// connected (another process cleaned up after it). A dead worker that holds nothing is found
+/// once it is answered. With more workers than ready tasks most of them hold none and send
+/// nothing: looking for every silent one took 2/3 of the learner's CPU time at W = 128
+/// (docs/FLEET.md#oversubscription).
+fn look_is_due(
+    holders: &HashMap<(u32, u64), UniqueClientId>,
+    heard: &HashSet<UniqueClientId>,
+    connected: &HashSet<UniqueClientId>,
+) -> bool {
+    holders
+        .values()
+        .any(|client| !heard.contains(client) || !connected.contains(client))
 }
 
 /// Give the tasks held by workers that are gone back to their learners. Returns how many workers
@@ -326,7 +344,8 @@ fn reissue_tasks_of_dead_workers(
 }
 
 /// Answer parked requests, each with as many ready tasks as it asks for (round robin over the
-/// jobs), as soon as at least one is ready; returns how many tasks went out.
+/// jobs), as soon as at least one is ready; tells `answered_to` of every worker answered;
+/// returns how many tasks went out.
 fn answer(
     jobs: &mut [FleetJob],
     parked: &mut VecDeque<(TaskRequest, usize)>,
@@ -334,7 +353,7 @@ fn answer(
     next_job: &mut usize,
     identity: u64,
     progress: &mut FleetProgress,
-    waker: &mut Waker,
+    mut answered_to: impl FnMut(UniqueClientId),
 ) -> Result<usize, FleetError> {
     let mut answered = 0;
     // Allocated only when a request is waiting: most passes have none.
@@ -359,7 +378,7 @@ fn answer(
             break;
         }
         ipc::reply(&request, Answer::new(Response::Task, identity), &tasks)?;
-        waker.answered(request.origin());
+        answered_to(request.origin());
         answered += tasks.len();
     }
     Ok(answered)
