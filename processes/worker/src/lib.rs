@@ -154,7 +154,7 @@ pub fn serve(
             got: options.in_flight.to_string(),
         });
     }
-    let node = ipc::node(run, &options.name)?;
+    let node = ipc::worker_node(run, &options.name)?;
     let services = ipc::open_services(&node)?;
     let started = Instant::now();
     while services.tasks.dynamic_config().number_of_servers() == 0 {

@@ -122,10 +122,27 @@ pub fn quiet_iceoryx2_log() {
 /// A node of `run` named `name`. Signal handling stays with the host program (library code must
 /// not swallow SIGINT/SIGTERM).
 pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
+    node_with(run, name, &run.config()?)
+}
+
+/// A worker's node of `run`, like [`node`], that leaves looking for dead nodes to the learner.
+/// iceoryx2 looks when a node is created or dropped and whenever it opens a service, and each
+/// look reads the files of every node of the run (50-80 us per node): 128 workers that start
+/// or leave together spent seconds of CPU on them (docs/FLEET.md#oversubscription). The learner
+/// cleans up when it starts, on its looks for dead workers, and at the end of the run.
+pub fn worker_node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
+    let mut config = run.config()?;
+    config.global.node.cleanup_dead_nodes_on_creation = false;
+    config.global.node.cleanup_dead_nodes_on_destruction = false;
+    config.global.service.cleanup_dead_nodes_on_open = false;
+    node_with(run, name, &config)
+}
+
+fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Service>, IpcError> {
     let node_name = NodeName::new(name).map_err(|e| IpcError::new(format!("node name '{name}'"), e))?;
     NodeBuilder::new()
         .name(&node_name)
-        .config(&run.config()?)
+        .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .map_err(|e| IpcError::new(format!("creating node '{name}' of run '{run}'"), e))
