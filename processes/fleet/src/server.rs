@@ -235,13 +235,15 @@ pub fn serve(
         progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
         let serving = || serving_since.map_or(0.0, |since: Instant| since.elapsed().as_secs_f64());
         if progress.jobs_done == jobs.len() {
+            progress.serving_seconds = serving();
+            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
+            // Before the workers are told to stop: a host that watches whether its workers are
+            // still there (`acps run` ends a run whose workers all left) must still find them.
+            observe(&progress);
             for (request, _) in parked.drain(..) {
                 let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
             }
             let _ = waker.wake_all();
-            progress.serving_seconds = serving();
-            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
-            observe(&progress);
             return Ok(progress);
         }
         if last_tick.elapsed() >= TICK {
