@@ -58,8 +58,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     })?;
     let served = jobs.remove(0).into_learner();
     println!(
-        "served {} outcomes; mean miss {:.3} m",
+        "served {} outcomes for {} episodes; mean miss {:.3} m",
         report.outcomes,
+        served.episodes().len(),
         served.latest_score().unwrap_or(f64::NAN)
     );
     // The same learner driven in this process.

@@ -7,9 +7,9 @@
 //! trajectory stays the one it has in-process.
 //!
 //! Faults, looked for every tick (50 ms):
-//! - A worker that died: once a connected worker has been silent, or a worker holding tasks is no
-//!   longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live clients,
-//!   and re-issues exactly the tasks held by clients that are gone.
+//! - A worker that died: once a worker holding tasks has been silent since its answer for a tick,
+//!   or is no longer connected, the server asks iceoryx2 to clean up dead nodes, lists the live
+//!   clients, and re-issues exactly the tasks held by clients that are gone.
 //! - A worker that lives but says nothing (stopped, hung in a rollout): one that holds tasks and
 //!   has sent nothing for its deadline ([`Liveness`]) is treated as dead for those tasks, which
 //!   are re-issued; it gets no new tasks until it speaks again.
@@ -21,6 +21,7 @@
 //! another build or run, and workers serving an environment no job needs, are refused; a worker
 //! that serves one environment is handed only tasks of jobs that need it.
 
+use crate::wake::Waker;
 use acps_learner::{Learner, LearnerTellError, LearningProgress};
 use acps_shared::{EnvironmentSpec, Serves, SpecBuildError};
 use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
@@ -244,11 +245,7 @@ pub(crate) fn serve(
         .listener_builder()
         .create()
         .map_err(|e| IpcError::new("creating the learner's listener", e))?;
-    let notifier = services
-        .to_workers
-        .notifier_builder()
-        .create()
-        .map_err(|e| IpcError::new("creating the learner's notifier", e))?;
+    let mut waker = Waker::new(&services)?;
 
     let mut progress = FleetProgress::default();
     let mut parked = VecDeque::new();
@@ -270,6 +267,7 @@ pub(crate) fn serve(
     let mut hung: HashSet<UniqueClientId> = HashSet::new();
     let mut slowest_rollout = Duration::ZERO;
     let mut without_workers: Option<Instant> = None;
+    let mut last_running = 0;
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
@@ -309,6 +307,7 @@ pub(crate) fn serve(
                 0 => {
                     ipc::reply(&request, Answer::new(Response::Task, identity), &[])?;
                     progress.delivered += 1;
+                    waker.answered(request.origin());
                     wake_now = true;
                 }
                 want => parked.push_back((request, want, serves)),
@@ -318,27 +317,36 @@ pub(crate) fn serve(
         // workers get them without waiting for the C-REPS updates (a millisecond each) of the
         // outcomes queued before theirs.
         let answered = if serving_since.is_some() {
-            answer(
+            let (answered, asking) = answer(
                 jobs,
                 &mut parked,
                 &hung,
                 &mut holders,
                 &mut next_job,
                 identity,
-                &mut progress,
-            )?
+                // An answered worker is woken, and until the next tick counts as heard: it has
+                // had no time yet to send anything for the tasks it now holds.
+                |client| {
+                    waker.answered(client);
+                    heard.insert(client);
+                },
+            )?;
+            progress.learner_seconds += asking.as_secs_f64();
+            answered
         } else {
             0
         };
         // Workers that are simulating need no wake-up; one per 8 tasks answered, or once the
         // queued outcomes are told, reaches those that wait without a syscall per task. A worker
-        // whose outcomes waited for a free slot may be asleep: it is woken at once.
+        // whose outcomes waited for a free slot may be asleep: it is woken at once. Only the
+        // answered workers are woken.
         unannounced += answered;
         if wake_now || (unannounced > 0 && (outcomes.is_empty() || unannounced >= 8)) {
-            notifier.notify().map_err(|e| IpcError::new("waking the workers", e))?;
+            waker.wake_answered(&services.tasks)?;
             unannounced = 0;
             wake_now = false;
         }
+        waker.heartbeat()?;
         // Tell queued outcomes until `TELL_BUDGET` is spent, then look for requests again: an
         // answer waits for at most the budget plus one C-REPS update, and cheap outcomes do not
         // each pay for a look at every request channel (telling one per pass capped the learner
@@ -369,13 +377,15 @@ pub(crate) fn serve(
         progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
         let serving = || serving_since.map_or(0.0, |since: Instant| since.elapsed().as_secs_f64());
         if progress.jobs_done == jobs.len() {
+            progress.serving_seconds = serving();
+            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
+            // Before the workers are told to stop: a host that watches whether its workers are
+            // still there (`acps run` ends a run whose workers all left) must still find them.
+            observer.progress(&progress);
             for (request, ..) in parked.drain(..) {
                 let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
             }
-            let _ = notifier.notify();
-            progress.serving_seconds = serving();
-            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
-            observer.progress(&progress);
+            let _ = waker.wake_all();
             return Ok(progress);
         }
         if last_tick.elapsed() >= TICK {
@@ -384,18 +394,15 @@ pub(crate) fn serve(
             progress.started_running = running;
             progress.serving_seconds = serving();
             progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
-            // Looking for dead workers lists the run's nodes, twice (about 0.3 ms each, 1% of
-            // the learner's time at a 50 ms tick). A worker that sent a request since the last
-            // tick is alive, so the look is due only once a connected worker fell silent (one
-            // that died is found a tick or two later), or a worker holding tasks is no longer
-            // connected (another process cleaned up after it).
             let mut connected = HashSet::new();
             services.tasks.dynamic_config().list_clients(|client| {
                 connected.insert(client.client_id);
                 CallbackProgression::Continue
             });
-            let look = connected.iter().any(|client| !heard.contains(client))
-                || holders.values().any(|client| !connected.contains(client));
+            // A started worker that exited may have held nothing: it is looked for at once, so
+            // that a fleet whose workers all exited is noticed.
+            let look = look_is_due(&holders, &heard, &connected) || running < last_running;
+            last_running = running;
             heard.clear();
             if look {
                 let Some(live) =
@@ -439,7 +446,7 @@ pub(crate) fn serve(
             std::thread::yield_now();
         } else {
             idle_since = None;
-            match listener.timed_wait(|_| {}, TICK) {
+            match listener.timed_wait(|_| {}, waker.until_heartbeat()) {
                 // Any signal interrupts the wait, also SIGSTOP and SIGCONT (a paused and resumed
                 // run): the loop goes on, and only `stop`, which the host's Ctrl-C handler sets,
                 // ends it.
@@ -448,6 +455,25 @@ pub(crate) fn serve(
             }
         }
     }
+}
+
+/// Whether the tick looks for dead workers. The look lists the run's nodes, twice, reading each
+/// node's files: 0.3 ms with 3 nodes, 11 ms with 129. A worker that sent a request since the last
+/// tick is alive (as is one answered since: `heard` has those too), and only the tasks of a dead
+/// worker need the look; so it is due only once a worker holding tasks fell silent for a tick
+/// after its answer (one that died is found a tick or two later), or is no longer
+/// connected (another process cleaned up after it). A dead worker that holds nothing is found
+/// once it is answered. With more workers than ready tasks most of them hold none and send
+/// nothing: looking for every silent one took 2/3 of the learner's CPU time at W = 128
+/// (docs/FLEET.md#oversubscription).
+fn look_is_due(
+    holders: &HashMap<(u32, u64), UniqueClientId>,
+    heard: &HashSet<UniqueClientId>,
+    connected: &HashSet<UniqueClientId>,
+) -> bool {
+    holders
+        .values()
+        .any(|client| !heard.contains(client) || !connected.contains(client))
 }
 
 /// Give the tasks held by workers that are gone back to their learners. Returns how many workers
@@ -576,8 +602,10 @@ fn refusal(mismatch: &Mismatch, identity: u64, jobs: &[FleetJob]) -> (Answer, St
 }
 
 /// Answer parked requests, each with as many ready tasks as it asks for of the environments its
-/// worker serves (round robin over the jobs), as soon as at least one is ready; returns how
-/// many tasks went out. Requests of hung workers stay parked.
+/// worker serves (round robin over the jobs), as soon as at least one is ready; tells
+/// `answered_to` of every worker answered; returns how many tasks went out and the time the
+/// learners took to hand them out. Requests of hung
+/// workers stay parked.
 fn answer(
     jobs: &mut [FleetJob],
     parked: &mut VecDeque<(TaskRequest, usize, Serves)>,
@@ -585,9 +613,10 @@ fn answer(
     holders: &mut HashMap<(u32, u64), UniqueClientId>,
     next_job: &mut usize,
     identity: u64,
-    progress: &mut FleetProgress,
-) -> Result<usize, FleetError> {
+    mut answered_to: impl FnMut(UniqueClientId),
+) -> Result<(usize, Duration), FleetError> {
     let mut answered = 0;
+    let mut asking = Duration::ZERO;
     // Allocated only when a request is waiting: most passes have none.
     let mut tasks = Vec::new();
     // What workers serve whose requests found nothing ready in this pass: the next request of
@@ -615,7 +644,7 @@ fn answer(
             tasks.push(WireTask::new(job as u32, &task, *jobs[job].environment())?);
             holders.insert((job as u32, task.id), request.origin());
         }
-        progress.learner_seconds += started.elapsed().as_secs_f64();
+        asking += started.elapsed();
         if tasks.is_empty() {
             if serves == Serves::Any {
                 // Nothing is ready for anyone: the request keeps its place.
@@ -627,9 +656,10 @@ fn answer(
             continue;
         }
         ipc::reply(&request, Answer::new(Response::Task, identity), &tasks)?;
+        answered_to(request.origin());
         answered += tasks.len();
     }
-    Ok(answered)
+    Ok((answered, asking))
 }
 
 /// The next ready task of an environment the worker `serves`, round robin over the jobs.

@@ -68,7 +68,7 @@ fn ask_tell_learns_the_cannon() {
 fn a_fleet_of_this_program_s_processes_learns_what_the_in_process_run_learns() {
     let stdout = run("fleet");
     assert!(stdout.contains("identical to the in-process run"), "{stdout}");
-    assert!(stdout.contains("1500 episodes, "), "{stdout}");
+    assert!(stdout.contains("outcomes for 1500 episodes"), "{stdout}");
     assert!(leftovers("cannon-").is_empty(), "{:?}", leftovers("cannon-"));
 }
 

@@ -182,6 +182,70 @@ fn reissued(stdout: &str) -> u64 {
         .unwrap_or(0)
 }
 
+/// The command lines of live processes that serve `run`: its learner (`--run NAME`) and the
+/// workers it started (`ACPS_RUN=NAME` in their environment).
+fn processes_of(run: &RunName) -> Vec<String> {
+    let mut found = Vec::new();
+    let variable = format!("{}={run}", acps_fleet::RUN_ENV);
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        // A zombie's command line is empty.
+        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let environ = std::fs::read(entry.path().join("environ")).unwrap_or_default();
+        let args: Vec<&[u8]> = cmdline.split(|b| *b == 0).collect();
+        let started = environ.split(|b| *b == 0).any(|v| v == variable.as_bytes());
+        if started
+            || args
+                .windows(2)
+                .any(|pair| pair == [b"--run".as_slice(), run.as_str().as_bytes()])
+        {
+            found.push(String::from_utf8_lossy(&cmdline).replace('\0', " "));
+        }
+    }
+    found
+}
+
+#[test]
+fn an_oversubscribed_fleet_finishes_with_the_in_process_result_and_leaves_nothing() {
+    // The most workers a run serves, on a machine of a few cores, for 6 jobs of one task in
+    // flight each: nearly every worker waits through the whole run. Such a fleet livelocked:
+    // idle workers listed the run's nodes on every tick, the learner woke all of them with every
+    // answer and looked for dead workers on every tick (docs/FLEET.md#oversubscription). The
+    // watchdog fails a run that does not finish.
+    let dir = temp_dir("oversubscribed");
+    let args = ["grid", "--sim", "rapier", "--runs", "1", "--episodes", "300", "-q"];
+    let reference = in_process(&args, &dir.join("in-process"));
+    let run = run_name("oversubscribed");
+    let out = dir.join("fleet");
+    let workers = ipc::MAX_WORKERS.to_string();
+    let output = watched()
+        .arg("run")
+        .args(args)
+        .args(["--workers", &workers, "--run", run.as_str()])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    check(output);
+    // A worker that could not join (an iceoryx2 limit) would print its error and leave the
+    // others to finish the run.
+    assert!(!stderr.contains("rror"), "{stderr}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_eq!(
+        std::fs::read(out.join("updates.csv")).unwrap(),
+        std::fs::read(dir.join("in-process").join("updates.csv")).unwrap()
+    );
+    assert_clean(&run);
+    assert_eq!(
+        processes_of(&run),
+        Vec::<String>::new(),
+        "processes of run {run} remain"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// Wait for `child` to exit, at most `limit`.
 fn wait_for(child: &mut Child, limit: Duration) -> Option<Duration> {
     let start = Instant::now();
@@ -264,7 +328,16 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
         .unwrap();
     // A worker started by hand joins the running learner by its run name.
     let mut victim = acps()
-        .args(["worker", "--run", run.as_str(), "--name", "victim", "--in-flight", "8", "-q"])
+        .args([
+            "worker",
+            "--run",
+            run.as_str(),
+            "--name",
+            "victim",
+            "--in-flight",
+            "8",
+            "-q",
+        ])
         .spawn()
         .unwrap();
     // The learner, its worker and the victim are in, and learning has begun.

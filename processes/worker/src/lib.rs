@@ -184,6 +184,31 @@ fn learner_alive(run: &RunName, services: &ipc::Services) -> Result<bool, IpcErr
     Ok(serving)
 }
 
+/// Whether the learner lives, asked cheaply unless `list`: the id of the learner's node holds the
+/// PID of its process, and /proc tells in one small file read whether that still runs. Listing
+/// the run's nodes ([`learner_alive`]) reads every node's files, 7-10 ms at 129 nodes; it
+/// decides when the PID's process is gone, and when `list` (a PID may be reused, or belong to
+/// another PID namespace).
+fn learner_lives(run: &RunName, services: &ipc::Services, list: bool) -> Result<bool, IpcError> {
+    if !list && learner_process_runs(services) {
+        return Ok(true);
+    }
+    learner_alive(run, services)
+}
+
+/// Whether the process that created the server's node (the learner) runs.
+fn learner_process_runs(services: &ipc::Services) -> bool {
+    let mut runs = false;
+    services.tasks.dynamic_config().list_servers(|server| {
+        runs |= server
+            .node_id
+            .pid::<iceoryx2::prelude::ipc::Service>()
+            .is_ok_and(|pid| ipc::process_runs(pid.value()));
+        CallbackProgression::Continue
+    });
+    runs
+}
+
 /// Serve the learner of `run` until it finishes, disappears or `stop` is set.
 pub fn serve(
     run: &RunName,
@@ -198,7 +223,7 @@ pub fn serve(
             got: options.in_flight.to_string(),
         });
     }
-    let node = ipc::node(run, &options.name)?;
+    let node = ipc::worker_node(run, &options.name)?;
     let services = ipc::open_services(&node)?;
     let started = Instant::now();
     while services.tasks.dynamic_config().number_of_servers() == 0 {
@@ -258,6 +283,7 @@ pub fn serve(
     let mut slowest = Duration::ZERO;
     let mut rollouts = 0;
     let mut idle_since = None;
+    let mut silence = Silence::default();
     // Requests sent since the learner was last woken.
     let mut unannounced = false;
     loop {
@@ -384,6 +410,8 @@ pub fn serve(
                 .push(wire_outcome)
                 .expect("a full outbox stops the simulation until it is sent");
             idle_since = None;
+            // A task came from a live learner.
+            silence.heard();
             continue;
         }
         let idle = *idle_since.get_or_insert_with(Instant::now);
@@ -398,11 +426,16 @@ pub fn serve(
             Err(ListenerWaitError::InterruptSignal) => 0,
             Err(error) => return Err(IpcError::new("waiting for the learner", error).into()),
         };
-        if woken == 0 && !learner_alive(run, &services)? {
-            return Ok(WorkerReport {
-                exit: WorkerExit::LearnerGone,
-                rollouts,
-            });
+        if woken > 0 {
+            silence.heard();
+        } else if silence.look_due() {
+            if !learner_lives(run, &services, silence.lists())? {
+                return Ok(WorkerReport {
+                    exit: WorkerExit::LearnerGone,
+                    rollouts,
+                });
+            }
+            silence.looked();
         }
     }
 }
@@ -424,6 +457,65 @@ fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves) -> String {
             "this worker belongs to run identity {identity:016x}, the learner runs {:016x}",
             answer.run
         ),
+    }
+}
+
+/// How long a waiting worker hears nothing from the learner before it looks whether the learner
+/// still lives ([`learner_lives`]). Idle workers looked on every silent tick by listing the run's
+/// nodes: at W = 128 that took more CPU than 2 cores have, and starved the learner
+/// (docs/FLEET.md#oversubscription). A live learner wakes every worker at least once per tick;
+/// so a worker looks only after [`Silence::FIRST_LOOK`] silent waits in a row, and at a learner
+/// found alive but silent (paused, or starved itself) again after twice as many, up to
+/// [`Silence::LAST_LOOK`]. Every [`Silence::LIST_EVERY`]th look lists the run's nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Silence {
+    /// Waits that timed out since the learner was last heard or looked at.
+    waits: u32,
+    /// Timed-out waits after which the next look is due.
+    look_after: u32,
+    /// Looks since the learner was last heard.
+    looks: u32,
+}
+
+impl Default for Silence {
+    fn default() -> Self {
+        Self {
+            waits: 0,
+            look_after: Self::FIRST_LOOK,
+            looks: 0,
+        }
+    }
+}
+
+impl Silence {
+    /// Two ticks: one heartbeat may come late.
+    const FIRST_LOOK: u32 = 2;
+    /// 32 ticks (1.6 s) between looks at a learner that stays silent.
+    const LAST_LOOK: u32 = 32;
+    /// The 8th look of a silence (after 8 s) lists the nodes, and every 8th after it (13 s).
+    const LIST_EVERY: u32 = 8;
+
+    /// The learner woke this worker.
+    fn heard(&mut self) {
+        *self = Self::default();
+    }
+
+    /// A wait timed out; true when the learner should be looked at now.
+    fn look_due(&mut self) -> bool {
+        self.waits += 1;
+        self.waits >= self.look_after
+    }
+
+    /// Whether the due look lists the run's nodes rather than trust the learner's PID.
+    fn lists(&self) -> bool {
+        self.looks % Self::LIST_EVERY == Self::LIST_EVERY - 1
+    }
+
+    /// The look found the learner alive.
+    fn looked(&mut self) {
+        self.waits = 0;
+        self.looks += 1;
+        self.look_after = (2 * self.look_after).min(Self::LAST_LOOK);
     }
 }
 
@@ -491,6 +583,39 @@ mod tests {
         // Rapier throws travel alone.
         assert!(!wakes_learner(2, 1, false));
         assert!(wakes_learner(1, 1, false), "one throw left");
+    }
+
+    #[test]
+    fn a_silent_learner_is_looked_at_after_two_silent_waits_then_ever_more_rarely() {
+        let mut silence = Silence::default();
+        // The silent waits at which the next `waits` looks, and whether each lists the nodes.
+        let looks = |silence: &mut Silence, waits: u32| {
+            let mut looks = Vec::new();
+            for wait in 1..=waits {
+                if silence.look_due() {
+                    looks.push((wait, silence.lists()));
+                    silence.looked();
+                }
+            }
+            looks
+        };
+        assert!(!silence.look_due(), "one late heartbeat is no reason to look");
+        assert!(silence.look_due());
+        assert!(!silence.lists(), "the first look trusts the PID");
+        silence.looked();
+        // Then after 4, 8, 16 and every 32 silent waits; the 8th look lists the nodes.
+        let after: Vec<(u32, bool)> = looks(&mut silence, 4 + 8 + 16 + 32 * 12);
+        let waits: Vec<u32> = after.iter().map(|(wait, _)| *wait).collect();
+        assert_eq!(&waits[..5], [4, 12, 28, 60, 92]);
+        let listing: Vec<usize> = after
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, l))| *l)
+            .map(|(i, _)| i + 2)
+            .collect();
+        assert_eq!(listing, [8, 16], "the looks that list, counted from the first");
+        silence.heard();
+        assert_eq!(silence, Silence::default(), "a heartbeat starts over");
     }
 
     #[test]

@@ -147,10 +147,27 @@ pub fn quiet_iceoryx2_log() {
 /// A node of `run` named `name`. Signal handling stays with the host program (library code must
 /// not swallow SIGINT/SIGTERM).
 pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
+    node_with(run, name, &run.config()?)
+}
+
+/// A worker's node of `run`, like [`node`], that leaves looking for dead nodes to the learner.
+/// iceoryx2 looks when a node is created or dropped and whenever it opens a service, and each
+/// look reads the files of every node of the run (50-80 us per node): 128 workers that start
+/// or leave together spent seconds of CPU on them (docs/FLEET.md#oversubscription). The learner
+/// cleans up when it starts, on its looks for dead workers, and at the end of the run.
+pub fn worker_node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
+    let mut config = run.config()?;
+    config.global.node.cleanup_dead_nodes_on_creation = false;
+    config.global.node.cleanup_dead_nodes_on_destruction = false;
+    config.global.service.cleanup_dead_nodes_on_open = false;
+    node_with(run, name, &config)
+}
+
+fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Service>, IpcError> {
     let node_name = NodeName::new(name).map_err(|e| IpcError::new(format!("node name '{name}'"), e))?;
     NodeBuilder::new()
         .name(&node_name)
-        .config(&run.config()?)
+        .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .map_err(|e| IpcError::new(format!("creating node '{name}' of run '{run}'"), e))
@@ -386,13 +403,13 @@ pub fn clean_dead_runs() -> Vec<RunName> {
     cleaned
 }
 
-/// Whether process `pid` runs: it exists and is not a zombie (whose parent died too, and whose
-/// new parent may never reap it).
-fn process_exists(pid: i32) -> bool {
+/// Whether process `pid` runs: it exists and is no zombie (a killed process whose parent has not
+/// reaped it, or whose new parent never will, is gone).
+pub fn process_runs(pid: i32) -> bool {
     std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
         // "pid (comm) state ...": comm may hold spaces and parentheses, so read after the last ')'.
         stat.rsplit_once(')')
-            .is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
+            .is_some_and(|(_, rest)| !rest.trim_start().starts_with(['Z', 'X']))
     })
 }
 
@@ -413,7 +430,7 @@ fn node_states(run: &RunName) -> Result<NodeStates, IpcError> {
                 if view
                     .details()
                     .as_ref()
-                    .is_some_and(|details| !process_exists(details.process_id().value())) =>
+                    .is_some_and(|details| !process_runs(details.process_id().value())) =>
             {
                 states.dead += 1
             }
@@ -531,6 +548,26 @@ mod tests {
         }
         remove_run_files(&run).unwrap();
         assert!(leftover_files(&run).is_empty());
+    }
+
+    #[test]
+    fn a_process_that_is_gone_or_a_zombie_does_not_run() {
+        assert!(process_runs(std::process::id() as i32));
+        assert!(!process_runs(i32::MAX), "beyond Linux's largest PID");
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let pid = child.id() as i32;
+        let state = || {
+            let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+            stat.rsplit_once(") ").unwrap().1.chars().next().unwrap()
+        };
+        let start = std::time::Instant::now();
+        while state() != 'Z' {
+            assert!(start.elapsed() < Duration::from_secs(10), "`true` did not exit");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert!(!process_runs(pid), "exited, not yet reaped");
+        child.wait().unwrap();
+        assert!(!process_runs(pid), "reaped");
     }
 
     #[test]
