@@ -604,8 +604,7 @@ fn refusal(mismatch: &Mismatch, identity: u64, jobs: &[FleetJob]) -> (Answer, St
 /// Answer parked requests, each with as many ready tasks as it asks for of the environments its
 /// worker serves (round robin over the jobs), as soon as at least one is ready; tells
 /// `answered_to` of every worker answered; returns how many tasks went out and the time the
-/// learners took to hand them out. Requests of hung
-/// workers stay parked.
+/// learners took to hand them out. Requests of hung workers stay parked.
 fn answer(
     jobs: &mut [FleetJob],
     parked: &mut VecDeque<(TaskRequest, usize, Serves)>,
