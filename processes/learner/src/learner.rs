@@ -421,7 +421,7 @@ impl LearnerSnapshot {
 ///
 /// ```
 /// use acps_learner::{Learner, LearnerConfig, SelectorConfig};
-/// use acps_shared::{ContextSpace, Outcome, Problem, ScoreAggregate, Task};
+/// use acps_shared::{ContextSpace, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Task};
 ///
 /// // Learn theta(s) = (s, -s) for contexts s in [0, 1]; the return is minus the squared error.
 /// let problem = Problem {
@@ -432,6 +432,8 @@ impl LearnerSnapshot {
 ///     theta0: vec![0.0, 0.0],
 ///     score: ScoreAggregate::Mean,
 ///     metric: "mean squared error".into(),
+///     // What performs the rollouts: a name and a hash of its settings (none here).
+///     environment: EnvironmentSpec::new("line", [0; 3], &())?,
 /// };
 /// let simulate = |task: &Task| {
 ///     let s = task.context[0];

@@ -153,7 +153,7 @@ impl BanditConfig {
 /// ```
 /// use acps_learner::selection::{DUcbConfig, IntrinsicReward, SaggRiacConfig};
 /// use acps_learner::{BanditConfig, Baseline, Method, SelectorConfig};
-/// use acps_shared::{ContextSpace, Problem, ScoreAggregate};
+/// use acps_shared::{ContextSpace, EnvironmentSpec, Problem, ScoreAggregate};
 ///
 /// let problem = Problem {
 ///     name: "five contexts".into(),
@@ -163,6 +163,7 @@ impl BanditConfig {
 ///     theta0: vec![0.0],
 ///     score: ScoreAggregate::Mean,
 ///     metric: "error".into(),
+///     environment: EnvironmentSpec::new("five-contexts", [0; 3], &())?,
 /// };
 ///
 /// // The paper's proposal with the defaults: D-UCB with monotonic progress.
