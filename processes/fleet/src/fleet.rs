@@ -33,7 +33,7 @@ type WorkerCommand = Box<dyn Fn(usize) -> Command>;
 struct Spawn {
     count: usize,
     command: WorkerCommand,
-    nice: Option<u8>,
+    nice: u8,
 }
 
 /// Configures a [`Fleet`]; [`start`](Self::start) starts it.
@@ -57,7 +57,8 @@ struct Spawn {
 pub struct FleetBuilder {
     name: String,
     identity: Option<u64>,
-    spawn: Option<Spawn>,
+    spawn: Option<(usize, WorkerCommand)>,
+    nice: Option<u8>,
     liveness: Option<Liveness>,
     spin: Option<Duration>,
     start_with: usize,
@@ -74,6 +75,16 @@ pub enum FleetStartError {
     /// [`FleetBuilder::ctrl_c`] off and set [`Fleet::stop_flag`] from your handler instead.
     #[error("installing the Ctrl-C handler: {0}")]
     CtrlC(String),
+    /// A setting outside the range that makes sense for it.
+    #[error("fleet setting {field} must be {accepted}, got {got}")]
+    Setting {
+        /// The setting.
+        field: &'static str,
+        /// The accepted range.
+        accepted: &'static str,
+        /// The value given.
+        got: String,
+    },
 }
 
 impl FleetBuilder {
@@ -91,11 +102,7 @@ impl FleetBuilder {
     /// this the fleet starts none and serves the workers that join (then it waits for them,
     /// unless [`Liveness::no_workers`] is set).
     pub fn spawn_workers(mut self, count: usize, command: impl Fn(usize) -> Command + 'static) -> Self {
-        self.spawn = Some(Spawn {
-            count,
-            command: Box::new(command),
-            nice: None,
-        });
+        self.spawn = Some((count, Box::new(command)));
         self
     }
 
@@ -103,9 +110,7 @@ impl FleetBuilder {
     /// outnumber the cores, else 0. Every worker waits for the learner's answers, so the learner
     /// should get a core as soon as it wakes.
     pub fn worker_niceness(mut self, nice: u8) -> Self {
-        if let Some(spawn) = &mut self.spawn {
-            spawn.nice = Some(nice.min(processes::MAX_NICE));
-        }
+        self.nice = Some(nice);
         self
     }
 
@@ -142,6 +147,43 @@ impl FleetBuilder {
     /// nodes of this run (workers started by hand may already wait for it).
     pub fn start(self) -> Result<Fleet, FleetStartError> {
         let run = RunName::new(&self.name).map_err(FleetStartError::Name)?;
+        let setting = |ok: bool, field, accepted, got: String| {
+            if ok {
+                Ok(())
+            } else {
+                Err(FleetStartError::Setting { field, accepted, got })
+            }
+        };
+        if let Some(nice) = self.nice {
+            setting(
+                nice <= processes::MAX_NICE,
+                "worker_niceness",
+                "in 0..=19",
+                nice.to_string(),
+            )?;
+        }
+        if let Some(liveness) = &self.liveness {
+            setting(
+                liveness.silence > Duration::ZERO,
+                "liveness.silence",
+                "> 0 (how long a worker holding tasks may say nothing)",
+                format!("{:?}", liveness.silence),
+            )?;
+            setting(
+                liveness.rollout_factor >= 1,
+                "liveness.rollout_factor",
+                ">= 1 (times the slowest rollout)",
+                liveness.rollout_factor.to_string(),
+            )?;
+            if let Some(grace) = liveness.no_workers {
+                setting(
+                    grace > Duration::ZERO,
+                    "liveness.no_workers",
+                    "> 0, or None to wait for workers for ever",
+                    format!("{grace:?}"),
+                )?;
+            }
+        }
         if self.ctrl_c {
             CTRL_C
                 .get_or_init(|| {
@@ -157,7 +199,7 @@ impl FleetBuilder {
         // Listing nodes can fail while one is being created or removed; the next start looks
         // again.
         let _ = ipc::clean_stale(&run);
-        let workers = self.spawn.as_ref().map_or(0, |s| s.count);
+        let workers = self.spawn.as_ref().map_or(0, |(count, _)| *count);
         let liveness = self.liveness.unwrap_or(Liveness {
             no_workers: (workers > 0).then_some(Liveness::default().no_workers).flatten(),
             ..Liveness::default()
@@ -166,7 +208,11 @@ impl FleetBuilder {
             run,
             identity: self.identity,
             spin: self.spin.unwrap_or_else(|| processes::spin(workers)),
-            spawn: self.spawn,
+            spawn: self.spawn.map(|(count, command)| Spawn {
+                count,
+                command,
+                nice: self.nice.unwrap_or_else(|| processes::default_nice(count)),
+            }),
             liveness,
             start_with: self.start_with,
             ctrl_c: self.ctrl_c,
@@ -209,6 +255,7 @@ impl Fleet {
             name: name.into(),
             identity: None,
             spawn: None,
+            nice: None,
             liveness: None,
             spin: None,
             start_with: 0,
@@ -280,7 +327,7 @@ impl Drop for Fleet {
 
 /// Start `spawn`'s worker processes for `run`.
 fn start_workers(run: &RunName, spawn: &Spawn) -> Result<Vec<Child>, FleetError> {
-    let nice = spawn.nice.unwrap_or_else(|| processes::default_nice(spawn.count));
+    let nice = spawn.nice;
     let mut children = Vec::with_capacity(spawn.count);
     for index in 0..spawn.count {
         let mut command = (spawn.command)(index);
@@ -313,4 +360,52 @@ fn identity_of(jobs: &[FleetJob]) -> u64 {
         let learner = job.learner();
         acps_shared::fnv1a(hash, format!("{:?} {}", learner.problem(), learner.seed()).as_bytes())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The message `builder` fails to start with.
+    fn refusal(builder: FleetBuilder) -> String {
+        match builder.start() {
+            Err(error) => error.to_string(),
+            Ok(_) => panic!("the fleet started"),
+        }
+    }
+
+    #[test]
+    fn bad_settings_are_refused_naming_the_setting_and_its_range() {
+        let fleet = || Fleet::builder("settings");
+        let liveness = |change: fn(&mut Liveness)| {
+            let mut liveness = Liveness::default();
+            change(&mut liveness);
+            fleet().liveness(liveness)
+        };
+        let cases = [
+            (
+                Fleet::builder("a_b"),
+                "run name: 'a_b' must be 1 to 40 characters of letters, digits and '-'",
+            ),
+            (
+                fleet().worker_niceness(20),
+                "fleet setting worker_niceness must be in 0..=19, got 20",
+            ),
+            (
+                liveness(|l| l.silence = Duration::ZERO),
+                "fleet setting liveness.silence must be > 0 (how long a worker holding tasks may say nothing), got 0ns",
+            ),
+            (
+                liveness(|l| l.rollout_factor = 0),
+                "fleet setting liveness.rollout_factor must be >= 1 (times the slowest rollout), got 0",
+            ),
+            (
+                liveness(|l| l.no_workers = Some(Duration::ZERO)),
+                "fleet setting liveness.no_workers must be > 0, or None to wait for workers for ever, got 0ns",
+            ),
+        ];
+        for (builder, message) in cases {
+            assert_eq!(refusal(builder), message);
+        }
+    }
 }

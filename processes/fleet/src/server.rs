@@ -217,12 +217,6 @@ impl<F: FnMut(&FleetProgress)> Observer for F {
     }
 }
 
-/// What the server knows of a worker.
-struct Client {
-    /// When its last request arrived.
-    heard: Instant,
-}
-
 /// Serve `jobs` to the workers of `run` until every job is done. `started` says how many worker
 /// processes the caller started are still running (they count as workers on their way).
 pub(crate) fn serve(
@@ -262,7 +256,8 @@ pub(crate) fn serve(
     // Workers that asked for tasks, until `start_with` have; then the time the first tasks went out.
     let mut waiting_for = HashSet::new();
     let mut serving_since = None;
-    let mut clients: HashMap<UniqueClientId, Client> = HashMap::new();
+    // When each worker's last request arrived.
+    let mut last_heard: HashMap<UniqueClientId, Instant> = HashMap::new();
     // Workers found hung: they get no tasks until they speak again.
     let mut hung: HashSet<UniqueClientId> = HashSet::new();
     let mut slowest_rollout = Duration::ZERO;
@@ -273,7 +268,7 @@ pub(crate) fn serve(
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
             active_now = true;
             heard.insert(request.origin());
-            clients.insert(request.origin(), Client { heard: Instant::now() });
+            last_heard.insert(request.origin(), Instant::now());
             if hung.remove(&request.origin()) {
                 tracing::info!("run '{run}': a worker found hung speaks again");
             }
@@ -420,8 +415,8 @@ pub(crate) fn serve(
                 .silence
                 .max(slowest_rollout * options.liveness.rollout_factor);
             progress.reissued +=
-                reissue_tasks_of_silent_workers(run, jobs, &mut holders, &clients, &mut hung, deadline);
-            clients.retain(|client, _| connected.contains(client));
+                reissue_tasks_of_silent_workers(run, jobs, &mut holders, &last_heard, &mut hung, deadline);
+            last_heard.retain(|client, _| connected.contains(client));
             hung.retain(|client| connected.contains(client));
             if progress.workers > 0 || progress.started_running > 0 {
                 without_workers = None;
@@ -518,11 +513,11 @@ fn reissue_tasks_of_silent_workers(
     run: &RunName,
     jobs: &mut [FleetJob],
     holders: &mut HashMap<(u32, u64), UniqueClientId>,
-    clients: &HashMap<UniqueClientId, Client>,
+    last_heard: &HashMap<UniqueClientId, Instant>,
     hung: &mut HashSet<UniqueClientId>,
     deadline: Duration,
 ) -> u64 {
-    let silent = |client: &UniqueClientId| clients.get(client).is_some_and(|c| c.heard.elapsed() > deadline);
+    let silent = |client: &UniqueClientId| last_heard.get(client).is_some_and(|heard| heard.elapsed() > deadline);
     let mut reissued = 0;
     holders.retain(|&(job, task_id), client| {
         if !silent(client) {

@@ -78,10 +78,10 @@ impl RunName {
         if valid {
             Ok(Self(name.to_string()))
         } else {
-            Err(IpcError::new(
-                "run name",
-                format!("'{name}' must be 1 to 40 characters of letters, digits and '-'"),
-            ))
+            Err(IpcError {
+                what: "run name".into(),
+                reason: format!("'{name}' must be 1 to 40 characters of letters, digits and '-'"),
+            })
         }
     }
 
@@ -446,10 +446,10 @@ pub fn remove_run_files(run: &RunName) -> Result<usize, IpcError> {
     clean_stale(run)?;
     let alive = live_nodes(run)?;
     if alive > 0 {
-        return Err(IpcError::new(
-            format!("removing the files of run '{run}'"),
-            format!("{alive} node(s) still alive"),
-        ));
+        return Err(IpcError {
+            what: format!("removing the files of run '{run}'"),
+            reason: format!("{alive} node(s) still alive"),
+        });
     }
     let files = leftover_files(run);
     let count = files.len();

@@ -1,15 +1,9 @@
 //! The `acps experiment` command-line contract: files written, summary.json fields, and errors
 //! that name the bad option.
 
+use crate::acps;
 use std::path::Path;
 use std::process::Command;
-
-fn acps(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_acps"))
-        .args(args)
-        .output()
-        .expect("acps runs")
-}
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("acps-cli-{name}-{}", std::process::id()));
@@ -138,7 +132,12 @@ fn toy_without_panel_writes_all_four_and_function_runs_one_method() {
 
 #[test]
 fn bad_options_are_refused_naming_the_option() {
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
+        (&["worker"], "--run is missing: name the run to join"),
+        (
+            &["run", "grid", "--run", "a_b"],
+            "'a_b' must be 1 to 40 characters of letters, digits and '-'",
+        ),
         (
             &["experiment", "toy", "--panel", "e"],
             "--panel must be one of a, b, c, d",
@@ -338,7 +337,12 @@ fn bench_writes_its_table_and_json() {
 
 #[test]
 fn fleet_options_are_checked_before_anything_starts() {
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
+        (&["worker"], "--run is missing: name the run to join"),
+        (
+            &["run", "grid", "--run", "a_b"],
+            "'a_b' must be 1 to 40 characters of letters, digits and '-'",
+        ),
         (
             &["run", "grid", "--worker-in-flight", "0"],
             "--worker-in-flight must be in 1..=128, got 0",

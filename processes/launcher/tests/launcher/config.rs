@@ -1,16 +1,9 @@
 //! Experiment files: the shipped ones validate and match the command-line defaults, bad files are
 //! refused with file, line and accepted range, and a run's resolved file re-runs it bit for bit.
 
+use crate::acps;
 use acps::config::{ExperimentFile, ExperimentName, LoadedFile, Plan, SimName};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn acps(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_acps"))
-        .args(args)
-        .output()
-        .expect("acps runs")
-}
 
 fn succeeds(args: &[&str]) {
     let out = acps(args);

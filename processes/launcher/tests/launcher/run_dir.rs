@@ -1,17 +1,11 @@
 //! The run directory's tables, policies and pictures, and `acps evaluate` replaying a saved
 //! policy.
 
+use crate::acps;
 use std::ops::Deref;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::sync::atomic::{AtomicUsize, Ordering};
-
-fn acps(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_acps"))
-        .args(args)
-        .output()
-        .expect("acps runs")
-}
 
 fn stdout(out: &Output) -> String {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
