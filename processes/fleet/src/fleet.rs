@@ -221,7 +221,9 @@ impl FleetBuilder {
     }
 }
 
-/// One run of learners served to worker processes: see the [module](self).
+/// One run of learners served to worker processes: it owns the run's name and identity, removes
+/// what dead runs left when it starts, starts and reaps worker processes, stops on Ctrl-C or when
+/// no worker can go on, and removes its shared memory when dropped.
 ///
 /// ```no_run
 /// use acps_fleet::{Fleet, FleetJob};

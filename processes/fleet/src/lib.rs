@@ -5,7 +5,8 @@
 //! - [`server`]: how tasks go out and outcomes come back, many learner cores at once; the
 //!   tasks of workers that die or hang are re-issued ([`Liveness`]).
 //! - [`processes`]: the scheduling priority of worker processes.
-//! - [`wake`]: how the learner wakes its workers: only those it answered, all once per tick.
+//! - `wake` (internal): how the learner wakes its workers: only those it answered, all once per
+//!   tick.
 //!
 //! Workers are `acps-worker`'s [`serve`](https://docs.rs/acps-worker) in any process; a
 //! fleet's results are bit for bit those of the same learners driven in-process.
@@ -14,7 +15,7 @@
 mod fleet;
 pub mod processes;
 pub mod server;
-pub mod wake;
+mod wake;
 
 pub use acps_wire::ipc::RunName;
 pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};

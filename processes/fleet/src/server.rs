@@ -179,7 +179,7 @@ impl Default for Liveness {
     }
 }
 
-/// How [`serve`] serves.
+/// How [`Fleet::serve`](crate::Fleet::serve) serves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ServeOptions {
     /// The run's identity (a hash of its configuration), checked against every worker's requests.

@@ -51,11 +51,6 @@ impl Waker {
         }
     }
 
-    /// True when an answered worker waits for its wake-up.
-    pub fn has_answered(&self) -> bool {
-        !self.answered.is_empty()
-    }
-
     /// Wake the workers answered since the last call, each alone.
     pub fn wake_answered(&mut self, tasks: &TaskService) -> Result<(), IpcError> {
         let mut answered = std::mem::take(&mut self.answered);

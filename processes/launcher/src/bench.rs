@@ -84,7 +84,7 @@ pub struct BenchOptions {
     pub max_workers: usize,
     /// Tasks each worker keeps in flight.
     pub worker_in_flight: usize,
-    /// Niceness of the workers (default: [`workers::default_nice`]).
+    /// Niceness of the workers (default: [`acps_fleet::processes::default_nice`]).
     pub worker_nice: Option<u8>,
     /// Multiplies the amount of work per row (1 = a few seconds per row).
     pub scale: f64,
