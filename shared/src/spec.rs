@@ -5,6 +5,9 @@ use crate::{FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
+/// The name of [`EnvironmentSpec::unnamed`].
+const UNNAMED: &str = "unnamed";
+
 /// Most bytes of an environment's name (a fixed capacity, so that a spec crosses a wire as is).
 pub const MAX_NAME: usize = 32;
 
@@ -46,6 +49,31 @@ impl EnvironmentSpec {
     pub fn new(name: &str, parameters: [u64; 3], settings: &impl fmt::Debug) -> Result<Self, SpecBuildError> {
         let text = format!("{settings:?}");
         Self::from_parts(name.as_bytes(), fnv1a(FNV_OFFSET, text.as_bytes()), parameters)
+    }
+
+    /// The spec of an environment whose settings are given as text, such as a problem file's
+    /// `settings` string: the hash is FNV-1a (64 bit) of the text's UTF-8 bytes, so a worker in
+    /// any language computes the same spec from the same text (docs/PROTOCOL.md).
+    ///
+    /// ```
+    /// use acps_shared::EnvironmentSpec;
+    /// let spec = EnvironmentSpec::from_text("reach-2d", [1, 0, 0], "dt=0.01").unwrap();
+    /// assert_eq!(spec.to_string(), "reach-2d [1, 0, 0] (settings 30178b206d634ad5)");
+    /// ```
+    pub fn from_text(name: &str, parameters: [u64; 3], settings: &str) -> Result<Self, SpecBuildError> {
+        Self::from_parts(name.as_bytes(), fnv1a(FNV_OFFSET, settings.as_bytes()), parameters)
+    }
+
+    /// The identity of an environment nobody named: a problem file without one, and a worker
+    /// that declares none, have it, so that they match each other and nothing else
+    /// (docs/PROTOCOL.md, "Environment identity").
+    pub fn unnamed() -> Self {
+        Self::from_text(UNNAMED, [0; 3], "").expect("a valid name")
+    }
+
+    /// Whether this is [`EnvironmentSpec::unnamed`].
+    pub fn is_unnamed(&self) -> bool {
+        *self == Self::unnamed()
     }
 
     /// A spec from its parts as they were stored or sent: `name` may be padded with zeros.
@@ -94,6 +122,9 @@ impl EnvironmentSpec {
 /// `contextual-function [2, 20, 7] (settings 9f3a0c12d4e5b6a7)`.
 impl fmt::Display for EnvironmentSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.is_unnamed() {
+            return f.write_str("no named environment");
+        }
         let [a, b, c] = self.parameters;
         write!(f, "{} [{a}, {b}, {c}] (settings {:016x})", self.name(), self.settings)
     }
@@ -183,6 +214,21 @@ mod tests {
             spec(0.008).to_string(),
             format!("arm.v2 [1, 0, 0] (settings {:016x})", spec(0.008).settings())
         );
+    }
+
+    #[test]
+    fn text_settings_hash_their_bytes_and_unnamed_matches_only_itself() {
+        let spec = EnvironmentSpec::from_text("reach-2d", [1, 0, 0], "dt=0.01").unwrap();
+        assert_eq!(spec.settings(), fnv1a(FNV_OFFSET, b"dt=0.01"));
+        assert_ne!(
+            spec,
+            EnvironmentSpec::new("reach-2d", [1, 0, 0], &"dt=0.01").unwrap(),
+            "Debug quotes"
+        );
+        let unnamed = EnvironmentSpec::unnamed();
+        assert!(unnamed.is_unnamed() && !spec.is_unnamed());
+        assert_eq!(unnamed.to_string(), "no named environment");
+        assert!(!EnvironmentSpec::from_text("unnamed", [0; 3], "x").unwrap().is_unnamed());
     }
 
     #[test]

@@ -50,6 +50,10 @@ pub(crate) enum Command {
     /// --target points or at the problem's test contexts, printing the landing point, error and
     /// reward of every throw (the return of every context for the contextual function).
     Evaluate(EvaluateArgs),
+    /// Print the wire protocol's layout as JSON: every payload's fields (type, offset, size,
+    /// alignment), the iceoryx2 type names, capacities, codes and service settings. Workers in
+    /// other languages are tested against it; docs/PROTOCOL.md explains it.
+    Protocol,
 }
 
 #[derive(clap::Args)]
@@ -257,6 +261,10 @@ impl Cli {
             Command::Worker(args) => commands::worker(args),
             Command::Bench(args) => commands::bench(args),
             Command::Evaluate(args) => commands::evaluate(args),
+            Command::Protocol => {
+                println!("{}", serde_json::to_string_pretty(&acps_wire::layout::describe())?);
+                Ok(())
+            }
         }
     }
 

@@ -59,8 +59,32 @@ impl IpcError {
 /// The environment variable that names the run a started worker process joins.
 pub const RUN_ENV: &str = "ACPS_RUN";
 
-/// How long a process waits for another to finish creating a service of the run.
-const CREATION_TIMEOUT: Duration = Duration::from_secs(10);
+/// The settings every process opens a run's services with: whoever creates a service fixes them,
+/// and iceoryx2 refuses an opener that asks for more (docs/PROTOCOL.md lists them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ServiceLimits {
+    /// Most nodes of a service: every worker and the learner, with room for a few tools.
+    pub nodes: usize,
+    /// Most requests of one client the task service holds: the asking ones and one delivery.
+    pub active_requests_per_client: usize,
+    /// Answers one request may have waiting.
+    pub response_buffer: usize,
+    /// Requests one client may have loaned at once.
+    pub loaned_requests: usize,
+    /// How long a process waits for another to finish creating a service of the run (iceoryx2
+    /// waits 1 s by default; a loaded machine starting many processes at once can take longer,
+    /// and only a creator that died makes everyone wait the whole time).
+    pub creation_timeout: Duration,
+}
+
+/// The limits of every run.
+pub const LIMITS: ServiceLimits = ServiceLimits {
+    nodes: MAX_WORKERS + 8,
+    active_requests_per_client: MAX_ASKING_REQUESTS + 1,
+    response_buffer: 2,
+    loaned_requests: 2,
+    creation_timeout: Duration::from_secs(10),
+};
 
 /// What the files of every acps run start with.
 const PREFIX: &str = "acps_";
@@ -113,10 +137,7 @@ impl RunName {
         let mut config = Config::default();
         config.global.prefix =
             FileName::new(self.prefix().as_bytes()).map_err(|e| IpcError::new("the run's iceoryx2 prefix", e))?;
-        // iceoryx2 waits this long for another process to finish creating a service (1 s by
-        // default). A loaded machine starting many processes at once can take longer; only a
-        // creator that died makes everyone wait the whole time.
-        config.global.creation_timeout = CREATION_TIMEOUT;
+        config.global.creation_timeout = LIMITS.creation_timeout;
         Ok(config)
     }
 }
@@ -178,7 +199,7 @@ const DIED_CREATING: &str = "a process of this run died while creating it";
 
 /// Open (or create) every service of the run on `node`.
 pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
-    let nodes = MAX_WORKERS + 8;
+    let nodes = LIMITS.nodes;
     let service_name =
         |name: &str| ServiceName::new(name).map_err(|e| IpcError::new(format!("service name '{name}'"), e));
     let tasks = node
@@ -188,9 +209,9 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         .max_servers(1)
         .max_clients(MAX_WORKERS)
         .max_nodes(nodes)
-        .max_active_requests_per_client(MAX_ASKING_REQUESTS + 1)
-        .max_response_buffer_size(2)
-        .max_loaned_requests(2)
+        .max_active_requests_per_client(LIMITS.active_requests_per_client)
+        .max_response_buffer_size(LIMITS.response_buffer)
+        .max_loaned_requests(LIMITS.loaned_requests)
         .open_or_create()
         .map_err(|e| {
             use iceoryx2::service::builder::request_response::{

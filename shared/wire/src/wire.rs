@@ -15,7 +15,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use std::time::Duration;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 6;
+pub const PROTOCOL_VERSION: u32 = 7;
 /// Largest context a task can carry (docs/CHOICES.md: why 8).
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -28,6 +28,7 @@ pub const MAX_BATCH: usize = 32;
 /// An [`EnvironmentSpec`] as it crosses the wire (all zeros: none).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
+#[type_name("acps::WireEnvironment")]
 pub struct WireEnvironment {
     /// [`EnvironmentSpec::name`], padded with zeros.
     pub name: [u8; MAX_NAME],
@@ -84,6 +85,7 @@ pub enum Refusal {
 /// One task of an answer.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
+#[type_name("acps::WireTask")]
 pub struct WireTask {
     /// The learner's [`TaskKind`] (0 train, 1 evaluate, 2 baseline).
     pub kind: u32,
@@ -129,6 +131,7 @@ pub struct Answer {
 /// One outcome of a [`WorkerMessage`].
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
+#[type_name("acps::WireOutcome")]
 pub struct WireOutcome {
     /// The outcome's job.
     pub job: u32,
