@@ -369,7 +369,17 @@ impl ContextGrid {
             if n == 1 {
                 return vec![low + (high - low) / 2.0];
             }
-            (0..n).map(|i| low + (high - low) * i as f64 / (n - 1) as f64).collect()
+            // The last point is `high` itself: interpolated, it can round past it (-0.2 .. 0.4
+            // in 4 points gave 0.4000000000000001), outside the box the file states.
+            (0..n)
+                .map(|i| {
+                    if i + 1 == n {
+                        high
+                    } else {
+                        low + (high - low) * i as f64 / (n - 1) as f64
+                    }
+                })
+                .collect()
         };
         let mut points = vec![Vec::with_capacity(dim)];
         for d in 0..dim {
@@ -470,5 +480,13 @@ mod tests {
             ..too_many
         };
         assert_eq!(overflow.expand(), None);
+        let rounding = ContextGrid {
+            low: vec![-0.2],
+            high: vec![0.4],
+            points: vec![4],
+        };
+        let axis: Vec<f64> = rounding.expand().unwrap().concat();
+        assert_eq!((axis[0], axis[3]), (-0.2, 0.4), "the ends are the box's own");
+        assert!(axis.windows(2).all(|w| w[0] < w[1]), "{axis:?}");
     }
 }
