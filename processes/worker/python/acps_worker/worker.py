@@ -15,6 +15,7 @@ import os
 import signal
 import threading
 import time
+import traceback
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -440,16 +441,19 @@ class _Session:
         return self.learner_pid is not None
 
     def failure(self, task: Task, why: str, exc: bool = False) -> None:
-        """Count a failed rollout; log the first with its reason (and traceback)."""
+        """Count a failed rollout; log the first with its reason (and the traceback of the
+        exception being handled when ``exc``, as text: a record holding the traceback itself
+        would keep this worker's frames, and with them its shared memory, alive)."""
         self.failed += 1
         if not self.logged_failure:
             self.logged_failure = True
+            trace = "\n" + traceback.format_exc().rstrip() if exc else ""
             log.error(
-                "rollout of task %d (job %d) failed: %s; later failures are counted, not logged",
+                "rollout of task %d (job %d) failed: %s; later failures are counted, not logged%s",
                 task.id,
                 task.job,
                 why,
-                exc_info=exc,
+                trace,
             )
 
     def serve(self) -> Report:
@@ -569,8 +573,10 @@ class _Session:
                                     )
                             queue.extend(tasks)
                     elif code == _wire.RESPONSE_STOP:
+                        _delete(response)
                         return self.report(Exit.FINISHED)
                     else:
+                        _delete(response)
                         raise RefusedError(
                             self.run,
                             refusal_reason(answer, identity, self.environment, self.protocol),
