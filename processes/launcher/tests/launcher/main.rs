@@ -6,6 +6,7 @@ use std::process::{Command, Output};
 mod cli;
 mod config;
 mod fleet;
+mod python;
 mod run_dir;
 
 /// `acps args`, run to its end.
