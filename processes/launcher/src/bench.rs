@@ -169,14 +169,16 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                 methods: Some(vec![Method::MonotonicProgress]),
                 ..Options::default()
             };
-            Ok(paper::grid(sim, &options)
+            paper::grid(sim, &options)
                 .jobs()?
                 .into_iter()
-                .map(|job| Job {
-                    learner: job.learner,
-                    environment: job.environment,
+                .map(|job| {
+                    Ok(Job {
+                        learner: job.learner,
+                        environment: job.environment.context("the grid's jobs have an environment")?,
+                    })
                 })
-                .collect())
+                .collect()
         }
     }
 }

@@ -9,7 +9,7 @@ use acps_learner::Learner;
 use acps_learner::checkpoint::{
     self, Checkpoint, CheckpointApplyError, CheckpointReadError, CheckpointWriteError, Stamp,
 };
-use acps_shared::Environment;
+use acps_shared::{Environment, EnvironmentRestoreError};
 use std::path::{Path, PathBuf};
 
 /// Where a run keeps its checkpoints, how often it writes them, and whether it starts from them.
@@ -124,7 +124,11 @@ impl Writer {
 
     /// Called after every outcome told to `learner`: writes a checkpoint when the learner has
     /// completed another `every` rounds, and once when it is done.
-    pub fn after_tell(&mut self, learner: &Learner, environment: &dyn Environment) -> Result<(), CheckpointsError> {
+    pub fn after_tell(
+        &mut self,
+        learner: &Learner,
+        environment: Option<&dyn Environment>,
+    ) -> Result<(), CheckpointsError> {
         if self.every == 0 || self.finished {
             return Ok(());
         }
@@ -137,13 +141,17 @@ impl Writer {
         Ok(())
     }
 
-    /// Write the checkpoint now (for example when the run is interrupted).
-    pub fn write(&self, learner: &Learner, environment: &dyn Environment) -> Result<(), CheckpointsError> {
-        Ok(checkpoint::write(
-            &self.path,
-            self.stamp,
-            &Checkpoint::take(learner, environment),
-        )?)
+    /// Write the checkpoint now (for example when the run is interrupted). A problem the
+    /// user's workers simulate has no environment here, and so no environment state.
+    pub fn write(&self, learner: &Learner, environment: Option<&dyn Environment>) -> Result<(), CheckpointsError> {
+        let checkpoint = match environment {
+            Some(environment) => Checkpoint::take(learner, environment),
+            None => Checkpoint {
+                learner: learner.snapshot(),
+                environment: Vec::new(),
+            },
+        };
+        Ok(checkpoint::write(&self.path, self.stamp, &checkpoint)?)
     }
 
     /// Whether checkpoints are written at all.
@@ -152,22 +160,30 @@ impl Writer {
     }
 }
 
-/// Continue `learner` and `environment` from the checkpoint at `path`, if there is one.
+/// Continue `learner` and `environment` (none for a problem the user's workers simulate, whose
+/// checkpoints hold no environment state) from the checkpoint at `path`, if there is one.
 /// Returns whether there was.
 pub(crate) fn restore(
     path: &Path,
     stamp: Stamp,
     learner: &mut Learner,
-    environment: &mut dyn Environment,
+    environment: Option<&mut Box<dyn Environment>>,
 ) -> Result<bool, CheckpointsError> {
     let Some(saved) = checkpoint::read(path, stamp)? else {
         return Ok(false);
     };
-    saved
-        .apply(learner, environment)
-        .map_err(|source| CheckpointsError::Apply {
-            path: path.to_path_buf(),
-            source,
-        })?;
+    let applied = match environment {
+        Some(environment) => saved.apply(learner, environment.as_mut()),
+        None if !saved.environment.is_empty() => Err(EnvironmentRestoreError::Length {
+            expected: 0,
+            got: saved.environment.len(),
+        }
+        .into()),
+        None => learner.restore(saved.learner).map_err(Into::into),
+    };
+    applied.map_err(|source| CheckpointsError::Apply {
+        path: path.to_path_buf(),
+        source,
+    })?;
     Ok(true)
 }

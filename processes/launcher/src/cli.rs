@@ -38,7 +38,9 @@ pub(crate) enum Command {
     Experiment(ExperimentArgs),
     /// Run an experiment through a worker fleet: this process is the learner and serves tasks
     /// over iceoryx2 shared memory to worker processes it starts. Writes the same DIR/summary.json
-    /// as `acps experiment` with the same --in-flight and --seed.
+    /// as `acps experiment` with the same --in-flight and --seed. An experiment file with a
+    /// [problem] table of your own runs here only, on your workers (--worker-command CMD, or
+    /// --workers 0 and start them yourself).
     Run(RunArgs),
     /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.
     Worker(WorkerArgs),
@@ -125,6 +127,7 @@ impl LearnArgs {
             workers: self.workers,
             worker_in_flight: DEFAULT_WORKER_IN_FLIGHT,
             worker_nice: WorkerNiceArg { worker_nice: None },
+            worker_command: None,
             run: self.run,
         }
     }
@@ -180,6 +183,12 @@ pub(crate) struct RunArgs {
     pub(crate) worker_in_flight: usize,
     #[command(flatten)]
     pub(crate) worker_nice: WorkerNiceArg,
+    /// Start the --workers W workers with this shell command instead of `acps worker`: your
+    /// own simulator's worker, in any language (a problem file's problem needs it, or
+    /// --workers 0). Each runs as `sh -c "exec CMD"` with ACPS_RUN (the run's name) and
+    /// ACPS_WORKER_INDEX (0..W-1) set; --worker-in-flight does not apply.
+    #[arg(long, value_name = "CMD")]
+    pub(crate) worker_command: Option<String>,
     /// The run's name (letters, digits and '-'): its shared-memory prefix, and how workers
     /// started by hand join it (default: EXPERIMENT-PID).
     #[arg(long)]

@@ -36,7 +36,7 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
     let plan = Plan::new(file.as_ref(), &args.settings)?;
     if let Some(path) = &args.save_config {
         plan.resolved().save_new(path)?;
-        println!("{} -> {}", plan.name().name(), path.display());
+        println!("{} -> {}", plan.name(), path.display());
         return Ok(None);
     }
     let out = match (&args.resume, &args.out) {
@@ -81,6 +81,9 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     let Some(jobs) = jobs(&args)? else {
         return Ok(());
     };
+    for job in &jobs {
+        job.experiment.check_in_process()?;
+    }
     check_resumable(&args, &jobs)?;
     for Job {
         experiment,
@@ -88,7 +91,7 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         config,
     } in jobs
     {
-        let progress = Progress::new(&experiment.name, args.quiet);
+        let progress = Progress::of(&experiment, args.quiet);
         let summary = match checkpoints(&args, &dir) {
             Some(checkpoints) => experiment.run_with_checkpoints(&progress, &checkpoints),
             None => experiment.run(&progress),
@@ -116,11 +119,21 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     let Some(jobs) = jobs(&args.experiment)? else {
         return Ok(());
     };
+    if let Some(job) = jobs.iter().find(|job| job.experiment.user_problem.is_some())
+        && args.worker_command.is_none()
+        && args.workers != Some(0)
+    {
+        bail!(
+            "problem '{}' needs your workers: --worker-command CMD or --workers 0",
+            job.experiment.name
+        );
+    }
     check_resumable(&args.experiment, &jobs)?;
-    let name = args
-        .run
-        .clone()
-        .unwrap_or_else(|| format!("{}-{}", jobs[0].experiment.name, std::process::id()));
+    let name = args.run.clone().unwrap_or_else(|| {
+        // Run names take letters, digits and '-' only; problem names also '_' and '.'.
+        let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
+        format!("{experiment}-{}", std::process::id())
+    });
     let workers = args
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -134,7 +147,10 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             .identity(experiment.identity())
             .ctrl_c(true);
         if workers > 0 {
-            builder = builder.spawn_workers(workers, crate::workers::command(args.worker_in_flight, workers));
+            builder = match &args.worker_command {
+                Some(command) => builder.spawn_workers(workers, crate::workers::user_command(command.clone())),
+                None => builder.spawn_workers(workers, crate::workers::command(args.worker_in_flight, workers)),
+            };
             if let Some(nice) = args.worker_nice.worker_nice {
                 builder = builder.worker_niceness(nice);
             }
@@ -142,9 +158,19 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         let mut fleet = builder.start().with_context(|| format!("--run {name}"))?;
         let run = fleet.run().clone();
         if workers == 0 {
-            eprintln!("run '{run}' waits for workers: start them with `acps worker --run {run}`");
+            match &experiment.user_problem {
+                None => eprintln!("run '{run}' waits for workers: start them with `acps worker --run {run}`"),
+                Some(_) => {
+                    let environment = (experiment.instance)(experiment.base_seed).problem.environment;
+                    eprintln!(
+                        "run '{run}' waits for your workers: start each with {}={run} in its environment (`{}={run} CMD`); they must declare {environment}",
+                        ipc::RUN_ENV,
+                        ipc::RUN_ENV
+                    );
+                }
+            }
         }
-        let progress = Progress::new(&experiment.name, args.experiment.quiet);
+        let progress = Progress::of(experiment, args.experiment.quiet);
         let checkpoints = checkpoints(&args.experiment, dir);
         let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), |p| {
             progress.show(&p.learning, p.outcomes, Some(p.workers));
@@ -258,6 +284,7 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     use crate::records::{SavedPolicy, policy_file};
     let path = policy_file(&args.dir, args.method.as_deref(), args.run)?;
     let (saved, policy) = SavedPolicy::load(&path)?;
+    evaluate::check_simulated(&saved, &path)?;
     evaluate::check_targets(&saved, &args.target)?;
     if let Some(file) = &args.render {
         evaluate::check_render(&saved, file)?;

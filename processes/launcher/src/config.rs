@@ -5,9 +5,13 @@
 //!
 //! How a run is executed (output directory, progress, the fleet's workers) stays on the command
 //! line: it does not change the results.
+//!
+//! Instead of naming one of the paper's experiments, a file may describe a problem of the user's
+//! in a `[problem]` table ([`crate::problem_file`]); its keys are in the same key table.
 
 use crate::experiment::Experiment;
 use crate::paper::{self, Options, Overrides};
+use crate::problem_file::{CheckedProblem, ProblemFile};
 use acps_learner::creps::MemoryConfig;
 use acps_learner::selection::FirstVisit;
 use acps_learner::{Method, SelectorConfig};
@@ -86,8 +90,9 @@ pub enum Memory {
 }
 
 /// Everything that defines a run, as an experiment file or as command-line options. Every key is
-/// optional except `experiment`; an unset key takes the experiment's default, and a resolved file
-/// (`DIR/config.toml`) sets every key that applies to its experiment.
+/// optional except `experiment` (or, in a file, a `[problem]` table instead); an unset key takes
+/// the experiment's default, and a resolved file (`DIR/config.toml`) sets every key that applies
+/// to its experiment.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(deny_unknown_fields)]
 pub struct ExperimentFile {
@@ -164,41 +169,99 @@ pub struct ExperimentFile {
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fig3_learning_factors: Option<bool>,
+    /// Files only: a problem of your own, simulated by your workers, instead of `experiment`.
+    #[arg(skip)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub problem: Option<ProblemFile>,
 }
 
 use ExperimentName::{Dartboard, Dims, Function, Grid, Toy};
 
-/// A key of [`ExperimentFile`]: what it accepts and which experiments it applies to.
+/// What an experiment file describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    /// One of the paper's experiments.
+    Paper(ExperimentName),
+    /// A `[problem]` table.
+    File,
+}
+
+impl Kind {
+    /// How a message names it.
+    fn describe(self) -> String {
+        match self {
+            Kind::Paper(name) => format!("the {} experiment", name.name()),
+            Kind::File => "a [problem] table".into(),
+        }
+    }
+
+    /// How a list of where a key applies names it.
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Paper(name) => name.name(),
+            Kind::File => "[problem] tables",
+        }
+    }
+}
+
+/// A key of [`ExperimentFile`] (`problem.KEY` for the keys of its `[problem]` table): what it
+/// accepts and what it applies to.
 struct Key {
     name: &'static str,
     accepted: &'static str,
-    applies: &'static [ExperimentName],
+    applies: &'static [Kind],
 }
 
-const ALL: &[ExperimentName] = &[Toy, Function, Dims, Grid, Dartboard];
-const WITH_CREPS: &[ExperimentName] = &[Function, Dims, Grid, Dartboard];
+const PAPER: &[Kind] = &[
+    Kind::Paper(Toy),
+    Kind::Paper(Function),
+    Kind::Paper(Dims),
+    Kind::Paper(Grid),
+    Kind::Paper(Dartboard),
+];
+const ALL: &[Kind] = &[
+    Kind::Paper(Toy),
+    Kind::Paper(Function),
+    Kind::Paper(Dims),
+    Kind::Paper(Grid),
+    Kind::Paper(Dartboard),
+    Kind::File,
+];
+const WITH_CREPS: &[Kind] = &[
+    Kind::Paper(Function),
+    Kind::Paper(Dims),
+    Kind::Paper(Grid),
+    Kind::Paper(Dartboard),
+    Kind::File,
+];
+const FILE: &[Kind] = &[Kind::File];
+/// What a list of contexts accepts.
+const CONTEXTS: &str =
+    "a non-empty list of points, each of 1 to 8 finite coordinates (as many as context_low's), inside the context box";
+/// What a context grid accepts.
+const GRID: &str = "a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: finite low <= high, points >= 1 per dimension and at most 100000 in all, inside the context box";
 
 /// Every key, in file order.
 const KEYS: &[Key] = &[
     Key {
         name: "experiment",
-        accepted: "one of toy, function, dims, grid, dartboard",
-        applies: ALL,
+        accepted: "one of toy, function, dims, grid, dartboard (or, in a file, a [problem] table of your own)",
+        applies: PAPER,
     },
     Key {
         name: "panel",
         accepted: "one of a, b, c, d",
-        applies: &[Toy],
+        applies: &[Kind::Paper(Toy)],
     },
     Key {
         name: "n_s",
         accepted: "an integer in 1..=4",
-        applies: &[Dims],
+        applies: &[Kind::Paper(Dims)],
     },
     Key {
         name: "sim",
         accepted: "analytic or rapier",
-        applies: &[Grid, Dartboard],
+        applies: &[Kind::Paper(Grid), Kind::Paper(Dartboard)],
     },
     Key {
         name: "runs",
@@ -228,7 +291,7 @@ const KEYS: &[Key] = &[
     Key {
         name: "n_theta",
         accepted: "an integer in 5..=64 (more than the largest context dimension, at most what a task carries)",
-        applies: &[Function, Dims],
+        applies: &[Kind::Paper(Function), Kind::Paper(Dims)],
     },
     Key {
         name: "first_visit",
@@ -258,7 +321,97 @@ const KEYS: &[Key] = &[
     Key {
         name: "fig3_learning_factors",
         accepted: "true or false",
-        applies: &[Toy],
+        applies: &[Kind::Paper(Toy)],
+    },
+    Key {
+        name: "problem",
+        accepted: "a table describing a problem of your own (README, \"Your own problem\")",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.name",
+        accepted: "1 to 32 characters of ASCII letters, digits, '-', '_' and '.' (default: the file's name without .toml)",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.training_contexts",
+        accepted: CONTEXTS,
+        applies: FILE,
+    },
+    Key {
+        name: "problem.training_grid",
+        accepted: GRID,
+        applies: FILE,
+    },
+    Key {
+        name: "problem.test_contexts",
+        accepted: CONTEXTS,
+        applies: FILE,
+    },
+    Key {
+        name: "problem.test_grid",
+        accepted: GRID,
+        applies: FILE,
+    },
+    Key {
+        name: "problem.context_low",
+        accepted: "a list of 1 to 8 finite numbers, one per context dimension (default: the lower corner of the contexts' bounding box)",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.context_high",
+        accepted: "a list of finite numbers, one per context dimension, each above context_low's (default: the upper corner of the contexts' bounding box)",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.theta0",
+        accepted: "a list of 1 to 64 finite numbers (the initial parameters)",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.features",
+        accepted: "one of affine, quadratic, polar (2-D contexts only)",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.score",
+        accepted: "one of sum, mean, log-mean",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.metric",
+        accepted: "a text that is not blank",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.unit",
+        accepted: "a text",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.lower_is_better",
+        accepted: "true or false",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.environment",
+        accepted: "a table with name, settings and optionally parameters",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.environment.name",
+        accepted: "1 to 32 characters of ASCII letters, digits, '-', '_' and '.'",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.environment.settings",
+        accepted: "a text (its FNV-1a 64-bit hash is the environment's settings identity)",
+        applies: FILE,
+    },
+    Key {
+        name: "problem.environment.parameters",
+        accepted: "three integers in 0..=2^63-1",
+        applies: FILE,
     },
 ];
 
@@ -275,24 +428,54 @@ fn key(name: &str) -> &'static Key {
 pub struct ConfigError(String);
 
 /// What is wrong with a key's value, before it is known where the value came from.
-struct Invalid {
+pub(crate) struct Invalid {
     key: &'static str,
     problem: Problem,
 }
 
 enum Problem {
-    /// Outside the key's accepted range.
+    /// Outside the key's accepted range: the value as written in the file, else `got`.
     Range { got: String },
+    /// A part of the value is out of range: `got` says which.
+    Element { got: String },
     /// The key does not apply to this experiment.
-    NotApplicable(ExperimentName),
+    NotApplicable(Kind),
     /// A required key is not set.
     Missing,
+    /// The key and this other one cannot both be set.
+    Conflict(&'static str),
 }
 
-fn out_of_range(key: &'static str, got: impl std::fmt::Display) -> Invalid {
+pub(crate) fn out_of_range(key: &'static str, got: impl std::fmt::Display) -> Invalid {
     Invalid {
         key,
         problem: Problem::Range { got: got.to_string() },
+    }
+}
+
+impl Invalid {
+    /// `key` is required and not set.
+    pub(crate) fn missing(key: &'static str) -> Self {
+        Self {
+            key,
+            problem: Problem::Missing,
+        }
+    }
+
+    /// A part of `key`'s value, described by `got`, is out of range.
+    pub(crate) fn element(key: &'static str, got: String) -> Self {
+        Self {
+            key,
+            problem: Problem::Element { got },
+        }
+    }
+
+    /// `key` and `other` are both set.
+    pub(crate) fn conflict(key: &'static str, other: &'static str) -> Self {
+        Self {
+            key,
+            problem: Problem::Conflict(other),
+        }
     }
 }
 
@@ -327,30 +510,27 @@ impl LoadedFile {
             ConfigError(format!("{}:{line} {message}", path.display()))
         };
         let document = toml::de::DeTable::parse(&text).map_err(|e| at(e.span(), e.message()))?;
-        let positions: BTreeMap<String, Position> = document
-            .get_ref()
-            .iter()
-            .map(|(key, value)| {
-                let position = Position {
-                    line: line_of(&text, key.span().start),
-                    value: value.span(),
-                };
-                (key.get_ref().to_string(), position)
-            })
-            .collect();
+        let mut positions = BTreeMap::new();
+        collect_positions(document.get_ref(), "", &text, &mut positions);
         let values = match toml::from_str::<ExperimentFile>(&text) {
             Ok(values) => values,
             Err(error) => {
                 // A wrong type or an unknown name inside a known key's value: say what the key
                 // accepts. Unknown keys keep toml's message, which lists the known ones.
                 let span = error.span();
+                // The innermost key whose value holds the error.
                 let owner = span.as_ref().and_then(|span| {
                     positions
                         .iter()
-                        .find(|(_, p)| p.value.start <= span.start && span.end <= p.value.end)
+                        .filter(|(name, p)| {
+                            p.value.start <= span.start
+                                && span.end <= p.value.end
+                                && KEYS.iter().any(|k| k.name == name.as_str())
+                        })
+                        .min_by_key(|(_, p)| p.value.len())
                 });
                 return Err(match (owner, span) {
-                    (Some((name, _)), Some(span)) if KEYS.iter().any(|k| k.name == name) => {
+                    (Some((name, _)), Some(span)) => {
                         let key = key(name);
                         ConfigError(format!(
                             "{}:{}: {} must be {}, got {}",
@@ -374,6 +554,21 @@ impl LoadedFile {
     }
 }
 
+/// Where every key of `table` stands, named `prefix` + key, and those of the tables inside it.
+fn collect_positions(table: &toml::de::DeTable, prefix: &str, text: &str, positions: &mut BTreeMap<String, Position>) {
+    for (key, value) in table.iter() {
+        let name = format!("{prefix}{}", key.get_ref());
+        if let toml::de::DeValue::Table(inner) = value.get_ref() {
+            collect_positions(inner, &format!("{name}."), text, positions);
+        }
+        let position = Position {
+            line: line_of(text, key.span().start),
+            value: value.span(),
+        };
+        positions.insert(name, position);
+    }
+}
+
 fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())].matches('\n').count() + 1
 }
@@ -381,8 +576,14 @@ fn line_of(text: &str, offset: usize) -> usize {
 /// A checked request: the experiment file's values overridden by command-line options.
 pub struct Plan {
     settings: ExperimentFile,
-    name: ExperimentName,
+    subject: Subject,
     options: Options,
+}
+
+/// What a plan runs: one of the paper's experiments or a problem file's problem.
+enum Subject {
+    Paper(ExperimentName),
+    File(Box<CheckedProblem>),
 }
 
 /// One experiment to run, where its results go, and its resolved experiment file.
@@ -401,8 +602,8 @@ impl Plan {
     pub fn new(file: Option<&LoadedFile>, cli: &ExperimentFile) -> Result<Self, ConfigError> {
         let base = file.map(|f| f.values.clone()).unwrap_or_default();
         let settings = cli.over(base);
-        settings.check().map_err(|invalid| describe(invalid, file, cli))?;
-        let name = settings.experiment.expect("checked");
+        let stem = file.and_then(|f| f.path.file_stem()).and_then(|s| s.to_str());
+        let subject = settings.check(stem).map_err(|invalid| describe(invalid, file, cli))?;
         let overrides = Overrides {
             n_theta: settings.n_theta,
             first_visit: settings.first_visit.map(|f| match f {
@@ -427,14 +628,17 @@ impl Plan {
         };
         Ok(Self {
             settings,
-            name,
+            subject,
             options,
         })
     }
 
-    /// The experiment.
-    pub fn name(&self) -> ExperimentName {
-        self.name
+    /// The experiment's name, or the problem's.
+    pub fn name(&self) -> &str {
+        match &self.subject {
+            Subject::Paper(name) => name.name(),
+            Subject::File(checked) => &checked.problem.name,
+        }
     }
 
     /// The experiments to run into `out`: toy without a panel and dims without n_s expand to
@@ -453,7 +657,14 @@ impl Plan {
                 config,
             }
         };
-        match self.name {
+        let name = match &self.subject {
+            Subject::Paper(name) => *name,
+            Subject::File(checked) => {
+                let experiment = crate::problem_file::experiment(checked, options);
+                return vec![job(experiment, out.to_path_buf(), None, None)];
+            }
+        };
+        match name {
             Toy => {
                 let panels: Vec<(char, PathBuf)> = match self.settings.panel {
                     Some(panel) => vec![(panel, out.to_path_buf())],
@@ -502,9 +713,13 @@ impl Plan {
         let recorded = &experiment.settings;
         let first_visit: FirstVisit = serde_json::from_value(recorded["first_visit"].clone())
             .expect("every experiment records its first-visit rule");
-        let throws = matches!(self.name, Grid | Dartboard);
+        let paper = match &self.subject {
+            Subject::Paper(name) => Some(*name),
+            Subject::File(_) => None,
+        };
+        let throws = matches!(paper, Some(Grid | Dartboard));
         ExperimentFile {
-            experiment: Some(self.name),
+            experiment: paper,
             panel,
             n_s,
             sim: throws.then(|| self.settings.sim.unwrap_or(SimName::Analytic)),
@@ -526,15 +741,19 @@ impl Plan {
             initial_sigma: creps.map(|c| c.initial_sigma),
             epsilon: creps.map(|c| c.epsilon),
             xi: recorded["ducb"]["xi"].as_f64(),
-            fig3_learning_factors: (self.name == Toy).then(|| self.settings.fig3_learning_factors == Some(true)),
+            fig3_learning_factors: (paper == Some(Toy)).then(|| self.settings.fig3_learning_factors == Some(true)),
+            problem: match &self.subject {
+                Subject::File(checked) => Some(checked.resolved.clone()),
+                Subject::Paper(_) => None,
+            },
         }
     }
 }
 
 /// The default output directory: runs/STEM for an experiment file STEM.toml, else runs/NAME.
-pub fn default_out(file: Option<&Path>, name: ExperimentName) -> PathBuf {
+pub fn default_out(file: Option<&Path>, name: &str) -> PathBuf {
     let stem = file.and_then(|f| f.file_stem()).and_then(|s| s.to_str());
-    Path::new("runs").join(stem.unwrap_or(name.name()))
+    Path::new("runs").join(stem.unwrap_or(name))
 }
 
 impl ExperimentFile {
@@ -558,6 +777,7 @@ impl ExperimentFile {
             epsilon: s.epsilon.or(base.epsilon),
             xi: s.xi.or(base.xi),
             fig3_learning_factors: s.fig3_learning_factors.or(base.fig3_learning_factors),
+            problem: s.problem.or(base.problem),
         }
     }
 
@@ -570,20 +790,21 @@ impl ExperimentFile {
         }
     }
 
-    /// Every value in its accepted range, and only keys that apply to the experiment.
-    fn check(&self) -> Result<(), Invalid> {
-        let Some(name) = self.experiment else {
-            return Err(Invalid {
-                key: "experiment",
-                problem: Problem::Missing,
-            });
+    /// Every value in its accepted range, and only keys that apply to the experiment; `stem`
+    /// names a problem file's problem by default.
+    fn check(&self, stem: Option<&str>) -> Result<Subject, Invalid> {
+        let kind = match (self.experiment, &self.problem) {
+            (Some(name), None) => Kind::Paper(name),
+            (None, Some(_)) => Kind::File,
+            (Some(_), Some(_)) => return Err(Invalid::conflict("problem", "experiment")),
+            (None, None) => return Err(Invalid::missing("experiment")),
         };
         for set in self.set_keys() {
             let key = key(&set);
-            if !key.applies.contains(&name) {
+            if !key.applies.contains(&kind) {
                 return Err(Invalid {
                     key: key.name,
-                    problem: Problem::NotApplicable(name),
+                    problem: Problem::NotApplicable(kind),
                 });
             }
         }
@@ -628,7 +849,11 @@ impl ExperimentFile {
                 in_range(key, ok(value), value.to_string())?;
             }
         }
-        Ok(())
+        Ok(match (kind, &self.problem) {
+            (Kind::File, Some(problem)) => Subject::File(Box::new(problem.check(stem)?)),
+            (Kind::Paper(name), _) => Subject::Paper(name),
+            (Kind::File, None) => unreachable!("a file's kind is that of its [problem] table"),
+        })
     }
 
     /// The file's text: `header` (comment lines) and every set key. Fails on integers TOML cannot
@@ -641,10 +866,11 @@ impl ExperimentFile {
     /// Write the resolved file of a run into its directory (`config.toml`).
     pub fn write_resolved(&self, dir: &Path) -> Result<(), ConfigError> {
         let path = dir.join("config.toml");
-        let text = self.to_toml(&header(
-            "the run in this directory",
-            "acps experiment --config config.toml --out NEW_DIR",
-        ))?;
+        let command = match self.problem {
+            None => "acps experiment --config config.toml --out NEW_DIR",
+            Some(_) => "acps run --config config.toml --worker-command CMD --out NEW_DIR",
+        };
+        let text = self.to_toml(&header("the run in this directory", command))?;
         std::fs::create_dir_all(dir)
             .and_then(|()| std::fs::write(&path, text))
             .map_err(|e| cannot_write(&path, e))
@@ -652,7 +878,11 @@ impl ExperimentFile {
 
     /// Write the file to `path`, which must not exist yet: a hand-edited file is never replaced.
     pub fn save_new(&self, path: &Path) -> Result<(), ConfigError> {
-        let text = self.to_toml(&header("an experiment", "acps experiment --config FILE"))?;
+        let command = match self.problem {
+            None => "acps experiment --config FILE",
+            Some(_) => "acps run --config FILE --worker-command CMD",
+        };
+        let text = self.to_toml(&header("an experiment", command))?;
         let mut file = std::fs::OpenOptions::new()
             .write(true)
             .create_new(true)
@@ -685,31 +915,43 @@ fn header(what: &str, command: &str) -> String {
 fn describe(invalid: Invalid, file: Option<&LoadedFile>, cli: &ExperimentFile) -> ConfigError {
     let key = key(invalid.key);
     let from_cli = cli.set_keys().iter().any(|k| k == key.name);
-    let position = file
-        .filter(|_| !from_cli)
-        .and_then(|f| f.positions.get(key.name).map(|p| (f, p)));
-    let (subject, got) = match (from_cli, position, file) {
+    let file = file.filter(|_| !from_cli);
+    let position = file.and_then(|f| f.positions.get(key.name).map(|p| (f, p)));
+    // A key that is not in the file (unset, or defaulted) is placed at its table's line.
+    let table = file.and_then(|f| {
+        let tables = std::iter::successors(key.name.rsplit_once('.'), |(table, _)| table.rsplit_once('.'));
+        tables
+            .filter_map(|(table, _)| f.positions.get(table))
+            .map(|p| (f, p.line))
+            .next()
+    });
+    let (subject, got) = match (from_cli, position, table, file) {
         (true, ..) => (flag(key.name), None),
-        (false, Some((f, p)), _) => (
+        (false, Some((f, p)), ..) => (
             format!("{}:{}: {}", f.path.display(), p.line, key.name),
             Some(f.text[p.value.clone()].to_string()),
         ),
-        (false, None, Some(f)) => (format!("{}: {}", f.path.display(), key.name), None),
-        (false, None, None) => (key.name.to_string(), None),
+        (false, None, Some((f, line)), _) => (format!("{}:{line}: {}", f.path.display(), key.name), None),
+        (false, None, None, Some(f)) => (format!("{}: {}", f.path.display(), key.name), None),
+        (false, None, None, None) => (key.name.to_string(), None),
     };
     ConfigError(match invalid.problem {
         Problem::Range { got: value } => {
             format!("{subject} must be {}, got {}", key.accepted, got.unwrap_or(value))
         }
-        Problem::NotApplicable(name) => {
-            let applies: Vec<&str> = key.applies.iter().map(|e| e.name()).collect();
+        Problem::Element { got } => format!("{subject} must be {}, got {got}", key.accepted),
+        Problem::NotApplicable(kind) => {
+            let applies: Vec<&str> = key.applies.iter().map(|k| k.name()).collect();
             format!(
-                "{subject} applies to {} only, not to the {} experiment",
+                "{subject} applies to {} only, not to {}",
                 applies.join(", "),
-                name.name()
+                kind.describe()
             )
         }
         Problem::Missing => format!("{subject} must be set: {}", key.accepted),
+        Problem::Conflict(other) => {
+            format!("{subject} and {other} exclude each other: give one of them")
+        }
     })
 }
 
@@ -756,11 +998,16 @@ mod tests {
             epsilon: Some(1.0),
             xi: Some(0.0),
             fig3_learning_factors: Some(true),
+            problem: Some(ProblemFile::default()),
         };
-        let names: Vec<&str> = KEYS.iter().map(|k| k.name).collect();
+        let names: Vec<&str> = KEYS.iter().map(|k| k.name).filter(|k| !k.contains('.')).collect();
         assert_eq!(every.set_keys().len(), names.len());
         let text = every.to_toml("").unwrap();
-        let order: Vec<&str> = text.lines().map(|l| l.split(" = ").next().unwrap()).collect();
+        let order: Vec<&str> = text
+            .lines()
+            .filter(|l| !l.is_empty())
+            .map(|l| l.split(" = ").next().unwrap().trim_matches(['[', ']']))
+            .collect();
         assert_eq!(order, names);
     }
 
@@ -786,7 +1033,7 @@ mod tests {
             ),
             (
                 "experiment = \"toy\"\nepsilon = 1.0\n",
-                "e.toml:2: epsilon applies to function, dims, grid, dartboard only, not to the toy experiment",
+                "e.toml:2: epsilon applies to function, dims, grid, dartboard, [problem] tables only, not to the toy experiment",
             ),
             (
                 "experiment = \"dims\"\nn_s = 5\n",
@@ -856,7 +1103,7 @@ mod tests {
         let message = Plan::new(Some(&file), &cli).err().unwrap().to_string();
         assert_eq!(
             message,
-            "--epsilon applies to function, dims, grid, dartboard only, not to the toy experiment"
+            "--epsilon applies to function, dims, grid, dartboard, [problem] tables only, not to the toy experiment"
         );
         let cli = ExperimentFile {
             experiment: Some(Grid),
@@ -871,10 +1118,10 @@ mod tests {
     /// must be what the D-UCB methods run with, by default and when set.
     #[test]
     fn resolved_d_ucb_settings_are_the_methods() {
-        for name in ALL {
+        for name in [Toy, Function, Dims, Grid, Dartboard] {
             for (xi, first_visit) in [(None, None), (Some(0.5), Some(FirstVisitName::Zero))] {
                 let cli = ExperimentFile {
-                    experiment: Some(*name),
+                    experiment: Some(name),
                     xi,
                     first_visit,
                     ..Default::default()
@@ -905,11 +1152,11 @@ mod tests {
 
     #[test]
     fn resolved_files_validate_and_panels_share_their_defaults() {
-        for name in ALL {
+        for name in [Toy, Function, Dims, Grid, Dartboard] {
             let plan = Plan::new(
                 None,
                 &ExperimentFile {
-                    experiment: Some(*name),
+                    experiment: Some(name),
                     ..Default::default()
                 },
             )

@@ -55,6 +55,19 @@ fn coordinates(s: &[f64]) -> String {
     s.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",")
 }
 
+/// Refuse a policy of a problem file's problem: only the user's simulator performs its
+/// rollouts.
+pub fn check_simulated(saved: &SavedPolicy, path: &Path) -> anyhow::Result<()> {
+    if saved.user_problem.is_some() {
+        bail!(
+            "{}: problem '{}' is a problem of your own, which acps cannot simulate; replay the policy in your simulator: its mean at context s is W^T phi(s) (this JSON file's policy.weights and policy.features; in Python, acps_worker.Policy.load(path).mean(context))",
+            path.display(),
+            saved.problem.name
+        );
+    }
+    Ok(())
+}
+
 /// Refuse targets the saved problem cannot take: a wrong dimension or a point outside the
 /// context space.
 pub fn check_targets(saved: &SavedPolicy, targets: &[Vec<f64>]) -> anyhow::Result<()> {
@@ -145,7 +158,7 @@ pub fn replay(saved: &SavedPolicy, policy: &RestoredPolicy, contexts: &[Vec<f64>
 
 /// True for the PA-10 problems, whose outcomes carry the landing point and score the distance in cm.
 pub fn is_throwing(saved: &SavedPolicy) -> bool {
-    matches!(saved.problem.name.as_str(), "grid" | "dartboard")
+    saved.user_problem.is_none() && matches!(saved.problem.name.as_str(), "grid" | "dartboard")
 }
 
 /// The replay as a table, one line per context, then the statistics of the per-context scores.

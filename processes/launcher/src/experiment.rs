@@ -15,7 +15,7 @@ use acps_learner::{
 };
 use acps_shared::{Environment, EnvironmentMatchError, Problem};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::{Mutex, PoisonError};
@@ -24,8 +24,9 @@ use std::sync::{Mutex, PoisonError};
 pub struct Instance {
     /// The problem description.
     pub problem: Problem,
-    /// The environment that performs rollouts.
-    pub environment: Box<dyn Environment>,
+    /// The environment that performs rollouts; `None` for a problem only the user's workers
+    /// simulate (a problem file's), which runs on a fleet only.
+    pub environment: Option<Box<dyn Environment>>,
     /// The best achievable score, when the problem knows it (the Section 4 model's J_opt).
     pub optimal_score: Option<f64>,
     /// Whether the environment keeps state between rollouts (the Section 4 model): a fleet cannot
@@ -63,6 +64,20 @@ pub struct Experiment {
     /// Whether the summary names the best policy of all runs (Fig. 8's "Best Policy" line); only
     /// for scores where lower is better.
     pub best_policy: bool,
+    /// For a problem file's problem: how its scores read. Such a problem has no environment in
+    /// this process; only a fleet of the user's workers runs it.
+    pub user_problem: Option<UserProblem>,
+}
+
+/// How the scores of a problem of the user's read, as its problem file says; recorded in the
+/// summary and in every policy file. The learner maximises the workers' rewards either way.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct UserProblem {
+    /// The scores' unit (may be empty).
+    pub unit: String,
+    /// Whether lower scores are better (costs, errors), as in all the paper's problems but the
+    /// Section 4 model.
+    pub lower_is_better: bool,
 }
 
 /// The result of one learner run.
@@ -132,6 +147,9 @@ pub struct Summary {
     pub experiment: String,
     /// What the numbers mean.
     pub metric: String,
+    /// For a problem file's problem: the scores' unit and direction.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub user_problem: Option<UserProblem>,
     /// Runs per method.
     pub runs: usize,
     /// Seed of run 0.
@@ -207,7 +225,7 @@ impl BestPolicy {
 /// A fleet run's observer: shows the progress and writes every job's checkpoints.
 struct Checkpointing<F> {
     writers: Vec<Option<Writer>>,
-    environments: Vec<Box<dyn Environment>>,
+    environments: Vec<Option<Box<dyn Environment>>>,
     observe: F,
 }
 
@@ -219,7 +237,7 @@ impl<F: FnMut(&FleetProgress)> Observer for Checkpointing<F> {
     fn told(&mut self, job: usize, learner: &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         match &mut self.writers[job] {
             Some(writer) => writer
-                .after_tell(learner, self.environments[job].as_ref())
+                .after_tell(learner, self.environments[job].as_deref())
                 .map_err(Into::into),
             None => Ok(()),
         }
@@ -237,8 +255,8 @@ struct Shown {
 pub struct Job {
     /// The learner core.
     pub learner: Learner,
-    /// Its environment, for in-process runs.
-    pub environment: Box<dyn Environment>,
+    /// Its environment, for in-process runs (`None`: the user's workers simulate it).
+    pub environment: Option<Box<dyn Environment>>,
     /// Whether the environment keeps state between rollouts.
     pub keeps_state: bool,
     /// The instance's optimal score, if known.
@@ -290,6 +308,11 @@ pub enum RunError {
         "experiment '{0}' cannot run on a worker fleet: its environment keeps state between rollouts (use `acps experiment`)"
     )]
     Stateful(String),
+    /// The experiment cannot run in this process: its problem is the user's.
+    #[error(
+        "problem '{0}' is a problem of your own, simulated by your workers: use `acps run --config FILE --worker-command CMD` (or --workers 0 and start them yourself)"
+    )]
+    NeedsWorkers(String),
 }
 
 impl Experiment {
@@ -308,7 +331,9 @@ impl Experiment {
             optimal_score,
             keeps_state,
         } = (self.instance)(seed);
-        problem.check_environment(environment.as_ref())?;
+        if let Some(environment) = &environment {
+            problem.check_environment(environment.as_ref())?;
+        }
         let learner = Learner::with_selector(
             LearnerConfig {
                 seed,
@@ -323,6 +348,14 @@ impl Experiment {
             keeps_state,
             optimal_score,
         })
+    }
+
+    /// Refuse to run in this process a problem only the user's workers simulate.
+    pub fn check_in_process(&self) -> Result<(), RunError> {
+        match self.user_problem {
+            Some(_) => Err(RunError::NeedsWorkers(self.name.clone())),
+            None => Ok(()),
+        }
     }
 
     /// Run every (method, run) pair in parallel in this process and summarise.
@@ -362,14 +395,18 @@ impl Experiment {
         jobs.par_iter_mut()
             .enumerate()
             .map(|(index, (job, writer))| {
+                let environment = job
+                    .environment
+                    .as_mut()
+                    .ok_or_else(|| RunError::NeedsWorkers(self.name.clone()))?;
                 let mut unreported = 0;
                 while let Some(task) = job.learner.ask() {
-                    let outcome = job.environment.rollout(&task);
+                    let outcome = environment.rollout(&task);
                     job.learner
                         .tell(outcome)
                         .expect("the outcome answers a task just handed out");
                     if let Some(writer) = writer {
-                        writer.after_tell(&job.learner, job.environment.as_ref())?;
+                        writer.after_tell(&job.learner, Some(environment.as_ref()))?;
                     }
                     unreported += 1;
                     if unreported == REPORT_EVERY {
@@ -380,7 +417,7 @@ impl Experiment {
                 report(index, &job.learner, unreported);
                 Ok(())
             })
-            .collect::<Result<Vec<()>, CheckpointsError>>()?;
+            .collect::<Result<Vec<()>, RunError>>()?;
         let jobs: Vec<Job> = jobs.into_iter().map(|(job, _)| job).collect();
         Ok(self.summary(&jobs))
     }
@@ -418,7 +455,11 @@ impl Experiment {
     /// One learner run of `selector` with `seed`, in this thread.
     pub fn run_one(&self, selector: &SelectorConfig, seed: u64) -> Result<RunResult, RunError> {
         let mut job = self.job(selector, seed)?;
-        run_in_process(&mut job.learner, job.environment.as_mut())?;
+        let environment = job
+            .environment
+            .as_mut()
+            .ok_or_else(|| RunError::NeedsWorkers(self.name.clone()))?;
+        run_in_process(&mut job.learner, environment.as_mut())?;
         Ok(job.result())
     }
 
@@ -463,7 +504,7 @@ impl Experiment {
             // Tasks out with workers are handed out again after a restore, so nothing is lost.
             for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {
                 if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner().is_done()) {
-                    writer.write(job.learner(), environment.as_ref())?;
+                    writer.write(job.learner(), environment.as_deref())?;
                 }
             }
         }
@@ -523,6 +564,7 @@ impl Experiment {
         Summary {
             experiment: self.name.clone(),
             metric: problem.metric.clone(),
+            user_problem: self.user_problem.clone(),
             runs: self.runs,
             base_seed: self.base_seed,
             training_episodes: self.learner.episodes,
@@ -630,7 +672,7 @@ mod tests {
         // The problem of seed s with the function of seed s + 1, as a user's wiring might do.
         experiment.instance = Box::new(|seed| Instance {
             problem: ContextualFunction::new(2, 20, seed).unwrap().grid_problem().unwrap(),
-            environment: Box::new(ContextualFunction::new(2, 20, seed + 1).unwrap()),
+            environment: Some(Box::new(ContextualFunction::new(2, 20, seed + 1).unwrap())),
             optimal_score: None,
             keeps_state: false,
         });

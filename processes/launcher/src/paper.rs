@@ -74,13 +74,13 @@ pub struct Overrides {
 pub const FIG3_LEARNING_FACTORS: [f64; CONTEXTS] = [0.09, 0.81, 0.25, 1.0, 0.04, 0.49, 0.64, 0.16, 0.01, 0.36];
 
 impl Options {
-    fn first_visit(&self) -> FirstVisit {
+    pub(crate) fn first_visit(&self) -> FirstVisit {
         self.overrides.first_visit.unwrap_or(FirstVisit::InitialReturn)
     }
 
     /// The selected methods (else `defaults`), the D-UCB ones with `ducb(method)` and this
     /// run's first-visit rule.
-    fn methods(&self, defaults: &[Method], ducb: impl Fn(Method) -> DUcbConfig) -> Vec<SelectorConfig> {
+    pub(crate) fn methods(&self, defaults: &[Method], ducb: impl Fn(Method) -> DUcbConfig) -> Vec<SelectorConfig> {
         let methods = self.methods.clone().unwrap_or_else(|| defaults.to_vec());
         methods
             .into_iter()
@@ -155,7 +155,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
             Instance {
                 problem: environment.problem(),
                 optimal_score: Some(environment.optimal_performance()),
-                environment: Box::new(environment),
+                environment: Some(Box::new(environment)),
                 keeps_state: true,
             }
         }),
@@ -169,6 +169,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
         }),
         detail: None,
         best_policy: false,
+        user_problem: None,
     }
 }
 
@@ -274,6 +275,7 @@ fn function_experiment(
         settings,
         detail: None,
         best_policy: false,
+        user_problem: None,
     }
 }
 
@@ -292,14 +294,14 @@ pub fn sim_name(sim: Sim) -> &'static str {
 fn stateless(problem: Problem, environment: Box<dyn Environment>) -> Instance {
     Instance {
         problem,
-        environment,
+        environment: Some(environment),
         optimal_score: None,
         keeps_state: false,
     }
 }
 
 /// `preset` with the run's overrides of epsilon and Sigma_0, and `memory`.
-fn with_overrides(preset: CRepsConfig, overrides: &Overrides, memory: MemoryConfig) -> CRepsConfig {
+pub(crate) fn with_overrides(preset: CRepsConfig, overrides: &Overrides, memory: MemoryConfig) -> CRepsConfig {
     CRepsConfig {
         epsilon: overrides.epsilon.unwrap_or(preset.epsilon),
         initial_sigma: overrides.initial_sigma.unwrap_or(preset.initial_sigma),
@@ -385,6 +387,7 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
         selection_window: 250,
         detail: None,
         best_policy: true,
+        user_problem: None,
     }
 }
 
@@ -419,6 +422,7 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
         selection_window: 10_000,
         detail: Some(Box::new(move |runs| dartboard_detail(&fields, runs))),
         best_policy: false,
+        user_problem: None,
     }
 }
 
@@ -491,7 +495,7 @@ fn dartboard_detail(fields: &[Field], runs: &[RunResult]) -> serde_json::Map<Str
 }
 
 /// C-REPS settings for a summary (the feature map is named, as custom maps are not data).
-fn creps_settings(creps: &CRepsConfig, features: &str, initial_mean: &str) -> serde_json::Value {
+pub(crate) fn creps_settings(creps: &CRepsConfig, features: &str, initial_mean: &str) -> serde_json::Value {
     json!({
         "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
         "update_every": creps.update_every, "memory": creps.memory, "features": features,

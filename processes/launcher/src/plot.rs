@@ -91,7 +91,9 @@ pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
     if let Some(picture) = SelectionsOverTime::new(summary) {
         save(&picture, dir, "selections-time")?;
     }
-    if matches!(summary.experiment.as_str(), "grid" | "dartboard") {
+    // A problem file's problem may have any name: only the paper's throw at targets.
+    let paper = summary.user_problem.is_none();
+    if paper && matches!(summary.experiment.as_str(), "grid" | "dartboard") {
         let policy = acps_models::throw::ThrowPolicy::new(acps_models::throw::ThrowDesign::pa10(), 0.01)?;
         let view = ThrowSideView {
             robot: &Robot::pa10(),
@@ -100,7 +102,7 @@ pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
         };
         save(&view, dir, "throw")?;
     }
-    if summary.experiment == "dartboard" {
+    if paper && summary.experiment == "dartboard" {
         let fields = acps_models::environment::dartboard_fields();
         return save(
             &Dartboard {
@@ -112,8 +114,10 @@ pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
         );
     }
     match summary.training_contexts.first().map(Vec::len) {
-        Some(1) => save(&SelectionTraces(summary), dir, "selections")?,
         Some(2) => save(&SelectionMaps(summary), dir, "selections")?,
+        Some(1) => save(&SelectionTraces(summary), dir, "selections")?,
+        // The context index stands for a point of 3 or more dimensions (a problem file's).
+        Some(_) if !paper => save(&SelectionTraces(summary), dir, "selections")?,
         _ => {}
     }
     Ok(())
@@ -157,10 +161,10 @@ fn curves(summary: &Summary) -> (Vec<Curve>, Option<f64>, String) {
         })
         .collect();
     let optimum = reference.and(summary.j_opt_mean);
-    let label = if reference.is_some() {
-        "J - J_RR".to_string()
-    } else {
-        summary.metric.clone()
+    let label = match (&reference, &summary.user_problem) {
+        (Some(_), _) => "J - J_RR".to_string(),
+        (None, Some(user)) if !user.unit.is_empty() => format!("{} ({})", summary.metric, user.unit),
+        (None, _) => summary.metric.clone(),
     };
     (curves, optimum, label)
 }
@@ -186,7 +190,12 @@ impl Picture for LearningCurves<'_> {
         DB::ErrorType: 'static,
     {
         let summary = self.0;
-        let caption = format!("{}: {} runs per method", summary.experiment, summary.runs);
+        let direction = match &summary.user_problem {
+            Some(user) if user.lower_is_better => ", lower is better",
+            Some(_) => ", higher is better",
+            None => "",
+        };
+        let caption = format!("{}: {} runs per method{direction}", summary.experiment, summary.runs);
         if !self.zoomed() {
             return learning_curves(summary, root, 0.0, caption);
         }

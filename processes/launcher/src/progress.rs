@@ -1,6 +1,7 @@
 //! What a running experiment shows: training episodes done of all, the latest test score
 //! averaged over the runs, rollouts per second and, for fleets, the live workers.
 
+use crate::experiment::Experiment;
 use acps_learner::LearningProgress;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::time::Duration;
@@ -12,15 +13,16 @@ pub struct Progress {
 }
 
 /// How the score of an experiment reads on the progress line: a name and a unit.
-type ScoreFormat = (&'static str, &'static str);
+type ScoreFormat = (&'static str, String);
 
 fn score_format(experiment: &str) -> ScoreFormat {
-    match experiment {
+    let (name, unit) = match experiment {
         "grid" | "dartboard" => ("test error", " cm"),
         "function" | "dims" => ("test ln cost", ""),
         "toy" => ("test J", ""),
         _ => ("test score", ""),
-    }
+    };
+    (name, unit.to_string())
 }
 
 impl Progress {
@@ -48,6 +50,20 @@ impl Progress {
         }
     }
 
+    /// A progress line for `experiment`, in the unit a problem file gives its scores.
+    pub fn of(experiment: &Experiment, quiet: bool) -> Self {
+        let mut progress = Self::new(&experiment.name, quiet);
+        if let Some(user) = &experiment.user_problem {
+            let unit = if user.unit.is_empty() {
+                String::new()
+            } else {
+                format!(" {}", user.unit)
+            };
+            progress.score = ("test score", unit);
+        }
+        progress
+    }
+
     /// Show `learning`, with `rollouts` done so far and, for fleets, the live `workers`.
     pub fn show(&self, learning: &LearningProgress, rollouts: u64, workers: Option<usize>) {
         self.bar.set_length(learning.total_episodes);
@@ -57,7 +73,7 @@ impl Progress {
 
     fn message(&self, learning: &LearningProgress, rollouts: u64, workers: Option<usize>) -> String {
         let rate = rollouts as f64 / self.bar.elapsed().as_secs_f64().max(1e-3);
-        let (name, unit) = self.score;
+        let (name, unit) = &self.score;
         let score = learning
             .score
             .map_or("-".to_string(), |score| format!("{score:.2}{unit}"));

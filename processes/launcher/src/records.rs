@@ -15,7 +15,7 @@
 //!
 //! Empty CSV fields mean "no value" (an evaluation whose rollouts all failed).
 
-use crate::experiment::{RunResult, Summary};
+use crate::experiment::{RunResult, Summary, UserProblem};
 use acps_learner::creps::{PolicySnapshot, Rejection, RestoredPolicy};
 use acps_shared::Problem;
 use anyhow::{Context, bail};
@@ -49,6 +49,9 @@ pub struct SavedPolicy {
     /// The problem: training and test contexts, context space, theta_0, score aggregate, and the
     /// environment it is defined for.
     pub problem: Problem,
+    /// For a problem file's problem: the scores' unit and direction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub user_problem: Option<UserProblem>,
     /// The upper-level policy.
     pub policy: PolicySnapshot,
 }
@@ -242,6 +245,7 @@ fn saved_policy(summary: &Summary, method: &str, run: usize, result: &RunResult)
         training_episodes: result.episodes.len() as u64,
         final_score: result.scores.last().copied().flatten(),
         problem: result.problem.clone(),
+        user_problem: summary.user_problem.clone(),
         policy: result.policy.clone()?,
     })
 }

@@ -1,5 +1,5 @@
-//! The acps binary's workers: the project's models plugged into `acps-worker`, and the command
-//! a fleet starts them with.
+//! The acps binary's workers: the project's models plugged into `acps-worker`, and the commands
+//! a fleet starts them, or the user's own workers, with.
 
 use acps_shared::{Environment, EnvironmentSpec, Serves};
 use acps_worker::EnvironmentFactory;
@@ -49,5 +49,23 @@ pub fn command(in_flight: usize, workers: usize) -> impl Fn(usize) -> Command {
             "-q",
         ]);
         command
+    }
+}
+
+/// The environment variable that tells a worker started from `--worker-command` its index
+/// among the fleet's started workers (0..W-1).
+pub const WORKER_INDEX_ENV: &str = "ACPS_WORKER_INDEX";
+
+/// The command of started worker `index` from the user's shell command `command`: `sh -c "exec
+/// CMD"`, so that quoting and variables work as in a shell and the process the fleet watches,
+/// signals and reaps is the user's program itself.
+pub fn user_command(command: String) -> impl Fn(usize) -> Command {
+    move |index| {
+        let mut shell = Command::new("sh");
+        shell
+            .arg("-c")
+            .arg(format!("exec {command}"))
+            .env(WORKER_INDEX_ENV, index.to_string());
+        shell
     }
 }

@@ -1,5 +1,6 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
+use crate::{assert_clean, run_name, watched};
 use acps::paper::{self, Options, Sim};
 use acps::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetJob, FleetProgress, Liveness};
@@ -21,17 +22,6 @@ use std::time::{Duration, Instant};
 
 fn acps() -> Command {
     Command::new(env!("CARGO_BIN_EXE_acps"))
-}
-
-/// `acps` under a watchdog: a learner that hangs fails the test instead of blocking it.
-fn watched() -> Command {
-    let mut command = Command::new("timeout");
-    command.args(["--signal=KILL", "180", env!("CARGO_BIN_EXE_acps")]);
-    command
-}
-
-fn run_name(test: &str) -> RunName {
-    RunName::new(&format!("t{}-{test}", std::process::id())).unwrap()
 }
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -75,11 +65,6 @@ fn in_process(args: &[&str], out: &Path) -> Vec<u8> {
             .unwrap(),
     );
     std::fs::read(out.join("summary.json")).unwrap()
-}
-
-fn assert_clean(run: &RunName) {
-    let left = ipc::leftover_files(run);
-    assert!(left.is_empty(), "run {run} left {left:?}");
 }
 
 #[test]
@@ -784,7 +769,11 @@ fn served_and_in_process(experiment: &acps::experiment::Experiment) -> (Vec<Flee
         .unwrap()
         .into_iter()
         .map(|mut job| {
-            run_in_process(&mut job.learner, job.environment.as_mut()).unwrap();
+            let environment = job
+                .environment
+                .as_mut()
+                .expect("the paper's problems have environments");
+            run_in_process(&mut job.learner, environment.as_mut()).unwrap();
             format!("{:?}", job.learner.episodes())
         })
         .collect();
@@ -833,7 +822,7 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
     // flight keeps all its 8 asking requests waiting, and its outcomes need the delivery slot.
     let (experiment, mut jobs, reference) = short_grid(1);
     let run = run_name("deliver");
-    let environment = Sleepy(experiment.jobs().unwrap().remove(0).environment);
+    let environment = Sleepy(experiment.jobs().unwrap().remove(0).environment.unwrap());
     let progress = std::thread::scope(|scope| {
         let worker = scope.spawn(|| {
             let options = WorkerOptions {
@@ -1016,7 +1005,7 @@ fn a_hung_worker_s_tasks_go_to_another_and_the_result_is_unchanged() {
     let (experiment, mut jobs, reference) = short_grid(4);
     let run = run_name("hung");
     let release = AtomicBool::new(false);
-    let environment = || experiment.jobs().unwrap().remove(0).environment;
+    let environment = || experiment.jobs().unwrap().remove(0).environment.unwrap();
     let joined = AtomicBool::new(false);
     let worker = |name: &str, environment: &mut dyn EnvironmentFactory| {
         let options = WorkerOptions {

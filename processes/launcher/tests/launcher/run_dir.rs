@@ -1,11 +1,9 @@
 //! The run directory's tables, policies and pictures, and `acps evaluate` replaying a saved
 //! policy.
 
-use crate::acps;
-use std::ops::Deref;
-use std::path::{Path, PathBuf};
+use crate::{TempDir, acps, temp_dir};
+use std::path::Path;
 use std::process::Output;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 fn stdout(out: &Output) -> String {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -17,32 +15,6 @@ fn refusal(args: &[&str]) -> String {
     let out = acps(args);
     assert!(!out.status.success(), "{args:?} succeeded");
     String::from_utf8(out.stderr).unwrap()
-}
-
-/// A directory of its own under the system's temp dir, removed when dropped, also when the test
-/// that made it fails.
-struct TempDir(PathBuf);
-
-impl Deref for TempDir {
-    type Target = Path;
-
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn temp_dir(name: &str) -> TempDir {
-    static MADE: AtomicUsize = AtomicUsize::new(0);
-    let made = MADE.fetch_add(1, Ordering::Relaxed);
-    let dir = std::env::temp_dir().join(format!("acps-rundir-{name}-{}-{made}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    TempDir(dir)
 }
 
 fn experiment(name: &str, method: &str, episodes: &str) -> TempDir {

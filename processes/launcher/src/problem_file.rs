@@ -1,0 +1,474 @@
+//! Problem files: an experiment file whose `[problem]` table describes a problem of the user's
+//! instead of naming one of the paper's. acps cannot simulate such a problem; `acps run` serves
+//! its tasks through the worker fleet to workers the user provides (README, "Your own problem").
+//!
+//! The table is checked here, key by key, with the accepted ranges of [`crate::config`]'s key
+//! table, before anything starts.
+
+use crate::config::{Invalid, out_of_range};
+use crate::experiment::{Experiment, Instance, UserProblem};
+use crate::paper::{self, Options};
+use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
+use acps_learner::selection::DUcbConfig;
+use acps_learner::{LearnerConfig, Method};
+use acps_shared::{ContextSpace, EnvironmentSpec, Problem, ScoreAggregate};
+use acps_wire::wire::{MAX_CONTEXT, MAX_THETA};
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+/// Most points a context grid expands to.
+pub const MAX_GRID_POINTS: u64 = 100_000;
+
+/// Evaluations of the greedy policy on the test contexts happen every this many training
+/// episodes (or once at the end of shorter runs), as in the paper's Section 5.1.2.
+const EVAL_EVERY: u64 = 50;
+
+/// A `[problem]` table as written; [`ProblemFile::check`] says which keys must be set.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProblemFile {
+    /// The problem's name (default: the file's stem).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// The K training contexts ...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training_contexts: Option<Vec<Vec<f64>>>,
+    /// ... or a grid of them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training_grid: Option<ContextGrid>,
+    /// The test contexts (default: the training contexts) ...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_contexts: Option<Vec<Vec<f64>>>,
+    /// ... or a grid of them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_grid: Option<ContextGrid>,
+    /// Lower corner of the continuous context box (default: of the contexts' bounding box).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context_low: Option<Vec<f64>>,
+    /// Upper corner of the box.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context_high: Option<Vec<f64>>,
+    /// The initial parameters.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub theta0: Option<Vec<f64>>,
+    /// The policy's context features (default affine).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub features: Option<Features>,
+    /// How the test contexts' scores aggregate (default mean).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub score: Option<ScoreAggregate>,
+    /// What the score means (default "score").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metric: Option<String>,
+    /// The score's unit (default none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
+    /// Whether lower scores are better (default true).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lower_is_better: Option<bool>,
+    /// The environment the problem is defined for (default: none named).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment: Option<EnvironmentTable>,
+}
+
+/// `{ low = [...], high = [...], points = [...] }`: `points[d]` evenly spaced values from
+/// `low[d]` to `high[d]` in every dimension (one point: the midpoint), the first dimension
+/// slowest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContextGrid {
+    /// Lowest value per dimension.
+    pub low: Vec<f64>,
+    /// Highest value per dimension.
+    pub high: Vec<f64>,
+    /// Points per dimension.
+    pub points: Vec<u64>,
+}
+
+/// The policy's context features, as a problem file names them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Features {
+    /// [`FeatureMap::Affine`].
+    Affine,
+    /// [`FeatureMap::Quadratic`].
+    Quadratic,
+    /// [`FeatureMap::PolarQuadratic`], 2-D contexts only.
+    Polar,
+}
+
+impl Features {
+    fn map(self) -> FeatureMap {
+        match self {
+            Self::Affine => FeatureMap::Affine,
+            Self::Quadratic => FeatureMap::Quadratic,
+            Self::Polar => FeatureMap::PolarQuadratic,
+        }
+    }
+}
+
+/// `[problem.environment]`: the identity workers must declare,
+/// `EnvironmentSpec::from_text(name, parameters, settings)`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EnvironmentTable {
+    /// The environment's name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Free text; its FNV-1a hash is the spec's settings hash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings: Option<String>,
+    /// Three numbers (default `[0, 0, 0]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parameters: Option<[u64; 3]>,
+}
+
+/// A checked problem file: the problem the learner sees, and the table with its defaults
+/// filled in (what `config.toml` records).
+#[derive(Debug, Clone)]
+pub struct CheckedProblem {
+    /// The table with every default filled in.
+    pub resolved: ProblemFile,
+    /// The problem.
+    pub problem: Problem,
+    features: Features,
+    user: UserProblem,
+}
+
+/// The name of a context key and its points, once expanded.
+struct Contexts {
+    key: &'static str,
+    points: Vec<Vec<f64>>,
+}
+
+impl ProblemFile {
+    /// Check every key and build the problem; `stem` (the file's name without `.toml`) is the
+    /// default name.
+    pub(crate) fn check(&self, stem: Option<&str>) -> Result<CheckedProblem, Invalid> {
+        let theta0 = self.theta0.clone().ok_or(Invalid::missing("problem.theta0"))?;
+        let finite = |values: &[f64]| values.iter().all(|x| x.is_finite());
+        if !(1..=MAX_THETA).contains(&theta0.len()) || !finite(&theta0) {
+            return Err(out_of_range("problem.theta0", format!("{theta0:?}")));
+        }
+        let training = contexts(
+            ("problem.training_contexts", &self.training_contexts),
+            ("problem.training_grid", &self.training_grid),
+        )?
+        .ok_or(Invalid::missing("problem.training_contexts"))?;
+        let dim = match &self.context_low {
+            Some(low) => low.len(),
+            None => training.points[0].len(),
+        };
+        if !(1..=MAX_CONTEXT).contains(&dim) {
+            let key = if self.context_low.is_some() {
+                "problem.context_low"
+            } else {
+                training.key
+            };
+            return Err(Invalid::element(key, format!("{dim}-D contexts")));
+        }
+        let test = contexts(
+            ("problem.test_contexts", &self.test_contexts),
+            ("problem.test_grid", &self.test_grid),
+        )?;
+        for set in std::iter::once(&training).chain(&test) {
+            if let Some((i, point)) = set.points.iter().enumerate().find(|(_, p)| p.len() != dim) {
+                return Err(Invalid::element(
+                    set.key,
+                    format!("point {i} {point:?} of {} coordinates, not {dim}", point.len()),
+                ));
+            }
+        }
+        let test = test.unwrap_or(Contexts {
+            key: training.key,
+            points: training.points.clone(),
+        });
+        let (low, high) = self.context_box(dim, &training, &test)?;
+        let space = ContextSpace::new_box(low.clone(), high.clone())
+            .map_err(|_| out_of_range("problem.context_low", format!("{low:?}")))?;
+        for set in [&training, &test] {
+            if let Some((i, point)) = set.points.iter().enumerate().find(|(_, p)| !space.contains(p)) {
+                return Err(Invalid::element(
+                    set.key,
+                    format!("point {i} {point:?}, outside the context box {low:?} .. {high:?}"),
+                ));
+            }
+        }
+        let features = self.features.unwrap_or(Features::Affine);
+        if features == Features::Polar && dim != 2 {
+            return Err(Invalid::element(
+                "problem.features",
+                format!("\"polar\" for {dim}-D contexts"),
+            ));
+        }
+        let metric = self.metric.clone().unwrap_or_else(|| "score".into());
+        if metric.trim().is_empty() {
+            return Err(out_of_range("problem.metric", format!("{metric:?}")));
+        }
+        let environment = match &self.environment {
+            None => EnvironmentSpec::unnamed(),
+            Some(table) => table.spec()?,
+        };
+        let name = match (&self.name, stem) {
+            (Some(name), _) => name.clone(),
+            (None, Some(stem)) => stem.to_string(),
+            (None, None) => return Err(Invalid::missing("problem.name")),
+        };
+        if EnvironmentSpec::from_text(&name, [0; 3], "").is_err() {
+            let got = match &self.name {
+                Some(_) => format!("{name:?}"),
+                None => format!("{name:?} (the file's name: set problem.name)"),
+            };
+            return Err(out_of_range("problem.name", got));
+        }
+        let user = UserProblem {
+            unit: self.unit.clone().unwrap_or_default(),
+            lower_is_better: self.lower_is_better.unwrap_or(true),
+        };
+        let score = self.score.unwrap_or(ScoreAggregate::Mean);
+        // What config.toml records: every default filled in, the test contexts as written for
+        // the training ones when they were left to default.
+        let (test_contexts, test_grid) = match (&self.test_contexts, &self.test_grid) {
+            (None, None) => (self.training_contexts.clone(), self.training_grid.clone()),
+            given => (given.0.clone(), given.1.clone()),
+        };
+        let resolved = ProblemFile {
+            name: Some(name.clone()),
+            training_contexts: self.training_contexts.clone(),
+            training_grid: self.training_grid.clone(),
+            test_contexts,
+            test_grid,
+            context_low: Some(low),
+            context_high: Some(high),
+            theta0: Some(theta0.clone()),
+            features: Some(features),
+            score: Some(score),
+            metric: Some(metric.clone()),
+            unit: Some(user.unit.clone()),
+            lower_is_better: Some(user.lower_is_better),
+            environment: self.environment.as_ref().map(|table| EnvironmentTable {
+                parameters: Some(table.parameters.unwrap_or_default()),
+                ..table.clone()
+            }),
+        };
+        Ok(CheckedProblem {
+            resolved,
+            problem: Problem {
+                name,
+                training_contexts: training.points,
+                test_contexts: test.points,
+                space,
+                theta0,
+                score,
+                metric,
+                environment,
+            },
+            features,
+            user,
+        })
+    }
+
+    /// The context box: as given, or the bounding box of the contexts.
+    fn context_box(&self, dim: usize, training: &Contexts, test: &Contexts) -> Result<(Vec<f64>, Vec<f64>), Invalid> {
+        let valid = |corner: &[f64]| corner.len() == dim && corner.iter().all(|x| x.is_finite());
+        match (&self.context_low, &self.context_high) {
+            (Some(low), Some(high)) => {
+                if !valid(low) {
+                    return Err(out_of_range("problem.context_low", format!("{low:?}")));
+                }
+                if !valid(high) || low.iter().zip(high).any(|(l, h)| l >= h) {
+                    return Err(out_of_range("problem.context_high", format!("{high:?}")));
+                }
+                Ok((low.clone(), high.clone()))
+            }
+            (Some(_), None) => Err(Invalid::missing("problem.context_high")),
+            (None, Some(_)) => Err(Invalid::missing("problem.context_low")),
+            (None, None) => {
+                let all = || training.points.iter().chain(&test.points);
+                let low: Vec<f64> = (0..dim).map(|d| all().map(|p| p[d]).fold(f64::MAX, f64::min)).collect();
+                let high: Vec<f64> = (0..dim).map(|d| all().map(|p| p[d]).fold(f64::MIN, f64::max)).collect();
+                match (0..dim).find(|&d| low[d] >= high[d]) {
+                    Some(d) => Err(Invalid::element(
+                        "problem.context_low",
+                        format!(
+                            "nothing, and every context has coordinate {d} = {}: set context_low and context_high",
+                            low[d]
+                        ),
+                    )),
+                    None => Ok((low, high)),
+                }
+            }
+        }
+    }
+}
+
+impl EnvironmentTable {
+    fn spec(&self) -> Result<EnvironmentSpec, Invalid> {
+        let name = self.name.as_ref().ok_or(Invalid::missing("problem.environment.name"))?;
+        let settings = self
+            .settings
+            .as_ref()
+            .ok_or(Invalid::missing("problem.environment.settings"))?;
+        EnvironmentSpec::from_text(name, self.parameters.unwrap_or_default(), settings)
+            .map_err(|_| out_of_range("problem.environment.name", format!("{name:?}")))
+    }
+}
+
+/// The contexts of a list key or a grid key, `None` when neither is set; both set is refused.
+fn contexts(
+    (list_key, list): (&'static str, &Option<Vec<Vec<f64>>>),
+    (grid_key, grid): (&'static str, &Option<ContextGrid>),
+) -> Result<Option<Contexts>, Invalid> {
+    match (list, grid) {
+        (Some(_), Some(_)) => Err(Invalid::conflict(grid_key, list_key)),
+        (None, None) => Ok(None),
+        (Some(points), None) => {
+            if points.is_empty() {
+                return Err(out_of_range(list_key, "[]"));
+            }
+            if let Some((i, point)) = points
+                .iter()
+                .enumerate()
+                .find(|(_, p)| p.is_empty() || p.iter().any(|x| !x.is_finite()))
+            {
+                return Err(Invalid::element(list_key, format!("point {i} {point:?}")));
+            }
+            Ok(Some(Contexts {
+                key: list_key,
+                points: points.clone(),
+            }))
+        }
+        (None, Some(grid)) => Ok(Some(Contexts {
+            key: grid_key,
+            points: grid
+                .expand()
+                .ok_or_else(|| out_of_range(grid_key, format!("{grid:?}")))?,
+        })),
+    }
+}
+
+impl ContextGrid {
+    /// The grid's points, first dimension slowest; `None` for a grid out of range.
+    fn expand(&self) -> Option<Vec<Vec<f64>>> {
+        let dim = self.low.len();
+        let valid = (1..=MAX_CONTEXT).contains(&dim)
+            && self.high.len() == dim
+            && self.points.len() == dim
+            && self
+                .low
+                .iter()
+                .zip(&self.high)
+                .all(|(l, h)| l.is_finite() && h.is_finite() && l <= h)
+            && self.points.iter().all(|&n| n >= 1);
+        let total = self.points.iter().try_fold(1u64, |total, &n| total.checked_mul(n));
+        if !valid || total.is_none_or(|total| total > MAX_GRID_POINTS) {
+            return None;
+        }
+        let axis = |d: usize| -> Vec<f64> {
+            let (low, high, n) = (self.low[d], self.high[d], self.points[d]);
+            if n == 1 {
+                return vec![low + (high - low) / 2.0];
+            }
+            (0..n).map(|i| low + (high - low) * i as f64 / (n - 1) as f64).collect()
+        };
+        let mut points = vec![Vec::with_capacity(dim)];
+        for d in 0..dim {
+            points = points
+                .into_iter()
+                .flat_map(|point| {
+                    axis(d).into_iter().map(move |x| {
+                        let mut next = point.clone();
+                        next.push(x);
+                        next
+                    })
+                })
+                .collect();
+        }
+        Some(points)
+    }
+}
+
+/// The experiment of a checked problem file: C-REPS with BOLeRo's defaults (an update every 25
+/// rollouts on the last 100, or the best 100/K per training context) and the file's features,
+/// D-UCB with [`DUcbConfig::default`] (docs/DUCB-PARAMETERS.md), monotonic progress against
+/// random selection by default. No environment: the user's workers perform every rollout.
+pub fn experiment(checked: &CheckedProblem, options: &Options) -> Experiment {
+    let overrides = &options.overrides;
+    let problem = checked.problem.clone();
+    let preset = CRepsConfig {
+        features: checked.features.map(),
+        ..CRepsConfig::default()
+    };
+    let memory = match overrides.best_per_task {
+        Some(true) => MemoryConfig::best_per_task(100, problem.training_contexts.len()),
+        _ => preset.memory.clone(),
+    };
+    let creps = paper::with_overrides(preset, overrides, memory);
+    let ducb = DUcbConfig {
+        xi: overrides.xi.unwrap_or(DUcbConfig::default().xi),
+        ..DUcbConfig::default()
+    };
+    let episodes = options.episodes.unwrap_or(LearnerConfig::default().episodes);
+    let eval_every = EVAL_EVERY.min(episodes);
+    let features = serde_json::to_value(checked.features).expect("a unit variant serialises");
+    let settings = json!({
+        "problem": checked.resolved,
+        "creps": paper::creps_settings(&creps, features.as_str().unwrap_or_default(), "theta0"),
+        "ducb": ducb,
+        "first_visit": options.first_visit(),
+        "eval_every": eval_every,
+    });
+    Experiment {
+        name: problem.name.clone(),
+        methods: options.methods(&[Method::MonotonicProgress, Method::Random], |_| ducb.clone()),
+        runs: options.runs,
+        base_seed: options.seed,
+        learner: LearnerConfig {
+            seed: options.seed,
+            episodes,
+            in_flight: options.in_flight,
+            eval_every,
+            creps: Some(creps),
+        },
+        instance: Box::new(move |_| Instance {
+            problem: problem.clone(),
+            environment: None,
+            optimal_score: None,
+            keeps_state: false,
+        }),
+        selection_window: 250.min(episodes as usize),
+        settings,
+        detail: None,
+        best_policy: false,
+        user_problem: Some(checked.user.clone()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grids_expand_first_dimension_slowest_and_one_point_is_the_midpoint() {
+        let grid = ContextGrid {
+            low: vec![-1.0, 0.0],
+            high: vec![1.0, 2.0],
+            points: vec![3, 1],
+        };
+        assert_eq!(
+            grid.expand().unwrap(),
+            vec![vec![-1.0, 1.0], vec![0.0, 1.0], vec![1.0, 1.0]]
+        );
+        let too_many = ContextGrid {
+            low: vec![0.0; 2],
+            high: vec![1.0; 2],
+            points: vec![1000, 1000],
+        };
+        assert_eq!(too_many.expand(), None);
+        let overflow = ContextGrid {
+            points: vec![u64::MAX, 2],
+            ..too_many
+        };
+        assert_eq!(overflow.expand(), None);
+    }
+}
