@@ -123,8 +123,8 @@ def measure(acps: str, workers: int, episodes: int, rollout_us: int, in_flight: 
         reports = [
             json.loads(p.communicate(timeout=600)[0].strip().splitlines()[-1]) for p in procs
         ]
-        rollouts = sum(r["rollouts"] for r in reports)
-        seconds = max(r["seconds"] for r in reports)
+        rollouts = int(sum(r["rollouts"] for r in reports))
+        seconds = float(max(r["seconds"] for r in reports))
         rate = rollouts / seconds
         print(
             f"W={workers} rollout={rollout_us} us in_flight={in_flight}: {rollouts} rollouts in "

@@ -3,7 +3,10 @@
 //! PyPI once), its unittest suite run against this build's `acps`, and its policy reader checked
 //! against the learner's own numbers.
 
+use crate::problems::{self, bowl_toml, bowl_worker, succeeded};
+use crate::{run_name, temp_dir};
 use acps::records::SavedPolicy;
+use acps_wire::ipc;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -111,15 +114,6 @@ fn python_worker_unittests_pass() {
     );
 }
 
-/// A temporary directory removed when dropped.
-struct TempDir(PathBuf);
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// Python's means of the policy file at `path` at `contexts`, as f64 bits.
 fn python_means(path: &Path, contexts: &[Vec<f64>]) -> Vec<Vec<u64>> {
     let script = "import json, struct, sys, acps_worker\n\
@@ -144,8 +138,7 @@ fn python_means(path: &Path, contexts: &[Vec<f64>]) -> Vec<Vec<u64>> {
 
 #[test]
 fn policy_means_are_rusts_bit_for_bit() {
-    let root = std::env::temp_dir().join(format!("acps-python-policies-{}", std::process::id()));
-    let _cleanup = TempDir(root.clone());
+    let root = temp_dir("python-policies");
     // Quadratic features of 2 and 3 dimensions (6 and 10 features: nalgebra's dot product sums
     // blocks of 8 differently) and polar-quadratic ones.
     let experiments: [&[&str]; 3] = [&["function"], &["dims", "--n-s", "3"], &["grid"]];
@@ -185,4 +178,108 @@ fn policy_means_are_rusts_bit_for_bit() {
         }
         assert_eq!(python.len(), contexts.len());
     }
+}
+
+/// The command line of the Python bowl worker (processes/worker/python/examples/bowl.py).
+fn python_bowl() -> String {
+    format!(
+        "'{}' '{}'",
+        python().display(),
+        package().join("examples/bowl.py").display()
+    )
+}
+
+/// The bowl problem, shortened by `args`, on 2 workers of `command`: its summary.json's bytes.
+fn bowl_summary(command: &str, test: &str, dir: &Path, args: &[&str]) -> Vec<u8> {
+    let out = dir.join(test);
+    let mut all = vec!["-q"];
+    all.extend_from_slice(args);
+    succeeded(&problems::run(&bowl_toml(), command, "2", test, &out, &all));
+    std::fs::read(out.join("summary.json")).unwrap()
+}
+
+#[test]
+fn python_bowl_workers_give_rust_bowl_workers_bits() {
+    let dir = temp_dir("python-bowl");
+    let rust = bowl_summary(&format!("'{}'", bowl_worker().display()), "bowl-rust", &dir, &[]);
+    let python = bowl_summary(&python_bowl(), "bowl-python", &dir, &[]);
+    assert!(
+        python == rust,
+        "summary.json of 2 Python workers differs from 2 Rust workers':\n{}\n{}",
+        String::from_utf8_lossy(&python),
+        String::from_utf8_lossy(&rust)
+    );
+}
+
+#[test]
+fn a_sigkilled_python_worker_changes_nothing() {
+    let dir = temp_dir("python-bowl-kill");
+    let shape = [
+        "--runs",
+        "1",
+        "--method",
+        "monotonic-progress",
+        "--episodes",
+        "20000",
+        "--checkpoint-every",
+        "1",
+    ];
+    let reference = bowl_summary(&format!("'{}'", bowl_worker().display()), "kill-ref", &dir, &shape);
+    // Each worker writes its PID (exec keeps it) before it becomes the Python bowl worker.
+    let pids = dir.join("pids");
+    std::fs::create_dir_all(&pids).unwrap();
+    let command = format!(
+        "sh -c 'echo $$ > {}/$ACPS_WORKER_INDEX; exec {}'",
+        pids.display(),
+        python_bowl().replace('\'', "")
+    );
+    let out = dir.join("killed");
+    let name = run_name("py-kill");
+    let mut learner = Command::new("timeout")
+        .args(["--signal=KILL", "180", env!("CARGO_BIN_EXE_acps"), "run", "--config"])
+        .arg(bowl_toml())
+        .args([
+            "--worker-command",
+            &command,
+            "--workers",
+            "2",
+            "--run",
+            name.as_str(),
+            "-q",
+        ])
+        .args(shape)
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Learning has begun (a checkpoint after every update) and worker 0 is known: kill it.
+    let start = std::time::Instant::now();
+    let victim = pids.join("0");
+    while !(std::fs::read_dir(out.join("checkpoints")).is_ok_and(|mut e| e.next().is_some()) && victim.exists()) {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(120),
+            "no checkpoint appeared"
+        );
+        assert!(
+            learner.try_wait().unwrap().is_none(),
+            "the run ended before a checkpoint"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let pid = std::fs::read_to_string(&victim).unwrap().trim().to_string();
+    let killed = Command::new("kill").args(["-9", &pid]).status().unwrap();
+    assert!(killed.success(), "worker 0 (PID {pid}) was gone before it was killed");
+    assert!(!out.join("summary.json").exists(), "killed before the end");
+    let output = learner.wait_with_output().unwrap();
+    assert!(
+        output.status.success(),
+        "the run with a killed worker failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    crate::assert_clean(&name);
+    let summary = std::fs::read(out.join("summary.json")).unwrap();
+    assert!(summary == reference, "a killed Python worker changed the result");
+    assert!(ipc::live_nodes(&name).is_ok_and(|alive| alive == 0));
 }

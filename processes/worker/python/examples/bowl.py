@@ -11,9 +11,11 @@ import acps_worker
 BOWL = acps_worker.Environment("bowl", settings="bowl v1", parameters=(0, 0, 0))
 
 
-def rollout(task: acps_worker.Task) -> tuple[float, float]:
+def rollout(task: acps_worker.Task) -> tuple[float, float] | None:
     """The squared distance of theta to the context's bowl bottom: reward -total, score sqrt."""
     d, n = len(task.context), len(task.theta)
+    if d == 0:
+        return None
     total = 0.0
     for i in range(n):
         e = task.theta[i] - task.context[i % d] * (i + 1) / n
