@@ -118,14 +118,17 @@ class _Batching:
     __slots__ = ("largest", "mean")
 
     def __init__(self, in_flight: int) -> None:
+        """Batches of at most half of ``in_flight`` (1..=MAX_BATCH), 1 until timed."""
         self.largest = min(max(in_flight // 2, 1), _wire.MAX_BATCH)
         self.mean: float | None = None
 
     def observe(self, seconds: float) -> None:
+        """A rollout took ``seconds``: an exponential mean (weight 0.1)."""
         mean = self.mean
         self.mean = seconds if mean is None else 0.9 * mean + 0.1 * seconds
 
     def size(self) -> int:
+        """Tasks per request: as many as fit BATCH_TIME, within the largest batch."""
         mean = self.mean
         if mean is None:
             return 1
@@ -142,21 +145,26 @@ class _Silence:
     __slots__ = ("look_after", "looks", "waits")
 
     def __init__(self) -> None:
+        """A learner just heard."""
         self.heard()
 
     def heard(self) -> None:
+        """The learner woke this worker: start over."""
         self.waits = 0
         self.look_after = self.FIRST_LOOK
         self.looks = 0
 
     def look_due(self) -> bool:
+        """A wait timed out; True when the learner should be looked at now."""
         self.waits += 1
         return self.waits >= self.look_after
 
     def lists(self) -> bool:
+        """Whether the due look lists the run's nodes rather than trust the learner's PID."""
         return self.looks % self.LIST_EVERY == self.LIST_EVERY - 1
 
     def looked(self) -> None:
+        """The look found the learner alive: look again after twice as many silent waits."""
         self.waits = 0
         self.looks += 1
         self.look_after = min(2 * self.look_after, self.LAST_LOOK)
@@ -239,6 +247,7 @@ def _signals(stop: threading.Event, enabled: bool) -> Iterator[None]:
         return
 
     def handler(signum: int, frame: FrameType | None) -> None:
+        """Set the stop flag."""
         log.info("signal %d: the worker stops", signum)
         stop.set()
 
@@ -329,6 +338,7 @@ class _Session:
         stop: threading.Event,
         protocol: int,
     ) -> None:
+        """A worker of ``run`` that is yet to open anything (see :func:`serve`)."""
         self.run = run
         self.rollout = rollout
         self.environment = environment
@@ -348,6 +358,7 @@ class _Session:
         self.logged_failure = False
 
     def report(self, exit: Exit) -> Report:
+        """What the worker did, ending for ``exit``."""
         seconds = 0.0 if self.joined is None else time.perf_counter() - self.joined
         return Report(exit, self.rollouts, self.failed, seconds, self.rollout_seconds)
 
@@ -457,6 +468,7 @@ class _Session:
             )
 
     def serve(self) -> Report:
+        """Open, join and serve until the run ends for this worker."""
         self.open()
         if not self.join():
             return self.report(Exit.STOPPED)
@@ -464,6 +476,10 @@ class _Session:
         return self.loop()
 
     def loop(self) -> Report:
+        """The Rust worker's loop: send requests while the budget allows, wake the learner
+        when this worker could run dry, take answers when the queue is empty, simulate one
+        task, else wait a tick for the learner and look whether it lives when it stays
+        silent."""
         ports = self.ports
         client, notifier, listener = ports.client, ports.notifier, ports.listener
         in_flight = self.in_flight
