@@ -11,6 +11,7 @@ mod cli;
 mod config;
 mod fleet;
 mod problems;
+mod python;
 mod run_dir;
 
 /// `acps` under a watchdog: a learner that hangs fails the test instead of blocking it.

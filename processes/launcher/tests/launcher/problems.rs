@@ -11,14 +11,14 @@ use std::sync::OnceLock;
 use std::time::SystemTime;
 
 /// The shipped example problem.
-fn bowl_toml() -> PathBuf {
+pub(crate) fn bowl_toml() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/bowl.toml")
 }
 
 /// The bowl example's worker, in this test's target directory: `cargo test --workspace` builds
 /// the examples; a test of this package alone builds it here when it is missing or older than
 /// its source.
-fn bowl_worker() -> &'static Path {
+pub(crate) fn bowl_worker() -> &'static Path {
     static BOWL: OnceLock<PathBuf> = OnceLock::new();
     BOWL.get_or_init(|| {
         let profile_dir = Path::new(env!("CARGO_BIN_EXE_acps")).parent().unwrap();
@@ -41,12 +41,12 @@ fn bowl_worker() -> &'static Path {
 }
 
 /// The bowl worker's command line for --worker-command, with environment variables `vars`.
-fn worker_command(vars: &str) -> String {
+pub(crate) fn worker_command(vars: &str) -> String {
     format!("env {vars} '{}'", bowl_worker().display())
 }
 
 /// `acps run` of `config` on `workers` started from `command`, under a watchdog.
-fn run(config: &Path, command: &str, workers: &str, test: &str, out: &Path, extra: &[&str]) -> Output {
+pub(crate) fn run(config: &Path, command: &str, workers: &str, test: &str, out: &Path, extra: &[&str]) -> Output {
     let run = run_name(test);
     let output = watched()
         .args(["run", "--config"])
@@ -61,7 +61,7 @@ fn run(config: &Path, command: &str, workers: &str, test: &str, out: &Path, extr
     output
 }
 
-fn succeeded(output: &Output) -> String {
+pub(crate) fn succeeded(output: &Output) -> String {
     assert!(
         output.status.success(),
         "stdout: {}\nstderr: {}",
@@ -356,12 +356,12 @@ fn the_bowl_learns_on_its_workers_and_two_workers_give_one_workers_bits() {
 }
 
 /// The spec the bowl worker declares with settings `settings`.
-fn bowl_spec(settings: &str) -> EnvironmentSpec {
+pub(crate) fn bowl_spec(settings: &str) -> EnvironmentSpec {
     EnvironmentSpec::from_text("bowl", [0, 0, 0], settings).unwrap()
 }
 
 /// A refused run's stderr: it ends when no worker is left.
-fn refused(output: &Output) -> String {
+pub(crate) fn refused(output: &Output) -> String {
     assert!(!output.status.success(), "{}", String::from_utf8_lossy(&output.stdout));
     String::from_utf8_lossy(&output.stderr).into_owned()
 }

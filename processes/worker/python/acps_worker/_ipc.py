@@ -1,0 +1,150 @@
+"""The iceoryx2 plumbing of a worker, mirroring ``shared/wire/src/ipc.rs``: the run's config
+(prefix, creation timeout, a worker node that leaves cleaning up dead nodes to the learner),
+the services opened with the run's limits, liveness of processes, and removal of a run's files
+once its last node is gone."""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+import iceoryx2 as iox2
+
+from . import _wire
+from .errors import AcpsWorkerError
+
+log = logging.getLogger("acps_worker")
+_RUN_NAME = re.compile(r"[A-Za-z0-9-]{1,40}")
+#: Where iceoryx2 keeps a directory per node.
+NODES_DIR = Path("/tmp/iceoryx2/nodes")
+#: The directories iceoryx2 keeps a run's files in.
+ROOTS = (Path("/dev/shm"), Path("/tmp/iceoryx2"))
+#: Attempts at listing a run's nodes (a listing fails while any node is created or removed).
+LIST_ATTEMPTS = 50
+
+
+def check_run_name(run: str) -> str:
+    """``run`` if it is a valid run name (1 to 40 letters, digits and '-'), else ValueError."""
+    if not _RUN_NAME.fullmatch(run):
+        raise ValueError(f"run name '{run}' must be 1 to 40 characters of letters, digits and '-'")
+    return run
+
+
+def prefix(run: str) -> str:
+    """The iceoryx2 file prefix of ``run``'s resources."""
+    return _wire.PREFIX_FORMAT.format(run=run)
+
+
+def run_config(run: str, worker: bool = True) -> Any:
+    """The iceoryx2 config of ``run``; a worker's leaves cleaning up dead nodes to the learner
+    (``ipc::worker_node``: each look reads every node's files of the run)."""
+    config = iox2.config.default()
+    config.global_cfg.prefix = iox2.FileName.new(prefix(run))
+    config.global_cfg.creation_timeout = iox2.Duration.from_millis(_wire.CREATION_TIMEOUT_MS)
+    if worker:
+        config.global_cfg.node.cleanup_dead_nodes_on_creation = False
+        config.global_cfg.node.cleanup_dead_nodes_on_destruction = False
+        config.global_cfg.service.cleanup_dead_nodes_on_open = False
+    return config
+
+
+def ipc_error(what: str, error: BaseException) -> AcpsWorkerError:
+    """An error for ``what`` with iceoryx2's reason."""
+    return AcpsWorkerError(f"{what}: {type(error).__name__}: {error}")
+
+
+def list_nodes(config: Any) -> list[Any]:
+    """The node states of the run of ``config``, retried while the listing fails."""
+    for attempt in range(LIST_ATTEMPTS):
+        try:
+            return list(iox2.Node.list(iox2.ServiceType.Ipc, config))
+        except iox2.NodeListFailure as error:
+            if attempt == LIST_ATTEMPTS - 1:
+                raise ipc_error("listing the run's nodes", error) from error
+            time.sleep(0.001)
+    raise AssertionError("unreachable")
+
+
+def process_runs(pid: int) -> bool:
+    """Whether process ``pid`` runs: it exists and is no zombie."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="utf-8", errors="replace") as stat:
+            text = stat.read()
+    except OSError:
+        return False
+    _, _, rest = text.rpartition(")")
+    return not rest.lstrip().startswith(("Z", "X"))
+
+
+def alive_learner_pid(config: Any) -> int | None:
+    """The PID of the run's live learner node, ``None`` when no learner node lives."""
+    for state in list_nodes(config):
+        if isinstance(state, iox2.NodeState.Alive):
+            details = state[0].details
+            if details is not None and details.name.as_str() == _wire.LEARNER_NODE:
+                return int(details.process_id)
+    return None
+
+
+def run_files(run: str) -> list[Path]:
+    """Files of ``run`` in /dev/shm and /tmp/iceoryx2 (recursively)."""
+    start = prefix(run)
+    found: list[Path] = []
+    stack = list(ROOTS)
+    while stack:
+        directory = stack.pop()
+        try:
+            entries = list(os.scandir(directory))
+        except OSError:
+            continue
+        for entry in entries:
+            if entry.name.startswith(start):
+                found.append(Path(entry.path))
+            elif entry.is_dir(follow_symlinks=False):
+                stack.append(Path(entry.path))
+    return found
+
+
+def remove_run_files_if_last(run: str) -> int:
+    """After this process's node is gone: when no node of ``run`` lives, clean up dead nodes and
+    remove the files iceoryx2 keeps on purpose (``ipc::remove_run_files``); returns how many
+    files went. Best effort: a run with a live node is left alone."""
+    config = run_config(run, worker=False)
+    try:
+        states = list_nodes(config)
+    except AcpsWorkerError:
+        return 0
+    alive = 0
+    for state in states:
+        if isinstance(state, iox2.NodeState.Dead):
+            try:
+                state[0].try_remove_stale_resources()
+            except Exception as error:  # noqa: BLE001 - best effort, as the Rust side
+                log.debug("cleaning up a dead node of run '%s' failed: %s", run, error)
+        elif not isinstance(state, iox2.NodeState.Inaccessible):
+            alive += 1
+    if alive > 0:
+        return 0
+    removed = 0
+    for path in run_files(run):
+        try:
+            if path.is_dir():
+                for child in sorted(path.rglob("*"), reverse=True):
+                    child.rmdir() if child.is_dir() else child.unlink()
+                path.rmdir()
+            else:
+                path.unlink()
+            removed += 1
+        except OSError:
+            continue
+        parent = path.parent
+        if parent.parent == NODES_DIR:
+            try:
+                parent.rmdir()
+            except OSError:
+                pass
+    return removed

@@ -1,0 +1,714 @@
+"""The worker loop, mirroring the Rust reference worker (``processes/worker/src/lib.rs``): join
+the run, keep up to ``in_flight`` tasks in flight in request slots, send outcomes in batches
+sized from the measured rollout time, wake the learner only when this worker could run dry,
+and watch the learner's liveness while waiting."""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import enum
+import gc
+import logging
+import math
+import os
+import signal
+import threading
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from types import FrameType
+from typing import Any
+
+import iceoryx2 as iox2
+
+from . import _ipc, _wire
+from .environment import Environment
+from .errors import NoLearnerError, ProtocolError, RefusedError
+
+log = logging.getLogger("acps_worker")
+
+#: How long blocking waits last before a liveness look (Rust: ``ipc::TICK``).
+TICK_MS = 50
+#: How often a starting worker looks for the run's learner.
+JOIN_POLL = 0.002
+#: How much simulation one request should carry (Rust: ``BATCH_TIME``).
+BATCH_TIME = 800e-6
+_U32_MAX = (1 << 32) - 1
+_KIND_NAMES = ("train", "evaluate", "baseline")
+#: What a rollout that raised leaves as its result.
+_RAISED = object()
+_TASK_SIZE = ctypes.sizeof(_wire.WireTask)
+
+#: What a rollout returns: ``(reward, score)``, ``(reward, score, diagnostics)`` or ``None`` for a
+#: failed rollout.
+RolloutResult = tuple[float, float] | tuple[float, float, Sequence[float]] | None
+
+
+class Task:
+    """One rollout to perform: the context, the parameters, the seed of everything random in
+    it, and the kind (``"train"``, ``"evaluate"`` or ``"baseline"``)."""
+
+    __slots__ = ("context", "id", "job", "kind", "seed", "theta")
+
+    id: int
+    job: int
+    kind: str
+    seed: int
+    context: tuple[float, ...]
+    theta: tuple[float, ...]
+
+    def __init__(
+        self,
+        id: int,
+        job: int,
+        kind: str,
+        seed: int,
+        context: tuple[float, ...],
+        theta: tuple[float, ...],
+    ) -> None:
+        """A task of ``job`` with id ``id``."""
+        self.id = id
+        self.job = job
+        self.kind = kind
+        self.seed = seed
+        self.context = context
+        self.theta = theta
+
+    def __repr__(self) -> str:
+        """All fields."""
+        return (
+            f"Task(id={self.id}, job={self.job}, kind={self.kind!r}, seed={self.seed}, "
+            f"context={self.context!r}, theta={self.theta!r})"
+        )
+
+
+class Exit(str, enum.Enum):
+    """Why a worker stopped."""
+
+    #: The learner said the run is over.
+    FINISHED = "finished"
+    #: The learner disappeared (crashed or killed).
+    LEARNER_GONE = "learner-gone"
+    #: The stop flag was set (also by SIGINT or SIGTERM).
+    STOPPED = "stopped"
+
+
+@dataclass(frozen=True)
+class Report:
+    """What a worker did."""
+
+    #: Why it stopped.
+    exit: Exit
+    #: Rollouts performed (failed ones included).
+    rollouts: int
+    #: Rollouts that failed: returned None, raised, or returned non-finite numbers.
+    failed: int
+    #: Seconds from joining the run to the end (0 when it never joined).
+    seconds: float
+    #: Seconds spent inside the rollout function.
+    rollout_seconds: float
+
+
+class _Batching:
+    """Tasks per request from the measured rollout time (Rust: ``Batching``)."""
+
+    __slots__ = ("largest", "mean")
+
+    def __init__(self, in_flight: int) -> None:
+        """Batches of at most half of ``in_flight`` (1..=MAX_BATCH), 1 until timed."""
+        self.largest = min(max(in_flight // 2, 1), _wire.MAX_BATCH)
+        self.mean: float | None = None
+
+    def observe(self, seconds: float) -> None:
+        """A rollout took ``seconds``: an exponential mean (weight 0.1)."""
+        mean = self.mean
+        self.mean = seconds if mean is None else 0.9 * mean + 0.1 * seconds
+
+    def size(self) -> int:
+        """Tasks per request: as many as fit BATCH_TIME, within the largest batch."""
+        mean = self.mean
+        if mean is None:
+            return 1
+        fits = math.floor(BATCH_TIME / max(mean, 1e-9))
+        return max(int(min(fits, self.largest)), 1)
+
+
+class _Silence:
+    """When a waiting worker looks whether the silent learner lives (Rust: ``Silence``)."""
+
+    FIRST_LOOK = 2
+    LAST_LOOK = 32
+    LIST_EVERY = 8
+    __slots__ = ("look_after", "looks", "waits")
+
+    def __init__(self) -> None:
+        """A learner just heard."""
+        self.heard()
+
+    def heard(self) -> None:
+        """The learner woke this worker: start over."""
+        self.waits = 0
+        self.look_after = self.FIRST_LOOK
+        self.looks = 0
+
+    def look_due(self) -> bool:
+        """A wait timed out; True when the learner should be looked at now."""
+        self.waits += 1
+        return self.waits >= self.look_after
+
+    def lists(self) -> bool:
+        """Whether the due look lists the run's nodes rather than trust the learner's PID."""
+        return self.looks % self.LIST_EVERY == self.LIST_EVERY - 1
+
+    def looked(self) -> None:
+        """The look found the learner alive: look again after twice as many silent waits."""
+        self.waits = 0
+        self.looks += 1
+        self.look_after = min(2 * self.look_after, self.LAST_LOOK)
+
+
+def _needs(answer: _wire.Answer) -> str:
+    """What a refusal says the learner's jobs need, in words (Rust: ``Answer::needs``)."""
+    spec = Environment.from_wire(answer.environment)
+    if spec is None:
+        return "no environment"
+    n = int(answer.environments)
+    if n <= 1:
+        return str(spec)
+    if n == 2:
+        return f"{spec} and 1 other"
+    return f"{spec} and {n - 1} others"
+
+
+def refusal_reason(answer: _wire.Answer, identity: int, serves: Environment, protocol: int) -> str:
+    """Why the learner's ``answer`` refused this worker (of run ``identity``, 0 before it learnt
+    one, serving ``serves``, speaking ``protocol``), naming both sides exactly as the Rust
+    worker's ``refusal_reason`` does."""
+    if answer.protocol != protocol:
+        return f"protocol version {protocol} here, {answer.protocol} at the learner (another build)"
+    if answer.refusal == _wire.REFUSAL_ENVIRONMENT:
+        return f"this worker serves {serves}; the run's jobs need {_needs(answer)}"
+    return (
+        f"this worker belongs to run identity {identity:016x}, the learner runs {answer.run:016x}"
+    )
+
+
+def _copy(ctype: type[Any], address: int) -> Any:
+    """A private copy of the ``ctype`` value at ``address`` (shared memory)."""
+    value = ctype()
+    ctypes.memmove(ctypes.addressof(value), address, ctypes.sizeof(ctype))
+    return value
+
+
+@dataclass
+class _Ports:
+    """Everything of iceoryx2 a worker holds, released in reverse order of creation."""
+
+    node: Any = None
+    tasks: Any = None
+    to_learner: Any = None
+    to_workers: Any = None
+    client: Any = None
+    notifier: Any = None
+    listener: Any = None
+
+    def release(self, pending: list[Any]) -> None:
+        """Release the pending requests, the ports, the services and the node, in that order
+        (a Python process that just exits leaves iceoryx2's files behind)."""
+        for request in pending:
+            _delete(request)
+        pending.clear()
+        for port in (self.listener, self.notifier, self.client):
+            _delete(port)
+        self.listener = self.notifier = self.client = None
+        self.to_workers = self.to_learner = self.tasks = None
+        self.node = None
+        gc.collect()
+
+
+def _delete(port: Any) -> None:
+    """Release an iceoryx2 object now."""
+    if port is not None:
+        try:
+            port.delete()
+        except Exception as error:  # noqa: BLE001 - releasing must go on
+            log.debug("releasing %r failed: %s", port, error)
+
+
+@contextlib.contextmanager
+def _signals(stop: threading.Event, enabled: bool) -> Iterator[None]:
+    """SIGINT and SIGTERM set ``stop`` while the worker serves (main thread only), so that it
+    ends cleanly; the previous handlers come back afterwards."""
+    if not enabled or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        """Set the stop flag."""
+        log.info("signal %d: the worker stops", signum)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+Rollout = Callable[[Task], RolloutResult]
+
+
+def serve(
+    rollout: Rollout,
+    run: str | None = None,
+    *,
+    environment: Environment | None = None,
+    in_flight: int = 4,
+    name: str | None = None,
+    startup_timeout: float = 10.0,
+    stop: threading.Event | None = None,
+    handle_signals: bool = True,
+    _protocol: int | None = None,
+) -> Report:
+    """Serve the learner of ``run`` (default: ``$ACPS_RUN``) until it finishes, disappears or
+    ``stop`` is set (SIGINT and SIGTERM set it when ``handle_signals`` and this is the main
+    thread), and return what this worker did.
+
+    ``rollout(task)`` returns ``(reward, score)``, optionally with a third value, a sequence
+    of up to 16 diagnostics; ``None``, an exception or non-finite numbers make a failed
+    outcome (the first exception is logged with its traceback). ``environment`` is the
+    identity this worker serves (default :meth:`Environment.unnamed`, which matches only
+    problems that name none). ``in_flight`` (1..=128) tasks are kept asked for or queued.
+
+    Raises :class:`NoLearnerError` when no learner comes within ``startup_timeout`` seconds,
+    :class:`RefusedError` when the learner refuses this worker, :class:`ProtocolError` for a
+    task of another environment or diagnostics beyond the wire's capacity, and
+    :class:`AcpsWorkerError` when iceoryx2 fails. Every iceoryx2 resource is released before
+    it returns or raises.
+    """
+    run = run if run is not None else os.environ.get(_wire.RUN_ENV)
+    if not run:
+        raise ValueError(f"no run to join: pass run=NAME or set {_wire.RUN_ENV}")
+    _ipc.check_run_name(run)
+    if isinstance(in_flight, bool) or not isinstance(in_flight, int):
+        raise TypeError(f"worker option in_flight must be an int, got {in_flight!r}")
+    if not 1 <= in_flight <= _wire.MAX_IN_FLIGHT_PER_WORKER:
+        raise ValueError(
+            f"worker option in_flight must be in 1..={_wire.MAX_IN_FLIGHT_PER_WORKER}, "
+            f"got {in_flight}"
+        )
+    name = name if name is not None else f"worker-{os.getpid()}"
+    if name == _wire.LEARNER_NODE:
+        raise ValueError(f"a worker's node may not be named '{_wire.LEARNER_NODE}' (the learner's)")
+    if not startup_timeout >= 0:
+        raise ValueError(f"startup_timeout must be >= 0 seconds, got {startup_timeout}")
+    session = _Session(
+        run=run,
+        rollout=rollout,
+        environment=environment if environment is not None else Environment.unnamed(),
+        in_flight=in_flight,
+        name=name,
+        startup_timeout=startup_timeout,
+        stop=stop if stop is not None else threading.Event(),
+        protocol=_wire.PROTOCOL_VERSION if _protocol is None else _protocol,
+    )
+    with _signals(session.stop, handle_signals):
+        try:
+            return session.serve()
+        finally:
+            session.close()
+
+
+class _Session:
+    """One worker's state while it serves."""
+
+    def __init__(
+        self,
+        *,
+        run: str,
+        rollout: Rollout,
+        environment: Environment,
+        in_flight: int,
+        name: str,
+        startup_timeout: float,
+        stop: threading.Event,
+        protocol: int,
+    ) -> None:
+        """A worker of ``run`` that is yet to open anything (see :func:`serve`)."""
+        self.run = run
+        self.rollout = rollout
+        self.environment = environment
+        self.in_flight = in_flight
+        self.name = name
+        self.startup_timeout = startup_timeout
+        self.stop = stop
+        self.protocol = protocol
+        self.config = _ipc.run_config(run)
+        self.ports = _Ports()
+        self.pending: list[Any] = []
+        self.learner_pid: int | None = None
+        self.rollouts = 0
+        self.failed = 0
+        self.rollout_seconds = 0.0
+        self.joined: float | None = None
+        self.logged_failure = False
+
+    def report(self, exit: Exit) -> Report:
+        """What the worker did, ending for ``exit``."""
+        seconds = 0.0 if self.joined is None else time.perf_counter() - self.joined
+        return Report(exit, self.rollouts, self.failed, seconds, self.rollout_seconds)
+
+    def close(self) -> None:
+        """Release everything, then remove the run's files if no node of the run lives."""
+        self.ports.release(self.pending)
+        _ipc.remove_run_files_if_last(self.run)
+
+    def open(self) -> None:
+        """The node and the run's services, opened with the limits every side agrees on."""
+        ports = self.ports
+        try:
+            ports.node = (
+                iox2.NodeBuilder.new()
+                .name(iox2.NodeName.new(self.name))
+                .config(self.config)
+                .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+                .create(iox2.ServiceType.Ipc)
+            )
+        except Exception as error:
+            raise _ipc.ipc_error(
+                f"creating node '{self.name}' of run '{self.run}'", error
+            ) from error
+        settings = _wire.TASKS_SERVICE
+        try:
+            ports.tasks = (
+                ports.node.service_builder(iox2.ServiceName.new(_wire.TASKS))
+                .request_response(_wire.WorkerMessage, iox2.Slice[_wire.WireTask])
+                .response_header(_wire.Answer)
+                .max_servers(settings["max_servers"])
+                .max_clients(settings["max_clients"])
+                .max_nodes(settings["max_nodes"])
+                .max_active_requests_per_client(settings["max_active_requests_per_client"])
+                .max_response_buffer_size(settings["max_response_buffer_size"])
+                .max_loaned_requests(settings["max_loaned_requests"])
+                .open_or_create()
+            )
+        except Exception as error:
+            raise _ipc.ipc_error(
+                "opening the task service (a learner of another build has incompatible types, "
+                "or a process of this run died while creating it)",
+                error,
+            ) from error
+
+        def event(service: str) -> Any:
+            limits = _wire.EVENT_SERVICE
+            try:
+                return (
+                    ports.node.service_builder(iox2.ServiceName.new(service))
+                    .event()
+                    .max_listeners(limits["max_listeners"])
+                    .max_notifiers(limits["max_notifiers"])
+                    .max_nodes(limits["max_nodes"])
+                    .open_or_create()
+                )
+            except Exception as error:
+                raise _ipc.ipc_error(f"opening the event service '{service}'", error) from error
+
+        ports.to_learner = event(_wire.TO_LEARNER)
+        ports.to_workers = event(_wire.TO_WORKERS)
+
+    def join(self) -> bool:
+        """Wait for the run's learner; False when stopped first."""
+        started = time.monotonic()
+        while self.ports.tasks.dynamic_config.number_of_servers == 0:
+            if self.stop.is_set():
+                return False
+            waited = time.monotonic() - started
+            if waited > self.startup_timeout:
+                raise NoLearnerError(self.run, waited)
+            time.sleep(JOIN_POLL)
+        ports = self.ports
+        try:
+            ports.client = ports.tasks.client_builder().create()
+            ports.notifier = ports.to_learner.notifier_builder().create()
+            ports.listener = ports.to_workers.listener_builder().create()
+        except Exception as error:
+            raise _ipc.ipc_error("creating the worker's ports", error) from error
+        self.learner_pid = _ipc.alive_learner_pid(self.config)
+        log.info("worker %s joins run '%s'", self.name, self.run)
+        return True
+
+    def learner_lives(self, listing: bool) -> bool:
+        """Whether the learner lives: its process by PID (cheap) unless ``listing``, else (or
+        when the PID's process is gone) by listing the run's nodes for a live learner node."""
+        if self.ports.tasks.dynamic_config.number_of_servers == 0:
+            return False
+        if not listing and self.learner_pid is not None and _ipc.process_runs(self.learner_pid):
+            return True
+        self.learner_pid = _ipc.alive_learner_pid(self.config)
+        return self.learner_pid is not None
+
+    def failure(self, task: Task, why: str, exc: bool = False) -> None:
+        """Count a failed rollout; log the first with its reason (and the traceback of the
+        exception being handled when ``exc``, as text: a record holding the traceback itself
+        would keep this worker's frames, and with them its shared memory, alive)."""
+        self.failed += 1
+        if not self.logged_failure:
+            self.logged_failure = True
+            trace = "\n" + traceback.format_exc().rstrip() if exc else ""
+            log.error(
+                "rollout of task %d (job %d) failed: %s; later failures are counted, not logged%s",
+                task.id,
+                task.job,
+                why,
+                trace,
+            )
+
+    def serve(self) -> Report:
+        """Open, join and serve until the run ends for this worker."""
+        self.open()
+        if not self.join():
+            return self.report(Exit.STOPPED)
+        self.joined = time.perf_counter()
+        return self.loop()
+
+    def loop(self) -> Report:
+        """The Rust worker's loop: send requests while the budget allows, wake the learner
+        when this worker could run dry, take answers when the queue is empty, simulate one
+        task, else wait a tick for the learner and look whether it lives when it stays
+        silent."""
+        ports = self.ports
+        client, notifier, listener = ports.client, ports.notifier, ports.listener
+        in_flight = self.in_flight
+        stop = self.stop
+        rollout = self.rollout
+        served = self.environment.to_wire()
+        served_bytes = bytes(served)
+        identity = 0
+        asking = min(in_flight, _wire.MAX_ASKING_REQUESTS)
+        # Requests in flight with the number of tasks each asks for; None is a free slot. The
+        # first `asking` slots ask for tasks, the last only delivers outcomes.
+        slots: list[tuple[Any, int] | None] = [None] * (asking + 1)
+        queue: deque[Any] = deque()
+        outbox = _wire.WorkerMessage()
+        outbox.protocol = self.protocol
+        outbox.serves_one = 1
+        outbox.environment = served
+        outcomes = outbox.outcomes
+        count = 0
+        batching = _Batching(in_flight)
+        slowest_us = 0
+        silence = _Silence()
+        unannounced = False
+        tick = iox2.Duration.from_millis(TICK_MS)
+        perf = time.perf_counter
+        isfinite = math.isfinite
+        while True:
+            if stop.is_set():
+                return self.report(Exit.STOPPED)
+            sent = False
+            while True:
+                asked = 0
+                for slot in slots:
+                    if slot is not None:
+                        asked += slot[1]
+                room = max(in_flight - (len(queue) + asked), 0)
+                batch = batching.size()
+                flush = count > 0 and (count >= batch or not queue)
+                top_up = count == 0 and (room >= batch or (asked == 0 and not queue))
+                if not (flush or top_up) or room == 0:
+                    break
+                index = None
+                for i in range(asking):
+                    if slots[i] is None:
+                        index = i
+                        break
+                if index is not None:
+                    want = min(room, batch)
+                elif flush and slots[asking] is None:
+                    index, want = asking, 0
+                else:
+                    break
+                outbox.run = identity
+                outbox.want = want
+                outbox.count = count
+                outbox.slowest_rollout_us = slowest_us
+                try:
+                    pending = client.send_copy(outbox)
+                except Exception as error:
+                    raise _ipc.ipc_error("sending a request", error) from error
+                slots[index] = (pending, want)
+                self.pending.append(pending)
+                count = 0
+                sent = True
+            unannounced |= sent
+            outbox_full = count >= _wire.MAX_BATCH
+            if unannounced and (len(queue) < 2 * batching.size() or outbox_full):
+                try:
+                    notifier.notify()
+                except Exception as error:
+                    raise _ipc.ipc_error("waking the learner", error) from error
+                unannounced = False
+            if not queue or outbox_full:
+                for i, slot in enumerate(slots):
+                    if slot is None:
+                        continue
+                    pending = slot[0]
+                    try:
+                        response = pending.receive()
+                    except Exception as error:
+                        raise _ipc.ipc_error("receiving a response", error) from error
+                    if response is None:
+                        continue
+                    answer = _copy(_wire.Answer, response.user_header_ptr)
+                    code = answer.response
+                    if code == _wire.RESPONSE_TASK:
+                        if identity == 0:
+                            identity = int(answer.run)
+                        payload = response.payload()
+                        # The binding reports the slice's length in bytes, not tasks, for a
+                        # slice whose element type it only knows by its size.
+                        size = payload.len()
+                        n, rest = divmod(size, _TASK_SIZE)
+                        if rest or n > _wire.MAX_BATCH:
+                            raise ProtocolError(
+                                f"an answer of {size} bytes is no whole number of "
+                                f"{_TASK_SIZE}-byte tasks up to {_wire.MAX_BATCH}"
+                            )
+                        if n:
+                            tasks = _copy(_wire.WireTask * n, payload.as_ptr())
+                            for wire in tasks:
+                                if bytes(wire.environment) != served_bytes:
+                                    raise ProtocolError(
+                                        f"task {wire.task_id} of job {wire.job} needs environment "
+                                        f"{Environment.from_wire(wire.environment)}, this worker "
+                                        f"serves {self.environment}"
+                                    )
+                            queue.extend(tasks)
+                    elif code == _wire.RESPONSE_STOP:
+                        _delete(response)
+                        return self.report(Exit.FINISHED)
+                    else:
+                        _delete(response)
+                        raise RefusedError(
+                            self.run,
+                            refusal_reason(answer, identity, self.environment, self.protocol),
+                        )
+                    # The answered request must be gone before the next is sent: the service
+                    # allows only so many active requests per client.
+                    _delete(response)
+                    _delete(pending)
+                    self.pending.remove(pending)
+                    slots[i] = None
+            if queue and not outbox_full:
+                wire = queue.popleft()
+                n_context = min(wire.context_len, _wire.MAX_CONTEXT)
+                n_theta = min(wire.theta_len, _wire.MAX_THETA)
+                kind = wire.kind
+                task = Task(
+                    wire.task_id,
+                    wire.job,
+                    _KIND_NAMES[kind] if kind < 3 else "train",
+                    wire.seed,
+                    tuple(wire.context[:n_context]),
+                    tuple(wire.theta[:n_theta]),
+                )
+                started = perf()
+                result: Any
+                try:
+                    result = rollout(task)
+                except Exception:  # noqa: BLE001 - any failure of a rollout is a failed outcome
+                    self.failure(task, "the rollout raised", exc=True)
+                    result = _RAISED
+                took = perf() - started
+                batching.observe(took)
+                self.rollout_seconds += took
+                us = int(took * 1e6)
+                if us > slowest_us:
+                    slowest_us = min(us, _U32_MAX)
+                self.rollouts += 1
+                outcome = outcomes[count]
+                outcome.job = wire.job
+                outcome.task_id = wire.task_id
+                outcome.diagnostics_len = 0
+                ok = 0
+                if result is None:
+                    self.failure(task, "it returned None")
+                elif result is not _RAISED:
+                    ok = self.fill(task, outcome, result, isfinite)
+                outcome.ok = ok
+                if not ok:
+                    outcome.reward = 0.0
+                    outcome.score = 0.0
+                    outcome.diagnostics_len = 0
+                count += 1
+                silence.heard()
+                continue
+            try:
+                woken = listener.timed_wait(tick)
+            except iox2.ListenerWaitError as error:
+                # A signal, also a pause and resume: only the stop flag ends the worker.
+                if "Interrupt" not in str(error) and "Interrupt" not in repr(error):
+                    raise _ipc.ipc_error("waiting for the learner", error) from error
+                woken = []
+            if woken:
+                silence.heard()
+            elif silence.look_due():
+                if not self.learner_lives(silence.lists()):
+                    log.warning("the learner of run '%s' is gone", self.run)
+                    return self.report(Exit.LEARNER_GONE)
+                silence.looked()
+
+    def fill(
+        self,
+        task: Task,
+        outcome: _wire.WireOutcome,
+        result: Any,
+        isfinite: Callable[[float], bool],
+    ) -> int:
+        """Write ``result`` into ``outcome``; 1 when it is a valid ok outcome, 0 (counted and
+        logged as failed) when not. Too many diagnostics raise :class:`ProtocolError`."""
+        try:
+            if len(result) == 2:
+                reward, score = result
+                diagnostics: Sequence[float] = ()
+            elif len(result) == 3:
+                reward, score, diagnostics = result
+            else:
+                raise TypeError(f"{len(result)} values")
+            reward = float(reward)
+            score = float(score)
+            n = len(diagnostics)
+        except (TypeError, ValueError) as error:
+            self.failure(
+                task,
+                f"it returned {result!r} ({error}); a rollout returns (reward, score), "
+                "(reward, score, diagnostics) or None",
+            )
+            return 0
+        if n > _wire.MAX_DIAGNOSTICS:
+            raise ProtocolError(
+                f"task {task.id} of job {task.job}: the outcome cannot be sent: an outcome's "
+                f"diagnostics has {n} values, the wire carries at most {_wire.MAX_DIAGNOSTICS} "
+                "(MAX_DIAGNOSTICS)"
+            )
+        if not (isfinite(reward) and isfinite(score)):
+            self.failure(task, f"non-finite reward {reward} or score {score}")
+            return 0
+        if n:
+            try:
+                values = [float(d) for d in diagnostics]
+            except (TypeError, ValueError) as error:
+                self.failure(task, f"diagnostics {diagnostics!r} are not numbers ({error})")
+                return 0
+            if not all(isfinite(v) for v in values):
+                self.failure(task, f"non-finite diagnostics {values}")
+                return 0
+            outcome.diagnostics[:n] = values
+            outcome.diagnostics_len = n
+        outcome.reward = reward
+        outcome.score = score
+        return 1

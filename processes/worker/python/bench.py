@@ -1,0 +1,173 @@
+"""Rollouts per second of Python workers through a real fleet.
+
+A learner (``acps run function --workers 0``, the built-in contextual function with a random
+context choice and ``--in-flight`` training tasks in flight) serves W Python worker processes
+whose rollout is trivial (``--rollout-us 0``) or busy-waits that many microseconds. Each worker
+reports its rollouts and the seconds from joining to the run's end; the rate is their total
+rollouts over the longest of those times.
+
+    python bench.py                                  # trivial rollouts, W = 1
+    python bench.py --workers 1 2 --rollout-us 1000  # ~1 ms rollouts at W = 1 and W = 2
+
+``--acps`` (default ``$ACPS_BIN``, else the worktree's ``target/release/acps``) is the binary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import acps_worker
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def worker(run: str, identity: str, rollout_us: int, in_flight: int) -> None:
+    """One worker process: serve ``run`` and print its report as JSON."""
+    name, settings, parameters = json.loads(identity)
+    environment = acps_worker.Environment(name, int(settings), tuple(parameters))
+    spin = rollout_us * 1e-6
+    clock = time.perf_counter
+
+    def rollout(task: acps_worker.Task) -> tuple[float, float]:
+        if spin:
+            end = clock() + spin
+            while clock() < end:
+                pass
+        return -abs(task.theta[0]), 1.0 + abs(task.theta[0])
+
+    report = acps_worker.serve(rollout, run, environment=environment, in_flight=in_flight)
+    print(
+        json.dumps(
+            {"exit": report.exit.value, "rollouts": report.rollouts, "seconds": report.seconds}
+        )
+    )
+
+
+def measure(acps: str, workers: int, episodes: int, rollout_us: int, in_flight: int) -> float:
+    """Rollouts per second of ``workers`` Python workers; also prints the row."""
+    run = f"bench-{os.getpid()}-{workers}"
+    with tempfile.TemporaryDirectory() as out:
+        subprocess.run(
+            [
+                acps,
+                "experiment",
+                "function",
+                "--runs",
+                "1",
+                "--episodes",
+                "10",
+                "--n-theta",
+                "5",
+                "--method",
+                "random",
+                "-q",
+                "--out",
+                out,
+            ],
+            check=True,
+            capture_output=True,
+        )
+        env = acps_worker.Policy.load(out).environment
+        assert env is not None
+        identity = json.dumps([env.name, str(env.settings), list(env.parameters)])
+    with tempfile.TemporaryDirectory() as out:
+        learner = subprocess.Popen(
+            [
+                acps,
+                "run",
+                "function",
+                "--runs",
+                "1",
+                "--episodes",
+                str(episodes),
+                "--n-theta",
+                "5",
+                "--method",
+                "random",
+                "--in-flight",
+                "64",
+                "--workers",
+                "0",
+                "--run",
+                run,
+                "-q",
+                "--out",
+                out,
+            ],
+            stdout=subprocess.DEVNULL,
+        )
+        procs = [
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    __file__,
+                    "--worker",
+                    run,
+                    identity,
+                    str(rollout_us),
+                    str(in_flight),
+                ],
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+            for _ in range(workers)
+        ]
+        reports = [
+            json.loads(p.communicate(timeout=600)[0].strip().splitlines()[-1]) for p in procs
+        ]
+        rollouts = int(sum(r["rollouts"] for r in reports))
+        seconds = float(max(r["seconds"] for r in reports))
+        rate = rollouts / seconds
+        print(
+            f"W={workers} rollout={rollout_us} us in_flight={in_flight}: {rollouts} rollouts in "
+            f"{seconds:.3f} s = {rate:,.0f} rollouts/s",
+            flush=True,
+        )
+        try:
+            # The measurement is done; the learner still writes its tables and plots.
+            code = learner.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            learner.kill()
+            learner.wait()
+            print("  (the learner did not finish writing its outputs within 120 s: killed)")
+        else:
+            if code != 0:
+                raise SystemExit(f"the learner failed with {code}")
+    return rate
+
+
+def main() -> None:
+    """Parse the options and run the rows."""
+    if len(sys.argv) > 1 and sys.argv[1] == "--worker":
+        worker(sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5]))
+        return
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--acps", default=os.environ.get("ACPS_BIN", str(ROOT / "target/release/acps"))
+    )
+    parser.add_argument("--workers", type=int, nargs="+", default=[1])
+    parser.add_argument(
+        "--episodes", type=int, help="default: 100000, or 2000 for --rollout-us >= 100"
+    )
+    parser.add_argument("--rollout-us", type=int, default=0)
+    parser.add_argument(
+        "--in-flight", type=int, default=64, help="tasks each worker keeps in flight"
+    )
+    args = parser.parse_args()
+    episodes = args.episodes or (2000 if args.rollout_us >= 100 else 100_000)
+    rates = [measure(args.acps, w, episodes, args.rollout_us, args.in_flight) for w in args.workers]
+    if len(rates) > 1:
+        print(f"ratio W={args.workers[-1]} / W={args.workers[0]}: {rates[-1] / rates[0]:.2f}")
+    assert all(math.isfinite(r) for r in rates)
+
+
+if __name__ == "__main__":
+    main()

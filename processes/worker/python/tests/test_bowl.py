@@ -1,0 +1,75 @@
+"""Python workers of a problem file (experiments/bowl.toml): refusals as both sides say them,
+and the example worker serving the run to its end, leaving nothing in shared memory."""
+
+from __future__ import annotations
+
+import importlib.util
+import unittest
+from types import ModuleType
+
+import acps_worker
+from acps_worker import Environment, Exit, RefusedError
+
+from .support import ROOT, Learner, leftovers, run_name
+
+BOWL_TOML = ROOT / "experiments" / "bowl.toml"
+
+
+def bowl_example() -> ModuleType:
+    """examples/bowl.py as a module."""
+    path = ROOT / "processes" / "worker" / "python" / "examples" / "bowl.py"
+    spec = importlib.util.spec_from_file_location("bowl_example", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+class BowlTest(unittest.TestCase):
+    """A learner of a problem file and Python workers."""
+
+    def test_refusals_are_named_on_both_sides_and_the_example_finishes_the_run(self) -> None:
+        """Another protocol version, other settings and no identity are refused; the
+        example's identity is admitted and serves the run to its end."""
+        bowl = bowl_example()
+        wanted = Environment("bowl", "bowl v1", (0, 0, 0))
+        self.assertEqual(bowl.BOWL, wanted)
+        run = run_name("bowl")
+        learner = Learner(run, ["--config", str(BOWL_TOML), "--episodes", "60"])
+        try:
+            with self.assertRaises(RefusedError) as refused:
+                acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL, _protocol=6)
+            self.assertEqual(
+                refused.exception.reason,
+                "protocol version 6 here, 7 at the learner (another build)",
+            )
+            other = Environment("bowl", "bowl v2")
+            with self.assertRaises(RefusedError) as refused:
+                acps_worker.serve(bowl.rollout, run, environment=other)
+            self.assertEqual(
+                refused.exception.reason,
+                f"this worker serves {other}; the run's jobs need {wanted}",
+            )
+            self.assertIn(
+                f"refused this worker: {refused.exception.reason}", str(refused.exception)
+            )
+            with self.assertRaises(RefusedError) as refused:
+                acps_worker.serve(bowl.rollout, run)
+            self.assertEqual(
+                refused.exception.reason,
+                f"this worker serves no named environment; the run's jobs need {wanted}",
+            )
+            report = acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL)
+            self.assertEqual((report.exit, report.failed), (Exit.FINISHED, 0))
+        finally:
+            summary = learner.finished()
+        self.assertEqual(summary["experiment"], "bowl")
+        log = learner.output()
+        self.assertIn("protocol 6 (ours 7)", log)
+        self.assertIn(f"it serves environment {other}; the jobs need {wanted}", log)
+        self.assertIn(f"it serves environment no named environment; the jobs need {wanted}", log)
+        self.assertEqual(leftovers(run), [])
+
+
+if __name__ == "__main__":
+    unittest.main()
