@@ -83,13 +83,14 @@ fn python() -> &'static Path {
             );
             let output = Command::new(&python)
                 .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check"])
-                .arg(package())
+                // With the examples' MuJoCo, which the test of the MuJoCo example needs.
+                .arg(format!("{}[examples]", package().display()))
                 .output()
                 .expect("pip runs");
             assert!(
                 output.status.success(),
-                "pip could not install the Python worker package and its dependency iceoryx2 \
-                 (is PyPI reachable from this machine?): {}",
+                "pip could not install the Python worker package with its examples' dependencies \
+                 (iceoryx2, mujoco; is PyPI reachable from this machine?): {}",
                 show(&output)
             );
             std::fs::write(&stamp, &wanted).expect("writing the venv's stamp");
@@ -282,4 +283,36 @@ fn a_sigkilled_python_worker_changes_nothing() {
     let summary = std::fs::read(out.join("summary.json")).unwrap();
     assert!(summary == reference, "a killed Python worker changed the result");
     assert!(ipc::live_nodes(&name).is_ok_and(|alive| alive == 0));
+}
+
+#[test]
+fn the_mujoco_arm_learns_to_reach_through_python_workers() {
+    let dir = temp_dir("mujoco-reach");
+    let example = package().join("examples");
+    let command = format!(
+        "'{}' '{}'",
+        python().display(),
+        example.join("mujoco_reach.py").display()
+    );
+    let out = dir.join("run");
+    // Briefly: one run of 200 episodes (README's command runs 2 x 1500).
+    let shape = ["-q", "--runs", "1", "--episodes", "200"];
+    succeeded(&problems::run(
+        &example.join("mujoco_reach.toml"),
+        &command,
+        "2",
+        "mujoco-reach",
+        &out,
+        &shape,
+    ));
+    let curves = std::fs::read_to_string(out.join("curves.csv")).unwrap();
+    let scores: Vec<f64> = curves
+        .lines()
+        .skip(1)
+        .map(|line| line.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    let (first, last) = (scores[0], *scores.last().unwrap());
+    // The arm starts 55 cm from the targets on average; 200 episodes bring it within 20 cm.
+    assert!(first > 40.0 && last < 0.5 * first, "distance {first} cm -> {last} cm");
+    assert!(out.join("curves.png").exists() && out.join("policies").is_dir());
 }

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import random
-from typing import Sequence
+from collections.abc import Sequence
 
 import mujoco
 
@@ -46,7 +46,9 @@ ARM = """
 
 # Everything that changes a rollout; the problem file states the same text, so a worker with
 # another arm or controller is refused instead of mixed in.
-SETTINGS = "planar-arm v1: dt 0.002 s, 0.6 s, kp 40, kd 4, effort 1e-4, start (0.5, 1.0) +- 0.02 rad"
+SETTINGS = (
+    "planar-arm v1: dt 0.002 s, 0.6 s, kp 40, kd 4, effort 1e-4, start (0.5, 1.0) +- 0.02 rad"
+)
 ENVIRONMENT = acps_worker.Environment(name="mujoco-reach", settings=SETTINGS)
 
 DURATION = 0.6
