@@ -1,6 +1,6 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
-use crate::{assert_clean, run_name, watched};
+use crate::{assert_clean, run_name, succeeded, watched};
 use acps::paper::{self, Options, Sim};
 use acps::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetJob, FleetProgress, Liveness};
@@ -16,7 +16,7 @@ use acps_worker::{EnvironmentFactory, Single, WorkerError, WorkerExit, WorkerOpt
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
@@ -44,19 +44,9 @@ const GRID: [&str; 10] = [
     "-q",
 ];
 
-fn check(output: Output) -> String {
-    assert!(
-        output.status.success(),
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
-}
-
 fn in_process(args: &[&str], out: &Path) -> Vec<u8> {
-    check(
-        watched()
+    succeeded(
+        &watched()
             .arg("experiment")
             .args(args)
             .arg("--out")
@@ -81,8 +71,8 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
         for (workers, in_flight, args) in [("1", "4", &args[..]), ("2", "16", &from_file[..])] {
             let run = run_name(&format!("match-{p}-{workers}"));
             let out = dir.join(format!("fleet-{workers}"));
-            check(
-                watched()
+            succeeded(
+                &watched()
                     .arg("run")
                     .args(args)
                     .args([
@@ -128,8 +118,8 @@ fn learn_is_the_fleet_run_of_monotonic_progress_it_documents() {
     let reference = in_process(&args, &dir.join("in-process"));
     let run = run_name("learn");
     let out = dir.join("learn");
-    check(
-        watched()
+    succeeded(
+        &watched()
             .args(["learn", "--sim", "analytic", "--workers", "2", "--run", run.as_str()])
             .args(shape)
             .arg("--out")
@@ -213,7 +203,7 @@ fn an_oversubscribed_fleet_finishes_with_the_in_process_result_and_leaves_nothin
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
-    check(output);
+    succeeded(&output);
     // A worker that could not join (an iceoryx2 limit) would print its error and leave the
     // others to finish the run.
     assert!(!stderr.contains("rror"), "{stderr}");
@@ -465,8 +455,8 @@ fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
     assert!(!ipc::leftover_files(&run).is_empty());
     let mut args = GRID.to_vec();
     args.extend(["--workers", "1", "--run", run.as_str()]);
-    check(
-        watched()
+    succeeded(
+        &watched()
             .arg("run")
             .args(&args)
             .arg("--out")
@@ -667,8 +657,8 @@ fn a_killed_fleet_learner_resumes_from_its_checkpoints_to_the_in_process_result(
     while ipc::live_nodes(&run).map_or(true, |alive| alive > 0) && start.elapsed() < Duration::from_secs(20) {
         std::thread::sleep(Duration::from_millis(50));
     }
-    check(
-        watched()
+    succeeded(
+        &watched()
             .arg("run")
             .args(args)
             .args(["--workers", "2", "--run", run.as_str()])

@@ -21,6 +21,17 @@ fn watched() -> Command {
     command
 }
 
+/// The command's stdout, after asserting that it succeeded (showing both outputs if not).
+fn succeeded(output: &Output) -> String {
+    assert!(
+        output.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
 /// The run name of `test` in this test process: tests do not share shared memory.
 fn run_name(test: &str) -> RunName {
     RunName::new(&format!("t{}-{test}", std::process::id())).unwrap()

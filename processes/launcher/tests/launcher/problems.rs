@@ -1,7 +1,7 @@
 //! Problem files: a `[problem]` table of the user's, checked key by key, and served through the
 //! fleet to workers the user provides (here processes/worker/examples/bowl.rs).
 
-use crate::{TempDir, acps, assert_clean, run_name, temp_dir, watched};
+use crate::{TempDir, acps, assert_clean, run_name, succeeded, temp_dir, watched};
 use acps::config::{ExperimentFile, LoadedFile, Plan};
 use acps_shared::EnvironmentSpec;
 use acps_wire::ipc;
@@ -46,6 +46,18 @@ pub(crate) fn worker_command(vars: &str) -> String {
 }
 
 /// `acps run` of `config` on `workers` started from `command`, under a watchdog.
+/// One bowl run long enough to be killed while it learns, with a checkpoint after every update.
+pub(crate) const LONG_BOWL: [&str; 8] = [
+    "--runs",
+    "1",
+    "--method",
+    "monotonic-progress",
+    "--episodes",
+    "20000",
+    "--checkpoint-every",
+    "1",
+];
+
 pub(crate) fn run(config: &Path, command: &str, workers: &str, test: &str, out: &Path, extra: &[&str]) -> Output {
     let run = run_name(test);
     let output = watched()
@@ -59,16 +71,6 @@ pub(crate) fn run(config: &Path, command: &str, workers: &str, test: &str, out: 
         .unwrap();
     assert_clean(&run);
     output
-}
-
-pub(crate) fn succeeded(output: &Output) -> String {
-    assert!(
-        output.status.success(),
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
 fn summary(dir: &Path) -> serde_json::Value {
@@ -435,17 +437,7 @@ fn a_problem_without_an_environment_admits_only_workers_that_declare_none() {
 fn a_killed_problem_run_resumes_to_the_uninterrupted_result() {
     let dir = temp_dir("bowl-resume");
     let command = worker_command("");
-    let shape = [
-        "--runs",
-        "1",
-        "--method",
-        "monotonic-progress",
-        "--episodes",
-        "20000",
-        "--checkpoint-every",
-        "1",
-        "-q",
-    ];
+    let shape = [LONG_BOWL.as_slice(), &["-q"]].concat();
     let reference = dir.join("reference");
     succeeded(&run(&bowl_toml(), &command, "2", "resume-ref", &reference, &shape));
     let out = dir.join("killed");
@@ -454,7 +446,7 @@ fn a_killed_problem_run_resumes_to_the_uninterrupted_result() {
         .args(["run", "--config"])
         .arg(bowl_toml())
         .args(["--worker-command", &command, "--workers", "2", "--run", name.as_str()])
-        .args(shape)
+        .args(&shape)
         .arg("--out")
         .arg(&out)
         .spawn()

@@ -3,8 +3,8 @@
 //! PyPI once), its unittest suite run against this build's `acps`, and its policy reader checked
 //! against the learner's own numbers.
 
-use crate::problems::{self, bowl_toml, bowl_worker, succeeded};
-use crate::{run_name, temp_dir};
+use crate::problems::{self, LONG_BOWL, bowl_toml, bowl_worker};
+use crate::{run_name, succeeded, temp_dir};
 use acps::records::SavedPolicy;
 use acps_wire::ipc;
 use std::path::{Path, PathBuf};
@@ -215,16 +215,7 @@ fn python_bowl_workers_give_rust_bowl_workers_bits() {
 #[test]
 fn a_sigkilled_python_worker_changes_nothing() {
     let dir = temp_dir("python-bowl-kill");
-    let shape = [
-        "--runs",
-        "1",
-        "--method",
-        "monotonic-progress",
-        "--episodes",
-        "20000",
-        "--checkpoint-every",
-        "1",
-    ];
+    let shape = LONG_BOWL;
     let reference = bowl_summary(&format!("'{}'", bowl_worker().display()), "kill-ref", &dir, &shape);
     // Each worker writes its PID (exec keeps it) before it becomes the Python bowl worker.
     let pids = dir.join("pids");
