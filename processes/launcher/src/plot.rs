@@ -22,9 +22,12 @@ use acps_models::robot::Robot;
 use acps_models::targets::Field;
 use acps_models::trajectory::JointTrajectory;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::collections::BTreeMap;
+use std::ops::Range;
 use std::path::Path;
 
 type PlotResult = Result<(), Box<dyn std::error::Error>>;
@@ -80,6 +83,115 @@ fn save(picture: &impl Picture, dir: &Path, stem: &str) -> PlotResult {
         save_as(picture, &dir.join(format!("{stem}.{extension}")))?;
     }
     Ok(())
+}
+
+/// The largest magnitude an axis reaches: beyond it values are clipped, so that an axis' width
+/// stays finite (plotters 0.3.7 loops forever computing the ticks of an infinite range).
+const LIMIT: f64 = 1e300;
+
+/// The most decades a log axis spans below its highest value, so that a run collapsed to 1e-300
+/// does not squash every other line into a sliver.
+const DECADES: i32 = 40;
+
+/// The lowest and highest finite value, clipped to +-[`LIMIT`]; `None` when none is finite.
+fn extent(values: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
+    values
+        .into_iter()
+        .filter(|v| v.is_finite())
+        .map(|v| v.clamp(-LIMIT, LIMIT))
+        .fold(None, |range, v| match range {
+            None => Some((v, v)),
+            Some((lo, hi)) => Some((f64::min(lo, v), f64::max(hi, v))),
+        })
+}
+
+/// A linear axis over the finite `values`, widened by `pad` times its width on both sides.
+/// plotters needs low < high, so equal values get an axis around them, and none at all 0..1.
+fn linear_range(values: impl IntoIterator<Item = f64>, pad: f64) -> Range<f64> {
+    let Some((lo, hi)) = extent(values) else {
+        return 0.0..1.0;
+    };
+    let magnitude = lo.abs().max(hi.abs());
+    // Ticks need a width well above the values' rounding error.
+    if hi - lo <= 1e-9 * magnitude {
+        let half = if magnitude > 0.0 { 0.1 * magnitude } else { 1.0 };
+        return (lo - half)..(hi + half);
+    }
+    let pad = pad * (hi - lo);
+    (lo - pad)..(hi + pad)
+}
+
+/// An axis from 0 to `headroom` times the highest finite value, or 0..1 when none is positive.
+fn from_zero(values: impl IntoIterator<Item = f64>, headroom: f64) -> Range<f64> {
+    match extent(values) {
+        Some((_, hi)) if hi > 0.0 => 0.0..headroom * hi,
+        _ => 0.0..1.0,
+    }
+}
+
+/// A log axis a factor 2 beyond the positive finite `values` (clipped to 1/[`LIMIT`]..[`LIMIT`]),
+/// at most [`DECADES`] below the highest; a decade either side of equal values, 0.1..10 for none.
+fn log_range(values: impl IntoIterator<Item = f64>) -> Range<f64> {
+    let positive = values.into_iter().filter(|&v| v > 0.0).map(|v| v.max(1.0 / LIMIT));
+    let Some((lo, hi)) = extent(positive) else {
+        return 0.1..10.0;
+    };
+    let lo = lo.max(hi / 10f64.powi(DECADES));
+    if lo == hi {
+        (lo / 10.0)..(hi * 10.0)
+    } else {
+        (lo / 2.0)..(hi * 2.0)
+    }
+}
+
+/// Where `value` is drawn on an axis of `range`: nowhere when it is not finite, and at most
+/// `slack` axis widths outside it, as plotters rasterizes a line pixel by pixel even off the
+/// picture (a point 1e300 away would take forever).
+fn clip(value: f64, range: &Range<f64>, slack: f64) -> Option<f64> {
+    let margin = slack * (range.end - range.start);
+    value
+        .is_finite()
+        .then(|| value.clamp(range.start - margin, range.end + margin))
+}
+
+/// The runs of consecutive `Some` items, so that a value left out breaks a line instead of being
+/// bridged.
+fn pieces<T>(items: impl IntoIterator<Item = Option<T>>) -> Vec<Vec<T>> {
+    let (mut pieces, mut current) = (Vec::new(), Vec::new());
+    for item in items {
+        match item {
+            Some(item) => current.push(item),
+            None if !current.is_empty() => pieces.push(std::mem::take(&mut current)),
+            None => {}
+        }
+    }
+    if !current.is_empty() {
+        pieces.push(current);
+    }
+    pieces
+}
+
+/// What a picture left out, to print in it ("" when nothing): `count` `noun`(s) `verb`.
+fn left_out(count: usize, noun: &str, verb: &str) -> String {
+    match count {
+        0 => String::new(),
+        1 => format!("1 {noun} {verb}"),
+        n => format!("{n} {noun}s {verb}"),
+    }
+}
+
+/// The non-empty `notes`, separated by commas.
+fn joined(notes: &[String]) -> String {
+    let notes: Vec<&str> = notes.iter().map(String::as_str).filter(|n| !n.is_empty()).collect();
+    notes.join(", ")
+}
+
+/// `text` followed by the non-empty `notes` in parentheses.
+fn with_notes(text: String, notes: &[String]) -> String {
+    match joined(notes) {
+        notes if notes.is_empty() => text,
+        notes => format!("{text} ({notes})"),
+    }
 }
 
 /// Write every picture that fits the summary into `dir`.
@@ -226,64 +338,100 @@ where
     for curve in &mut curves {
         curve.points.retain(|p| p.0 >= x_min);
     }
-    let all = curves.iter().flat_map(|c| c.points.iter());
     // The range fits the curves and the best policy; the optimum line may leave it early on, as
     // in the paper's Fig. 2.
-    let (mut y_min, mut y_max) = all.fold((f64::MAX, f64::MIN), |(lo, hi), &(_, m, s)| {
-        (lo.min(m - s), hi.max(m + s))
-    });
-    if let Some(best) = best {
-        (y_min, y_max) = (y_min.min(best), y_max.max(best));
-    }
-    if y_min >= y_max {
-        (y_min, y_max) = (y_min - 1.0, y_max + 1.0);
-    }
-    let pad = 0.05 * (y_max - y_min);
+    let y_range = linear_range(
+        curves
+            .iter()
+            .flat_map(|c| c.points.iter())
+            .flat_map(|&(_, m, s)| [m, m - s, m + s])
+            .chain(best),
+        0.05,
+    );
+    let best_note = match best {
+        Some(best) if !best.is_finite() => format!("best policy {best} not drawn"),
+        _ => String::new(),
+    };
     let mut chart = ChartBuilder::on(root)
-        .caption(caption, ("sans-serif", 20))
+        .caption(with_notes(caption, &[best_note]), ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60)
-        .build_cartesian_2d(x_min..x_max, (y_min - pad)..(y_max + pad))?;
+        .build_cartesian_2d(x_min..x_max, y_range.clone())?;
     chart
         .configure_mesh()
         .x_desc("training episodes")
         .x_label_formatter(&|x| format!("{x:.0}"))
         .y_desc(short(&y_label))
         .draw()?;
+    let y = |value: f64| clip(value, &y_range, 0.0);
     for (index, curve) in curves.iter().enumerate() {
         let color = COLORS[index % COLORS.len()];
-        let band: Vec<(f64, f64)> = curve
+        // A mean that is not finite (ln 0 of a log-mean metric) breaks the line; a SEM that is
+        // not finite leaves the band out there.
+        let lines = pieces(
+            curve
+                .points
+                .iter()
+                .map(|&(x, m, s)| Some((x, y(m)?, s.is_finite().then_some(s)))),
+        );
+        let bands = lines.iter().flat_map(|line| {
+            pieces(line.iter().map(|&(x, m, s)| Some((x, m, s?))))
+                .into_iter()
+                .map(|band| {
+                    let upper = band.iter().map(|&(x, m, s)| (x, y(m + s).unwrap_or(m)));
+                    let lower = band.iter().rev().map(|&(x, m, s)| (x, y(m - s).unwrap_or(m)));
+                    Polygon::new(upper.chain(lower).collect::<Vec<_>>(), color.mix(0.15))
+                })
+        });
+        chart.draw_series(bands)?;
+        let means = curve.points.iter().filter(|p| !p.1.is_finite()).count();
+        let sems = curve
             .points
             .iter()
-            .map(|&(x, m, s)| (x, m + s))
-            .chain(curve.points.iter().rev().map(|&(x, m, s)| (x, m - s)))
-            .collect();
-        chart.draw_series(std::iter::once(Polygon::new(band, color.mix(0.15))))?;
+            .filter(|p| p.1.is_finite() && !p.2.is_finite())
+            .count();
+        let label = with_notes(
+            curve.name.clone(),
+            &[
+                left_out(means, "non-finite mean", "not drawn"),
+                left_out(sems, "non-finite SEM", "not drawn"),
+            ],
+        );
         chart
-            .draw_series(LineSeries::new(
-                curve.points.iter().map(|&(x, m, _)| (x, m)),
-                color.stroke_width(2),
-            ))?
-            .label(curve.name.clone())
+            .draw_series(lines.iter().map(|line| {
+                PathElement::new(
+                    line.iter().map(|&(x, m, _)| (x, m)).collect::<Vec<_>>(),
+                    color.stroke_width(2),
+                )
+            }))?
+            .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        // A point between two left out is no line: a dot shows it.
+        let dots = lines.iter().filter(|line| line.len() == 1);
+        chart.draw_series(dots.map(|line| Circle::new((line[0].0, line[0].1), 3, color.filled())))?;
     }
     if let (Some(rr), Some(opt)) = (summary.methods.get("round-robin"), optimum) {
-        let line: Vec<(f64, f64)> = rr
-            .episodes
-            .iter()
-            .zip(&rr.mean)
-            .filter_map(|(&e, m)| Some((e as f64, opt - (*m)?)))
-            .collect();
+        let lines = pieces(
+            rr.episodes
+                .iter()
+                .zip(&rr.mean)
+                .map(|(&e, m)| Some((e as f64, clip(opt - (*m)?, &y_range, 1.0)?))),
+        );
         chart
-            .draw_series(DashedLineSeries::new(line, 6, 4, BLACK.stroke_width(1)))?
+            .draw_series(
+                lines
+                    .into_iter()
+                    .map(|line| DashedPathElement::new(line, 6, 4, BLACK.stroke_width(1))),
+            )?
             .label("J_opt")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     }
-    if let Some(best) = best {
+    if let Some(best) = best.filter(|b| b.is_finite()) {
+        let at = y(best).unwrap_or(best);
         chart
             .draw_series(DashedLineSeries::new(
-                [(x_min, best), (x_max, best)],
+                [(x_min, at), (x_max, at)],
                 6,
                 4,
                 BLACK.stroke_width(1),
@@ -381,47 +529,75 @@ impl Picture for Exploration {
         let root = root.titled(&self.caption, ("sans-serif", 20))?;
         let all = || self.methods.iter().flat_map(|(_, runs)| runs.iter().flatten());
         let x_max = all().map(|u| u.0).fold(1.0, f64::max);
-        // A Sigma collapsed to exactly 0 still needs a positive value on the log axis.
-        let trace = |u: &(f64, f64, f64)| u.1.max(f64::MIN_POSITIVE);
-        let trace_range = all()
-            .map(trace)
-            .fold((f64::MAX, f64::MIN), |(lo, hi), t| (lo.min(t), hi.max(t)));
-        let ess_max = all().map(|u| u.2).fold(1.0, f64::max);
+        let trace_range = log_range(all().map(|u| u.1));
+        let ess_range = from_zero(all().map(|u| u.2), 1.05);
+        // A Sigma collapsed to 0, or far below the others, is drawn at the log axis' floor.
+        // log10 on a linear axis: plotters' own log axis leaves every tick below 1e-16 unlabelled.
+        let trace = |value: f64| Some(clip(value, &trace_range, 0.0)?.log10());
+        let decades = trace_range.start.log10()..trace_range.end.log10();
+        let ess = |value: f64| clip(value, &ess_range, 0.0);
         let panels = root.split_evenly((self.methods.len(), 2));
         for (row, (name, runs)) in self.methods.iter().enumerate() {
             let color = COLORS[row % COLORS.len()];
             let last = row + 1 == self.methods.len();
-            let mut chart = panel(&panels[2 * row], last)
-                .build_cartesian_2d(0.0..x_max, (trace_range.0 / 2.0..trace_range.1 * 2.0).log_scale())?;
+            let mut chart = panel(&panels[2 * row], last).build_cartesian_2d(0.0..x_max, decades.clone())?;
             run_lines(
                 &mut chart,
                 runs,
-                trace,
-                ("trace Sigma", &|y| format!("{y:.0e}")),
+                |u| u.1,
+                &trace,
+                ("trace Sigma", &|y| format!("{:.0e}", 10f64.powf(*y))),
                 last,
                 color,
             )?;
             label(&panels[2 * row], name)?;
-            let mut chart = panel(&panels[2 * row + 1], last).build_cartesian_2d(0.0..x_max, 0.0..ess_max * 1.05)?;
-            run_lines(&mut chart, runs, |u| u.2, ("ESS", &|y| format!("{y:.0}")), last, color)?;
+            let traces = || runs.iter().flatten().map(|u| u.1);
+            let floored = traces().filter(|&t| t.is_finite() && t < trace_range.start).count();
+            note(
+                &panels[2 * row],
+                &[
+                    left_out(
+                        traces().filter(|t| !t.is_finite()).count(),
+                        "non-finite value",
+                        "not drawn",
+                    ),
+                    left_out(floored, "value", "drawn at the floor"),
+                ],
+            )?;
+            let mut chart = panel(&panels[2 * row + 1], last).build_cartesian_2d(0.0..x_max, ess_range.clone())?;
+            run_lines(
+                &mut chart,
+                runs,
+                |u| u.2,
+                &ess,
+                ("ESS", &|y| format!("{y:.0}")),
+                last,
+                color,
+            )?;
+            let count = runs.iter().flatten().filter(|u| !u.2.is_finite()).count();
+            note(
+                &panels[2 * row + 1],
+                &[left_out(count, "non-finite value", "not drawn")],
+            )?;
         }
         Ok(())
     }
 }
 
 /// The axes of one panel of [`Exploration`] (`y`: the axis' name and label format), every run's
-/// `value` as a thin line and their median as a thick one.
-fn run_lines<'a, DB: DrawingBackend + 'a, Y>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, Y>>,
+/// `value` as a thin line and their median as a thick one, each value drawn where `place` says, if
+/// at all.
+fn run_lines<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     runs: &[Vec<(f64, f64, f64)>],
     value: fn(&(f64, f64, f64)) -> f64,
+    place: &dyn Fn(f64) -> Option<f64>,
     y: (&str, &dyn Fn(&f64) -> String),
     last: bool,
     color: RGBColor,
 ) -> PlotResult
 where
     DB::ErrorType: 'static,
-    Y: Ranged<ValueType = f64> + plotters::coord::ranged1d::ValueFormatter<f64>,
 {
     chart
         .configure_mesh()
@@ -431,10 +607,38 @@ where
         .y_label_formatter(y.1)
         .y_labels(5)
         .draw()?;
-    for run in runs {
-        chart.draw_series(LineSeries::new(run.iter().map(|u| (u.0, value(u))), color.mix(0.25)))?;
+    let lines = |points: Vec<(f64, f64)>| pieces(points.into_iter().map(|(x, v)| Some((x, place(v)?))));
+    let median = Exploration::median(runs, value);
+    let thin = runs.iter().map(|run| {
+        (
+            run.iter().map(|u| (u.0, value(u))).collect(),
+            ShapeStyle::from(color.mix(0.25)),
+        )
+    });
+    for (points, style) in thin.chain([(median, color.stroke_width(2))]) {
+        let lines = lines(points);
+        // A point between two left out is no line: a dot shows it.
+        let dots: Vec<_> = lines
+            .iter()
+            .filter(|line| line.len() == 1)
+            .map(|line| line[0])
+            .collect();
+        chart.draw_series(lines.into_iter().map(|line| PathElement::new(line, style)))?;
+        chart.draw_series(dots.into_iter().map(|dot| Circle::new(dot, 2, style.filled())))?;
     }
-    chart.draw_series(LineSeries::new(Exploration::median(runs, value), color.stroke_width(2)))?;
+    Ok(())
+}
+
+/// What a panel left out, in its top right corner.
+fn note<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, notes: &[String]) -> PlotResult
+where
+    DB::ErrorType: 'static,
+{
+    let style = ("sans-serif", 13)
+        .into_font()
+        .color(&COLORS[3])
+        .pos(Pos::new(HPos::Right, VPos::Top));
+    area.draw_text(&joined(notes), &style, (area.dim_in_pixel().0 as i32 - 18, 4))?;
     Ok(())
 }
 
@@ -533,7 +737,7 @@ fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
 
 impl Picture for SelectionsOverTime {
     fn size(&self) -> (u32, u32) {
-        (900, self.panel_height() * self.methods.len() as u32)
+        (900, self.panel_height() * self.methods.len().max(1) as u32)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
@@ -585,7 +789,8 @@ struct SelectionTraces<'a>(&'a Summary);
 
 impl Picture for SelectionTraces<'_> {
     fn size(&self) -> (u32, u32) {
-        (900, 220 * self.0.methods.len() as u32)
+        // A PNG of height 0 is an error: a summary without methods still gets an empty picture.
+        (900, 220 * self.0.methods.len().max(1) as u32)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
@@ -629,7 +834,7 @@ impl SelectionMaps<'_> {
     /// Panels per row and rows.
     fn grid(&self) -> (usize, usize) {
         let columns = self.0.methods.len().clamp(1, 3);
-        (columns, self.0.methods.len().div_ceil(columns))
+        (columns, self.0.methods.len().div_ceil(columns).max(1))
     }
 }
 
@@ -646,49 +851,50 @@ impl Picture for SelectionMaps<'_> {
         let summary = self.0;
         let methods: Vec<_> = summary.methods.iter().collect();
         let (columns, rows) = self.grid();
-        let (lo, hi) = bounds(&summary.training_contexts);
+        let contexts = &summary.training_contexts;
         // Half the smallest spacing between contexts: each context is drawn as a square of that size.
-        let half = half_spacing(&summary.training_contexts);
+        let half = half_spacing(contexts);
+        let axis = |d: usize| linear_range(contexts.iter().flat_map(|c| [c[d] - half, c[d] + half]), 0.0);
+        let (x_range, y_range) = (axis(0), axis(1));
+        let unplaced = contexts
+            .iter()
+            .filter(|c| !(c[0].is_finite() && c[1].is_finite()))
+            .count();
         for ((name, m), area) in methods.iter().zip(root.split_evenly((rows, columns))) {
-            let title = format!(
-                "{name}: ln(selections / most selected), first {}",
-                summary.selection_window
+            let title = with_notes(
+                format!(
+                    "{name}: ln(selections / most selected), first {}",
+                    summary.selection_window
+                ),
+                &[left_out(unplaced, "non-finite context", "not drawn")],
             );
             let mut chart = ChartBuilder::on(&area)
                 .caption(title, ("sans-serif", 12))
                 .margin(8)
                 .x_label_area_size(25)
                 .y_label_area_size(35)
-                .build_cartesian_2d((lo[0] - half)..(hi[0] + half), (lo[1] - half)..(hi[1] + half))?;
+                .build_cartesian_2d(x_range.clone(), y_range.clone())?;
             chart.configure_mesh().disable_mesh().draw()?;
             let most = m.selection_ratio.iter().copied().fold(0.0, f64::max);
-            let squares = summary
-                .training_contexts
-                .iter()
-                .zip(&m.selection_ratio)
-                .map(|(c, &ratio)| {
-                    // The paper's Fig. 5 colour scale: -3 (white) to 0 (dark).
-                    let shade = if most > 0.0 {
-                        ((ratio / most).max(1e-12).ln() + 3.0) / 3.0
-                    } else {
-                        0.0
-                    };
-                    let level = (255.0 * (1.0 - shade.clamp(0.0, 1.0))) as u8;
-                    Rectangle::new(
-                        [(c[0] - half, c[1] - half), (c[0] + half, c[1] + half)],
-                        RGBColor(level, level, 255).filled(),
-                    )
-                });
+            let squares = contexts.iter().zip(&m.selection_ratio).filter_map(|(c, &ratio)| {
+                // The paper's Fig. 5 colour scale: -3 (white) to 0 (dark).
+                let shade = if most > 0.0 {
+                    ((ratio / most).max(1e-12).ln() + 3.0) / 3.0
+                } else {
+                    0.0
+                };
+                let level = (255.0 * (1.0 - shade.clamp(0.0, 1.0))) as u8;
+                let x = |v: f64| clip(v, &x_range, 0.0);
+                let y = |v: f64| clip(v, &y_range, 0.0);
+                Some(Rectangle::new(
+                    [(x(c[0] - half)?, y(c[1] - half)?), (x(c[0] + half)?, y(c[1] + half)?)],
+                    RGBColor(level, level, 255).filled(),
+                ))
+            });
             chart.draw_series(squares)?;
         }
         Ok(())
     }
-}
-
-fn bounds(contexts: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
-    let fold =
-        |f: fn(f64, f64) -> f64, init: f64| (0..2).map(|d| contexts.iter().map(|c| c[d]).fold(init, f)).collect();
-    (fold(f64::min, f64::MAX), fold(f64::max, f64::MIN))
 }
 
 fn half_spacing(contexts: &[Vec<f64>]) -> f64 {
@@ -714,7 +920,7 @@ struct Dartboard<'a> {
 
 impl Picture for Dartboard<'_> {
     fn size(&self) -> (u32, u32) {
-        (1200, 600 * self.summary.methods.len() as u32)
+        (1200, 600 * self.summary.methods.len().max(1) as u32)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
@@ -772,13 +978,13 @@ impl Picture for Dartboard<'_> {
                 .and_then(|s| serde_json::from_value(s["cumulative"].clone()).ok())
                 .unwrap_or_default();
             let longest = curves.values().map(Vec::len).max().unwrap_or(0);
-            let top = curves.values().flatten().copied().fold(1.0, f64::max);
+            let y_range = from_zero(curves.values().flatten().copied().chain([1.0]), 1.05);
             let mut chart = ChartBuilder::on(&right)
                 .caption("average selections per field of each ring", ("sans-serif", 15))
                 .margin(10)
                 .x_label_area_size(30)
                 .y_label_area_size(45)
-                .build_cartesian_2d(0.0..(100.0 * longest.max(1) as f64), 0.0..top * 1.05)?;
+                .build_cartesian_2d(0.0..(100.0 * longest.max(1) as f64), y_range.clone())?;
             chart
                 .configure_mesh()
                 .x_desc("episode")
@@ -788,7 +994,10 @@ impl Picture for Dartboard<'_> {
                 let color = COLORS[index % COLORS.len()];
                 chart
                     .draw_series(LineSeries::new(
-                        values.iter().enumerate().map(|(i, &v)| (100.0 * (i + 1) as f64, v)),
+                        values
+                            .iter()
+                            .enumerate()
+                            .filter_map(|(i, &v)| Some((100.0 * (i + 1) as f64, clip(v, &y_range, 0.0)?))),
                         color.stroke_width(2),
                     ))?
                     .label(category.clone())
@@ -832,7 +1041,7 @@ impl Picture for ThrowSideView<'_> {
             .margin(12)
             .x_label_area_size(35)
             .y_label_area_size(45)
-            .build_cartesian_2d(-1.0..(norm + 0.3), 0.0..2.2)?;
+            .build_cartesian_2d(linear_range([-1.0, norm + 0.3], 0.0), 0.0..2.2)?;
         chart
             .configure_mesh()
             .x_desc("distance towards the landing point (m)")
@@ -919,12 +1128,19 @@ impl Picture for BenchBars<'_> {
                     mode => format!("{mode}, {} worker(s)", row.workers),
                 })
                 .collect();
-            let top = 1.2 * bars.iter().map(|row| row.rollouts_per_s).fold(0.0, f64::max).max(1.0);
+            let y_range = from_zero(bars.iter().map(|row| row.rollouts_per_s).chain([1.0]), 1.2);
+            let top = y_range.end;
+            // A rate that is not finite (a round timed at 0 s) is drawn as no bar.
+            let height = |row: &crate::bench::Row| clip(row.rollouts_per_s, &y_range, 0.0).unwrap_or(0.0);
+            let unmeasured = bars.iter().filter(|row| !row.rollouts_per_s.is_finite()).count();
+            let caption = with_notes(
+                format!(
+                    "{env}: rollouts/s (median round; ratio to W x one thread and its range over rounds above each bar)"
+                ),
+                &[left_out(unmeasured, "non-finite rate", "not drawn")],
+            );
             let mut chart = ChartBuilder::on(&area)
-                .caption(
-                    format!("{env}: rollouts/s (median round; ratio to W x one thread and its range over rounds above each bar)"),
-                    ("sans-serif", 16),
-                )
+                .caption(caption, ("sans-serif", 16))
                 .margin(8)
                 .x_label_area_size(30)
                 .y_label_area_size(70)
@@ -942,10 +1158,7 @@ impl Picture for BenchBars<'_> {
             chart.draw_series(bars.iter().enumerate().map(|(i, row)| {
                 let color = if row.mode == "fleet" { COLORS[1] } else { COLORS[0] };
                 let mut bar = Rectangle::new(
-                    [
-                        (SegmentValue::Exact(i), 0.0),
-                        (SegmentValue::Exact(i + 1), row.rollouts_per_s),
-                    ],
+                    [(SegmentValue::Exact(i), 0.0), (SegmentValue::Exact(i + 1), height(row))],
                     color.filled(),
                 );
                 bar.set_margin(0, 0, 20, 20);
@@ -954,7 +1167,7 @@ impl Picture for BenchBars<'_> {
             chart.draw_series(bars.iter().enumerate().map(|(i, row)| {
                 Text::new(
                     ratio_label(row),
-                    (SegmentValue::CenterOf(i), row.rollouts_per_s + 0.02 * top),
+                    (SegmentValue::CenterOf(i), height(row) + 0.02 * top),
                     TextStyle::from(("sans-serif", 13).into_font()).pos(Pos::new(HPos::Center, VPos::Bottom)),
                 )
             }))?;
@@ -966,6 +1179,274 @@ impl Picture for BenchBars<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::experiment::{BestPolicy, MethodSummary, UserProblem};
+    use std::path::PathBuf;
+    use std::sync::mpsc::{RecvTimeoutError, channel};
+    use std::time::Duration;
+
+    const INF: f64 = f64::INFINITY;
+    const NAN: f64 = f64::NAN;
+
+    /// Series a user's simulator and reward can produce, each named for the failure messages.
+    const HOSTILE: [(&str, &[f64]); 13] = [
+        ("minus-inf", &[-1.0, -INF, -2.0, -INF]),
+        ("plus-inf", &[1.0, INF, 2.0]),
+        ("nan", &[NAN, 1.0, NAN, 2.0]),
+        ("only-non-finite", &[NAN, -INF, INF]),
+        ("equal", &[3.0, 3.0, 3.0]),
+        ("equal-huge", &[1e20, 1e20]),
+        ("zeros", &[0.0, 0.0, 0.0]),
+        ("negative", &[-1.0, -5.0, 0.0]),
+        ("tiny-and-huge", &[1e-300, 1e300, 1.0]),
+        ("extremes", &[-f64::MAX, f64::MAX, f64::MIN_POSITIVE, 5e-324]),
+        ("collapse", &[1e2, 1e-30, 1e-200, 1e-320, 0.0]),
+        ("single", &[5.0]),
+        ("empty", &[]),
+    ];
+
+    /// A fresh directory for one test's pictures.
+    fn dir(test: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("acps-plot-{test}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+        dir
+    }
+
+    /// Run `draw` on a thread and fail when it errs, panics or is still drawing after 60 s (a
+    /// hang detector: plotters loops forever on some axis ranges).
+    fn within_a_minute(case: &str, draw: impl FnOnce() -> PlotResult + Send + 'static) {
+        let (sender, receiver) = channel();
+        std::thread::spawn(move || sender.send(draw().map_err(|e| e.to_string())));
+        match receiver.recv_timeout(Duration::from_secs(60)) {
+            Ok(result) => result.unwrap_or_else(|e| panic!("{case}: {e}")),
+            Err(RecvTimeoutError::Timeout) => panic!("{case}: still drawing after 60 s"),
+            Err(RecvTimeoutError::Disconnected) => panic!("{case}: drawing panicked"),
+        }
+    }
+
+    /// The SVG `dir/stem.svg`, after checking that its PNG twin was written too.
+    fn drawn(dir: &Path, stem: &str) -> String {
+        let png = std::fs::metadata(dir.join(format!("{stem}.png"))).map_or(0, |m| m.len());
+        assert!(png > 0, "{stem}.png not written");
+        std::fs::read_to_string(dir.join(format!("{stem}.svg"))).unwrap_or_else(|e| panic!("{stem}.svg: {e}"))
+    }
+
+    fn method(values: &[f64], sem: f64, selections: Vec<Option<usize>>) -> MethodSummary {
+        let n = values.len();
+        MethodSummary {
+            episodes: (0..n as u64).map(|i| 100 * i).collect(),
+            mean: values.iter().map(|&v| Some(v)).collect(),
+            sem: vec![Some(sem); n],
+            final_mean: values.last().copied(),
+            final_sem: Some(sem),
+            final_scores: vec![values.last().copied()],
+            longest_stay: vec![1],
+            selections_run0: selections,
+            selection_ratio: values.to_vec(),
+            updates: 0,
+            rejected_updates: 0,
+            failed_episodes: 0,
+            detail: serde_json::Map::new(),
+        }
+    }
+
+    /// A problem file's summary whose curves (and selection ratios) are `values`; with an
+    /// optimum, round robin is the reference and the best policy scores `values[0]`.
+    fn summary(values: &[f64], contexts: Vec<Vec<f64>>, optimum: Option<f64>) -> Summary {
+        let selections = (0..values.len()).map(|t| Some(t % contexts.len().max(1))).collect();
+        let methods = [
+            ("round-robin", method(values, 0.5, selections)),
+            ("nan-sem", method(values, NAN, vec![None, Some(0)])),
+            ("empty", method(&[], 0.0, Vec::new())),
+        ];
+        Summary {
+            experiment: "function".to_string(),
+            metric: "log-mean reward over contexts".to_string(),
+            user_problem: Some(UserProblem {
+                unit: "m".to_string(),
+                lower_is_better: false,
+            }),
+            runs: 2,
+            base_seed: 0,
+            training_episodes: 100 * values.len() as u64,
+            in_flight: 1,
+            selection_window: 10,
+            training_contexts: contexts,
+            j_opt_mean: optimum,
+            settings: serde_json::Value::Null,
+            best_policy: optimum.and(values.first()).map(|&score| BestPolicy {
+                score,
+                method: "round-robin".to_string(),
+                run: 0,
+                seed: 0,
+                episode: 0,
+            }),
+            methods: methods.into_iter().map(|(name, m)| (name.to_string(), m)).collect(),
+            run_results: BTreeMap::new(),
+        }
+    }
+
+    #[test]
+    fn axis_ranges_are_finite_ordered_and_bounded() {
+        for (case, values) in HOSTILE {
+            for range in [
+                linear_range(values.iter().copied(), 0.05),
+                from_zero(values.iter().copied(), 1.2),
+            ] {
+                assert!(range.start.is_finite() && range.end.is_finite(), "{case}: {range:?}");
+                assert!(
+                    (range.end - range.start).is_finite(),
+                    "{case}: {range:?} is infinitely wide"
+                );
+                assert!(range.start < range.end, "{case}: {range:?}");
+            }
+            let log = log_range(values.iter().copied());
+            assert!(
+                0.0 < log.start && log.start < log.end && log.end.is_finite(),
+                "{case}: {log:?}"
+            );
+            let decades = (log.end / log.start).log10();
+            assert!(
+                decades <= f64::from(DECADES) + 1.0,
+                "{case}: {log:?} spans {decades} decades"
+            );
+        }
+        // Equal values stay inside their axis; a constant huge value still has ticks apart.
+        let equal = linear_range([1e20, 1e20], 0.05);
+        assert!(equal.start < 1e20 && 1e20 < equal.end, "{equal:?}");
+        assert_eq!(linear_range([-INF, 2.0, 4.0, NAN], 0.0), 2.0..4.0);
+    }
+
+    #[test]
+    fn pieces_break_at_left_out_values() {
+        let split = pieces([Some(1), None, None, Some(2), Some(3), None]);
+        assert_eq!(split, vec![vec![1], vec![2, 3]]);
+        assert!(pieces::<i32>([None, None]).is_empty());
+    }
+
+    #[test]
+    fn curves_of_hostile_scores_are_drawn_and_say_what_they_left_out() {
+        let dir = dir("curves");
+        for (case, values) in HOSTILE {
+            for optimum in [None, Some(10.0), Some(-INF)] {
+                let (dir, stem) = (dir.clone(), format!("{case}-{optimum:?}"));
+                let summary = summary(values, vec![vec![0.0]], optimum);
+                within_a_minute(&stem.clone(), move || save(&LearningCurves(&summary), &dir, &stem));
+            }
+        }
+        let svg = drawn(&dir, "minus-inf-None");
+        assert!(svg.contains("round-robin (2 non-finite means not drawn)"), "{svg}");
+        assert!(svg.contains("nan-sem (2 non-finite means not drawn, 2 non-finite SEMs not drawn)"));
+        let svg = drawn(&dir, "only-non-finite-Some(10.0)");
+        assert!(svg.contains("best policy NaN not drawn"), "{svg}");
+    }
+
+    #[test]
+    fn exploration_of_hostile_updates_is_drawn_and_says_what_it_left_out() {
+        let dir = dir("updates");
+        for (case, values) in HOSTILE {
+            let run = |scale: f64| -> Vec<(f64, f64, f64)> {
+                values
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &v)| (100.0 * i as f64, v * scale, v))
+                    .collect()
+            };
+            let picture = Exploration {
+                caption: case.to_string(),
+                methods: vec![
+                    ("a".to_string(), vec![run(1.0), run(2.0), Vec::new()]),
+                    ("b".to_string(), vec![run(-1.0)]),
+                ],
+            };
+            let dir = dir.clone();
+            within_a_minute(case, move || save(&picture, &dir, case));
+        }
+        let svg = drawn(&dir, "collapse");
+        // Zeros, 5e-324 and 1e-200 are more than 40 decades below 100.
+        assert!(svg.contains("6 values drawn at the floor"), "{svg}");
+        let svg = drawn(&dir, "plus-inf");
+        assert!(svg.contains("2 non-finite values not drawn"), "{svg}");
+    }
+
+    #[test]
+    fn selections_of_hostile_data_are_drawn() {
+        let dir = dir("selections");
+        let contexts: [(&str, Vec<Vec<f64>>); 5] = [
+            ("one", vec![vec![0.0, 0.0]]),
+            ("equal", vec![vec![1.0, 1.0], vec![1.0, 1.0]]),
+            ("huge", vec![vec![-1e300, 1e-300], vec![1e300, 1e300]]),
+            ("extremes", vec![vec![-f64::MAX, 0.0], vec![f64::MAX, 1.0]]),
+            ("non-finite", vec![vec![NAN, 0.0], vec![INF, 1.0], vec![0.0, 0.0]]),
+        ];
+        for (case, contexts) in contexts {
+            for (values_case, values) in HOSTILE {
+                let stem = format!("{case}-{values_case}");
+                let (summary, dir) = (summary(values, contexts.clone(), None), dir.clone());
+                within_a_minute(&stem.clone(), move || {
+                    save(&SelectionMaps(&summary), &dir, &format!("{stem}-maps"))?;
+                    save(&SelectionTraces(&summary), &dir, &format!("{stem}-traces"))
+                });
+            }
+        }
+        assert!(drawn(&dir, "non-finite-nan-maps").contains("2 non-finite contexts not drawn"));
+        drawn(&dir, "one-empty-traces");
+        let mut empty = summary(&[], vec![vec![0.0, 0.0]], None);
+        empty.methods.clear();
+        let empty_dir = dir.clone();
+        within_a_minute("no methods", move || {
+            save(&LearningCurves(&empty), &empty_dir, "no-methods-curves")?;
+            save(&SelectionMaps(&empty), &empty_dir, "no-methods-maps")?;
+            save(&SelectionTraces(&empty), &empty_dir, "no-methods-traces")
+        });
+        drawn(&dir, "no-methods-traces");
+    }
+
+    #[test]
+    fn selections_over_time_of_hostile_shares_are_drawn() {
+        let dir = dir("selections-time");
+        for (case, values) in HOSTILE {
+            let bins = values.len().max(1);
+            let shares: Vec<Vec<f64>> = (0..3)
+                .map(|_| values.iter().copied().chain([0.0]).take(bins).collect())
+                .collect();
+            let picture = SelectionsOverTime {
+                methods: vec![("a".to_string(), shares)],
+                episodes: 10 * bins,
+                runs: 2,
+            };
+            let into = dir.clone();
+            within_a_minute(case, move || save(&picture, &into, case));
+            drawn(&dir, case);
+        }
+    }
+
+    #[test]
+    fn bench_bars_of_hostile_rates_are_drawn_and_say_what_they_left_out() {
+        let dir = dir("bench");
+        for (case, values) in HOSTILE {
+            let rows: Vec<crate::bench::Row> = values
+                .iter()
+                .map(|&rate| crate::bench::Row {
+                    env: "trivial",
+                    mode: "fleet",
+                    workers: 2,
+                    rollouts_per_s: rate,
+                    ratio: rate,
+                    learner_share: None,
+                    startup_seconds: None,
+                    rollouts: 10,
+                    seconds: 0.0,
+                    round_rates: vec![rate, rate],
+                    round_ratios: vec![rate, 0.0],
+                })
+                .collect();
+            let dir = dir.clone();
+            within_a_minute(case, move || save(&BenchBars(&rows), &dir, case));
+        }
+        assert!(drawn(&dir, "minus-inf").contains("2 non-finite rates not drawn"));
+        drawn(&dir, "empty");
+    }
 
     /// The bins cover every episode exactly once, as the heat map's cells are drawn.
     #[test]
