@@ -852,9 +852,9 @@ impl Picture for SelectionMaps<'_> {
         let methods: Vec<_> = summary.methods.iter().collect();
         let (columns, rows) = self.grid();
         let contexts = &summary.training_contexts;
-        // Half the smallest spacing between contexts: each context is drawn as a square of that size.
-        let half = half_spacing(contexts);
-        let axis = |d: usize| linear_range(contexts.iter().flat_map(|c| [c[d] - half, c[d] + half]), 0.0);
+        let (half_x, half_y) = half_spacing(contexts);
+        let half = [half_x, half_y];
+        let axis = |d: usize| linear_range(contexts.iter().flat_map(|c| [c[d] - half[d], c[d] + half[d]]), 0.0);
         let (x_range, y_range) = (axis(0), axis(1));
         let unplaced = contexts
             .iter()
@@ -887,7 +887,10 @@ impl Picture for SelectionMaps<'_> {
                 let x = |v: f64| clip(v, &x_range, 0.0);
                 let y = |v: f64| clip(v, &y_range, 0.0);
                 Some(Rectangle::new(
-                    [(x(c[0] - half)?, y(c[1] - half)?), (x(c[0] + half)?, y(c[1] + half)?)],
+                    [
+                        (x(c[0] - half_x)?, y(c[1] - half_y)?),
+                        (x(c[0] + half_x)?, y(c[1] + half_y)?),
+                    ],
                     RGBColor(level, level, 255).filled(),
                 ))
             });
@@ -897,17 +900,32 @@ impl Picture for SelectionMaps<'_> {
     }
 }
 
-fn half_spacing(contexts: &[Vec<f64>]) -> f64 {
-    let mut smallest = f64::MAX;
+/// Half the width and height of each context's cell: on a grid, half the spacing along each
+/// axis, so that a grid whose axes are spaced differently is tiled without gaps; else (scattered
+/// contexts) half the smallest distance between two contexts, a square.
+fn half_spacing(contexts: &[Vec<f64>]) -> (f64, f64) {
+    let (mut nearest, mut along) = (f64::MAX, [f64::MAX; 2]);
     for (i, a) in contexts.iter().enumerate() {
         for b in &contexts[i + 1..] {
-            let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+            let (dx, dy) = ((a[0] - b[0]).abs(), (a[1] - b[1]).abs());
+            let d = dx.hypot(dy);
             if d > 1e-12 {
-                smallest = smallest.min(d);
+                nearest = nearest.min(d);
+            }
+            // Neighbours in a row or a column of a grid.
+            if dy <= 1e-12 && dx > 1e-12 {
+                along[0] = along[0].min(dx);
+            }
+            if dx <= 1e-12 && dy > 1e-12 {
+                along[1] = along[1].min(dy);
             }
         }
     }
-    if smallest == f64::MAX { 0.1 } else { smallest / 2.0 }
+    let square = if nearest == f64::MAX { 0.1 } else { nearest / 2.0 };
+    match along {
+        [x, y] if x < f64::MAX && y < f64::MAX => (x / 2.0, y / 2.0),
+        _ => (square, square),
+    }
 }
 
 /// The dartboard with every field, its target and where run 0's final policy lands (paper
@@ -1367,6 +1385,18 @@ mod tests {
         assert!(svg.contains("6 values drawn at the floor"), "{svg}");
         let svg = drawn(&dir, "plus-inf");
         assert!(svg.contains("2 non-finite values not drawn"), "{svg}");
+    }
+
+    #[test]
+    fn a_grid_s_cells_tile_it_and_scattered_contexts_get_squares() {
+        let grid: Vec<Vec<f64>> = [0.3, 0.5, 0.7]
+            .iter()
+            .flat_map(|&x| [-0.2, 0.2].map(|y| vec![x, y]))
+            .collect();
+        let (hx, hy) = half_spacing(&grid);
+        assert!((hx - 0.1).abs() < 1e-12 && (hy - 0.2).abs() < 1e-12, "{hx} {hy}");
+        let scattered = [vec![0.0, 0.0], vec![3.0, 4.0], vec![10.0, 1.0]];
+        assert_eq!(half_spacing(&scattered), (2.5, 2.5));
     }
 
     #[test]
