@@ -58,6 +58,23 @@ pub(crate) const LONG_BOWL: [&str; 8] = [
     "1",
 ];
 
+/// Wait until the run writing to `out` has written a checkpoint (with [`LONG_BOWL`]: learning
+/// has begun) and `also` holds; fails if that takes two minutes or the run ends first.
+pub(crate) fn wait_for_learning(learner: &mut std::process::Child, out: &Path, also: impl Fn() -> bool) {
+    let start = std::time::Instant::now();
+    while !(std::fs::read_dir(out.join("checkpoints")).is_ok_and(|mut e| e.next().is_some()) && also()) {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(120),
+            "no checkpoint appeared"
+        );
+        assert!(
+            learner.try_wait().unwrap().is_none(),
+            "the run ended before a checkpoint"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+}
+
 pub(crate) fn run(config: &Path, command: &str, workers: &str, test: &str, out: &Path, extra: &[&str]) -> Output {
     let run = run_name(test);
     let output = watched()
@@ -452,18 +469,7 @@ fn a_killed_problem_run_resumes_to_the_uninterrupted_result() {
         .spawn()
         .unwrap();
     // SIGKILL once learning has begun: a checkpoint is written after every update.
-    let start = std::time::Instant::now();
-    while !std::fs::read_dir(out.join("checkpoints")).is_ok_and(|mut e| e.next().is_some()) {
-        assert!(
-            start.elapsed() < std::time::Duration::from_secs(120),
-            "no checkpoint appeared"
-        );
-        assert!(
-            learner.try_wait().unwrap().is_none(),
-            "the run ended before a checkpoint"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(2));
-    }
+    wait_for_learning(&mut learner, &out, || true);
     let _ = learner.kill();
     let _ = learner.wait();
     assert!(!out.join("summary.json").exists(), "killed before the end");

@@ -247,19 +247,8 @@ fn a_sigkilled_python_worker_changes_nothing() {
         .spawn()
         .unwrap();
     // Learning has begun (a checkpoint after every update) and worker 0 is known: kill it.
-    let start = std::time::Instant::now();
     let victim = pids.join("0");
-    while !(std::fs::read_dir(out.join("checkpoints")).is_ok_and(|mut e| e.next().is_some()) && victim.exists()) {
-        assert!(
-            start.elapsed() < std::time::Duration::from_secs(120),
-            "no checkpoint appeared"
-        );
-        assert!(
-            learner.try_wait().unwrap().is_none(),
-            "the run ended before a checkpoint"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(2));
-    }
+    problems::wait_for_learning(&mut learner, &out, || victim.exists());
     let pid = std::fs::read_to_string(&victim).unwrap().trim().to_string();
     let killed = Command::new("kill").args(["-9", &pid]).status().unwrap();
     assert!(killed.success(), "worker 0 (PID {pid}) was gone before it was killed");
