@@ -1222,12 +1222,29 @@ mod tests {
         ("empty", &[]),
     ];
 
+    /// A test's directory of pictures, removed when the test ends.
+    struct Scratch(PathBuf);
+
+    impl std::ops::Deref for Scratch {
+        type Target = PathBuf;
+
+        fn deref(&self) -> &PathBuf {
+            &self.0
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
     /// A fresh directory for one test's pictures.
-    fn dir(test: &str) -> PathBuf {
+    fn dir(test: &str) -> Scratch {
         let dir = std::env::temp_dir().join(format!("acps-plot-{test}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
-        dir
+        Scratch(dir)
     }
 
     /// Run `draw` on a thread and fail when it errs, panics or is still drawing after 60 s (a

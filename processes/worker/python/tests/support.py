@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import tempfile
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -66,6 +68,8 @@ class Learner:
         """Start the learner of ``run`` with the experiment arguments ``args``."""
         self.run = run
         self.dir = Path(tempfile.mkdtemp(prefix=f"acps-{run}-"))
+        # Removed once the learner object is gone, at the latest when the tests end.
+        weakref.finalize(self, shutil.rmtree, self.dir, True)
         self.out = self.dir / "out"
         self.log = self.dir / "learner.log"
         with open(self.log, "w") as log:
