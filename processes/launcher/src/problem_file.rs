@@ -383,10 +383,12 @@ impl ContextGrid {
         };
         let mut points = vec![Vec::with_capacity(dim)];
         for d in 0..dim {
+            let values = axis(d);
+            let values = &values;
             points = points
                 .into_iter()
                 .flat_map(|point| {
-                    axis(d).into_iter().map(move |x| {
+                    values.iter().map(move |&x| {
                         let mut next = point.clone();
                         next.push(x);
                         next

@@ -216,11 +216,10 @@ class _Ports:
     listener: Any = None
 
     def release(self, pending: list[Any]) -> None:
-        """Release the pending requests, the ports, the services and the node, in that order
-        (a Python process that just exits leaves iceoryx2's files behind)."""
+        """Release the ``pending`` requests, the ports, the services and the node, in that
+        order (a Python process that just exits leaves iceoryx2's files behind)."""
         for request in pending:
             _delete(request)
-        pending.clear()
         for port in (self.listener, self.notifier, self.client):
             _delete(port)
         self.listener = self.notifier = self.client = None
@@ -349,7 +348,9 @@ class _Session:
         self.protocol = protocol
         self.config = _ipc.run_config(run)
         self.ports = _Ports()
-        self.pending: list[Any] = []
+        # Requests in flight with the number of tasks each asks for; None is a free slot. The
+        # first slots ask for tasks, the last only delivers outcomes (see `loop`).
+        self.slots: list[tuple[Any, int] | None] = []
         self.learner_pid: int | None = None
         self.rollouts = 0
         self.failed = 0
@@ -364,7 +365,8 @@ class _Session:
 
     def close(self) -> None:
         """Release everything, then remove the run's files if no node of the run lives."""
-        self.ports.release(self.pending)
+        self.ports.release([slot[0] for slot in self.slots if slot is not None])
+        self.slots.clear()
         _ipc.remove_run_files_if_last(self.run)
 
     def open(self) -> None:
@@ -489,9 +491,7 @@ class _Session:
         served_bytes = bytes(served)
         identity = 0
         asking = min(in_flight, _wire.MAX_ASKING_REQUESTS)
-        # Requests in flight with the number of tasks each asks for; None is a free slot. The
-        # first `asking` slots ask for tasks, the last only delivers outcomes.
-        slots: list[tuple[Any, int] | None] = [None] * (asking + 1)
+        slots = self.slots = [None] * (asking + 1)
         queue: deque[Any] = deque()
         outbox = _wire.WorkerMessage()
         outbox.protocol = self.protocol
@@ -541,7 +541,6 @@ class _Session:
                 except Exception as error:
                     raise _ipc.ipc_error("sending a request", error) from error
                 slots[index] = (pending, want)
-                self.pending.append(pending)
                 count = 0
                 sent = True
             unannounced |= sent
@@ -601,7 +600,6 @@ class _Session:
                     # allows only so many active requests per client.
                     _delete(response)
                     _delete(pending)
-                    self.pending.remove(pending)
                     slots[i] = None
             if queue and not outbox_full:
                 wire = queue.popleft()
