@@ -119,6 +119,14 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     let Some(jobs) = jobs(&args.experiment)? else {
         return Ok(());
     };
+    if let Some(command) = &args.worker_command {
+        if command.trim().is_empty() {
+            bail!("--worker-command must be a command that starts your worker, got {command:?}");
+        }
+        if args.workers == Some(0) {
+            bail!("--worker-command starts --workers W >= 1 copies of CMD; with --workers 0 it would start none");
+        }
+    }
     if let Some(job) = jobs.iter().find(|job| job.experiment.user_problem.is_some())
         && args.worker_command.is_none()
         && args.workers != Some(0)

@@ -319,6 +319,28 @@ fn a_problem_is_refused_in_process_and_without_workers() {
         stderr.contains("problem 'bowl' needs your workers: --worker-command CMD or --workers 0"),
         "{stderr}"
     );
+    for (workers, command, says) in [
+        (
+            "2",
+            " ",
+            "--worker-command must be a command that starts your worker, got \" \"",
+        ),
+        ("0", "my-worker", "with --workers 0 it would start none"),
+    ] {
+        let output = acps(&[
+            "run",
+            "--config",
+            config,
+            "--workers",
+            workers,
+            "--worker-command",
+            command,
+            "--out",
+            out,
+        ]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success() && stderr.contains(says), "{stderr}");
+    }
     assert!(!dir.exists(), "a refused command wrote {}", dir.display());
 }
 
