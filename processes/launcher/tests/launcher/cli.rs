@@ -1,15 +1,9 @@
 //! The `acps experiment` command-line contract: files written, summary.json fields, and errors
 //! that name the bad option.
 
-use crate::acps;
+use crate::{acps, temp_dir};
 use std::path::Path;
 use std::process::Command;
-
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("acps-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
 
 fn summary(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
@@ -85,8 +79,6 @@ fn toy_panel_writes_the_summary_contract() {
         std::fs::read(dir.join("summary.json")).unwrap(),
         std::fs::read(again.join("summary.json")).unwrap()
     );
-    let _ = std::fs::remove_dir_all(dir);
-    let _ = std::fs::remove_dir_all(again);
 }
 
 #[test]
@@ -127,7 +119,6 @@ fn toy_without_panel_writes_all_four_and_function_runs_one_method() {
         ["corners"]
     );
     assert_eq!(s["methods"]["corners"]["episodes"], serde_json::json!([0, 50, 100]));
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -240,7 +231,6 @@ fn throwing_experiments_write_their_results() {
     assert!(error["median"].as_f64().unwrap() <= error["max"].as_f64().unwrap());
     assert_eq!(m["landings_run0"].as_array().unwrap().len(), 81);
     assert!(board.join("board.svg").is_file());
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -332,7 +322,6 @@ fn bench_writes_its_table_and_json() {
         "{}",
         String::from_utf8_lossy(&error.stderr)
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -504,5 +493,4 @@ fn a_run_killed_mid_way_resumes_to_the_same_summary() {
         stderr.contains("--resume a and --out b name different directories"),
         "{stderr}"
     );
-    let _ = std::fs::remove_dir_all(dir);
 }

@@ -1,7 +1,7 @@
 //! Experiment files: the shipped ones validate and match the command-line defaults, bad files are
 //! refused with file, line and accepted range, and a run's resolved file re-runs it bit for bit.
 
-use crate::acps;
+use crate::{acps, temp_dir};
 use acps::config::{ExperimentFile, ExperimentName, LoadedFile, Plan, SimName};
 use std::path::{Path, PathBuf};
 
@@ -12,13 +12,6 @@ fn succeeds(args: &[&str]) {
         "{args:?}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("acps-config-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 fn shipped() -> Vec<PathBuf> {
@@ -96,6 +89,7 @@ fn every_shipped_file_validates_sets_every_key_and_matches_the_defaults() {
 #[test]
 fn bad_files_are_refused_with_file_line_and_range() {
     let dir = temp_dir("bad");
+    std::fs::create_dir_all(&*dir).unwrap();
     let cases = [
         (
             "experiment = \"toy\"\nruns = 2\nwokers = 4\n",
@@ -144,7 +138,6 @@ fn bad_files_are_refused_with_file_line_and_range() {
     }
     // Nothing ran: no run directory appeared.
     assert!(!Path::new("runs/bad-0").exists());
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The file's settings without its comment lines.
@@ -159,6 +152,7 @@ fn settings(path: &Path) -> String {
 #[test]
 fn a_saved_or_written_config_reruns_bit_for_bit() {
     let dir = temp_dir("rerun");
+    std::fs::create_dir_all(&*dir).unwrap();
     let cases: [&[&str]; 2] = [
         &[
             "toy",
@@ -236,7 +230,6 @@ fn a_saved_or_written_config_reruns_bit_for_bit() {
         dir.join("0-saved.toml").to_str().unwrap(),
     ]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("exists; remove it or choose another name"));
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]

@@ -1,6 +1,6 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
-use crate::{assert_clean, run_name, succeeded, watched};
+use crate::{assert_clean, run_name, succeeded, temp_dir, watched};
 use acps::paper::{self, Options, Sim};
 use acps::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetJob, FleetProgress, Liveness};
@@ -22,12 +22,6 @@ use std::time::{Duration, Instant};
 
 fn acps() -> Command {
     Command::new(env!("CARGO_BIN_EXE_acps"))
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("acps-fleet-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
 }
 
 /// A short grid experiment: 2 methods x 2 runs.
@@ -105,7 +99,6 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
             );
             assert_clean(&run);
         }
-        let _ = std::fs::remove_dir_all(dir);
     }
 }
 
@@ -129,7 +122,6 @@ fn learn_is_the_fleet_run_of_monotonic_progress_it_documents() {
     );
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// Wait until `condition` holds, polling; panics naming `what` after `limit` (a watchdog, not a
@@ -218,7 +210,6 @@ fn an_oversubscribed_fleet_finishes_with_the_in_process_result_and_leaves_nothin
         Vec::<String>::new(),
         "processes of run {run} remain"
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// Wait for `child` to exit, at most `limit`.
@@ -256,7 +247,7 @@ const SLOW: [&str; 10] = [
 /// A slow run named `name`: its directory, the in-process result, its run name and the fleet's
 /// output directory.
 struct SlowRun {
-    dir: PathBuf,
+    dir: crate::TempDir,
     reference: Vec<u8>,
     run: RunName,
     out: PathBuf,
@@ -283,7 +274,7 @@ const KILL_WORKER_P: [&str; 2] = ["--in-flight", "8"];
 #[test]
 fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
     let SlowRun {
-        dir,
+        dir: _dir,
         reference,
         run,
         out,
@@ -328,7 +319,6 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
     assert!(reissued(&stdout) >= 1, "{stdout}");
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// Send `signal` to the process group `group`.
@@ -343,7 +333,7 @@ fn signal_group(signal: &str, group: u32) {
 #[test]
 fn a_paused_and_resumed_fleet_finishes_with_the_same_result() {
     let SlowRun {
-        dir,
+        dir: _dir,
         reference,
         run,
         out,
@@ -374,13 +364,12 @@ fn a_paused_and_resumed_fleet_finishes_with_the_same_result() {
     assert!(pauses >= 3, "the run ended before it could be paused ({pauses} pauses)");
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn ctrl_c_stops_a_fleet_run_and_resume_finishes_it() {
     let SlowRun {
-        dir,
+        dir: _dir,
         reference,
         run,
         out,
@@ -417,7 +406,6 @@ fn ctrl_c_stops_a_fleet_run_and_resume_finishes_it() {
     assert!(resumed.status.success(), "{}", String::from_utf8_lossy(&resumed.stderr));
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -465,7 +453,6 @@ fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
             .unwrap(),
     );
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -571,7 +558,6 @@ fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worke
     );
     ipc::remove_run_files(&run).unwrap();
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -674,7 +660,6 @@ fn a_killed_fleet_learner_resumes_from_its_checkpoints_to_the_in_process_result(
         std::fs::read(dir.join("in-process").join("updates.csv")).unwrap()
     );
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The niceness of process `pid`: field 19 of /proc/PID/stat, the 17th after the parenthesised
@@ -702,7 +687,7 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
         ])
         .args(["--workers", "1", "--worker-nice", "7", "--run", run.as_str()])
         .arg("--out")
-        .arg(&dir)
+        .arg(&*dir)
         .spawn()
         .unwrap();
     let children = format!("/proc/{0}/task/{0}/children", learner.id());
@@ -723,7 +708,6 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
     assert!(learner.wait().unwrap().success());
     assert_eq!(seen, Some(0), "a worker at niceness 7 beside a learner at 0");
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// How the tests serve in-process jobs: no polling, a fixed run identity.
@@ -918,7 +902,7 @@ fn a_bench_whose_worker_dies_stops_with_an_error_instead_of_a_row() {
             "0.2",
         ])
         .arg("--out")
-        .arg(&dir)
+        .arg(&*dir)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -955,7 +939,6 @@ fn a_bench_whose_worker_dies_stops_with_an_error_instead_of_a_row() {
     );
     assert!(!dir.join("bench.json").exists(), "no table of a broken fleet");
     assert_clean(&RunName::new(&format!("bench-{acps}-rapier-1")).unwrap());
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// Blocks in its first rollout until released: a worker that lives but says nothing, as one
@@ -1090,7 +1073,7 @@ fn children_of(pid: u32) -> Vec<u32> {
 #[test]
 fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
     let SlowRun {
-        dir,
+        dir: _dir,
         reference,
         run,
         out,
@@ -1127,7 +1110,6 @@ fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
         "the hand worker left"
     );
     assert_clean(&run);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -1139,7 +1121,7 @@ fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_lef
         .args(SLOW)
         .args(["--workers", "2", "--run", run.as_str(), "--checkpoint-every", "1"])
         .arg("--out")
-        .arg(&dir)
+        .arg(&*dir)
         .process_group(0)
         .stderr(Stdio::null())
         .spawn()
@@ -1165,7 +1147,6 @@ fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_lef
     assert!(ipc::leftover_files(&run).is_empty(), "{:?}", ipc::leftover_files(&run));
     drop(fleet);
     assert_clean(&other);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
