@@ -97,6 +97,12 @@ pub(crate) struct LearnArgs {
     /// The run's name, for workers started by hand to join (default: grid-PID).
     #[arg(long)]
     pub(crate) run: Option<String>,
+    /// Continue the run in DIR (default: --out) from its checkpoints after Ctrl-C, a crash or a
+    /// kill, with the other options it was started with (an interrupted run prints the
+    /// command). The result is bit for bit that of an uninterrupted run.
+    #[arg(long, value_name = "DIR")]
+    #[allow(clippy::option_option)]
+    pub(crate) resume: Option<Option<PathBuf>>,
     /// No progress line.
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -119,9 +125,9 @@ impl LearnArgs {
                 config: None,
                 settings,
                 save_config: None,
+                resume: self.resume.map(|dir| dir.unwrap_or_else(|| self.out.clone())),
                 out: Some(self.out),
                 checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
-                resume: None,
                 quiet: self.quiet,
             },
             workers: self.workers,
@@ -245,8 +251,8 @@ pub(crate) struct ExperimentArgs {
     #[arg(long, value_name = "N", default_value_t = DEFAULT_CHECKPOINT_EVERY)]
     pub(crate) checkpoint_every: u64,
     /// Continue the run whose output directory is DIR from its checkpoints, after a crash, a
-    /// kill or Ctrl-C; give the arguments the run was started with. The result is bit for bit
-    /// that of an uninterrupted run.
+    /// kill or Ctrl-C (which prints the whole command); give the arguments the run was started
+    /// with. The result is bit for bit that of an uninterrupted run.
     #[arg(long, value_name = "DIR")]
     pub(crate) resume: Option<PathBuf>,
     /// No progress bar.

@@ -3,7 +3,7 @@
 use crate::bench::BenchEvent;
 use crate::checkpoints::Checkpoints;
 use crate::cli::{BenchArgs, EvaluateArgs, ExperimentArgs, RunArgs, WorkerArgs};
-use crate::config::{self, ExperimentFile, Job, LoadedFile, Plan};
+use crate::config::{self, Job, LoadedFile, Plan};
 use crate::experiment::{Experiment, Summary};
 use crate::progress::Progress;
 use crate::workers::ModelFactory;
@@ -17,14 +17,107 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-/// True when `error` is a fleet stopped by Ctrl-C.
-pub fn interrupted(error: &anyhow::Error) -> bool {
+/// How a run that wrote checkpoints ended early: stopped by Ctrl-C, or failed. Its message
+/// carries the exact command that continues the run, when its checkpoints allow it.
+#[derive(Debug, thiserror::Error)]
+pub enum Stopped {
+    /// Ctrl-C (SIGINT, SIGTERM or SIGHUP).
+    #[error(
+        "interrupted; {}{}",
+        if *fleet { "the run's workers were stopped and its shared memory removed; " } else { "" },
+        continue_hint(resume.as_deref())
+    )]
+    Interrupted {
+        /// The command that continues the run (`None`: it wrote no checkpoints).
+        resume: Option<String>,
+        /// Whether the run served a fleet.
+        fleet: bool,
+    },
+    /// Any other error, after which the checkpoints written so far continue the run.
+    #[error("{error:#}\n{}", continue_hint(Some(resume)))]
+    Failed {
+        /// What went wrong.
+        error: anyhow::Error,
+        /// The command that continues the run.
+        resume: String,
+    },
+}
+
+fn continue_hint(resume: Option<&str>) -> String {
+    match resume {
+        Some(command) => format!("the checkpoints written so far continue the run with\n  {command}"),
+        None => "the run wrote no checkpoints (--checkpoint-every 0) and cannot be continued".into(),
+    }
+}
+
+/// The command line this process was started with, with `--resume DIR` in place of any
+/// `--resume` it had: the exact command that continues the run writing into `dir`.
+fn continue_command(dir: &Path) -> String {
+    let mut args = std::env::args_os().map(|a| a.to_string_lossy().into_owned());
+    let mut command: Vec<String> = args.next().into_iter().collect();
+    let mut args = args.peekable();
+    while let Some(arg) = args.next() {
+        if arg == "--resume" {
+            // `acps learn --resume` may stand without its value.
+            args.next_if(|value| !value.starts_with('-'));
+        } else if !arg.starts_with("--resume=") {
+            command.push(arg);
+        }
+    }
+    command.extend(["--resume".to_string(), dir.display().to_string()]);
+    command
+        .iter()
+        .map(|arg| shell_quoted(arg))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// `arg` as a POSIX shell reads it back: bare when it holds no special characters, else in
+/// single quotes.
+fn shell_quoted(arg: &str) -> String {
+    let plain = |c: char| c.is_ascii_alphanumeric() || "-_./,:=@%+".contains(c);
+    if !arg.is_empty() && arg.chars().all(plain) {
+        arg.to_string()
+    } else {
+        format!("'{}'", arg.replace('\'', r"'\''"))
+    }
+}
+
+/// `error` of a run into `dir` as the user should read it: with the command that continues the
+/// run when it keeps checkpoints.
+fn stopped(
+    error: impl Into<anyhow::Error>,
+    checkpoints: Option<&Checkpoints>,
+    dir: &Path,
+    fleet: bool,
+) -> anyhow::Error {
+    let error = error.into();
+    let resume = checkpoints.filter(|c| c.every > 0).map(|_| continue_command(dir));
+    if interrupted(&error) {
+        return Stopped::Interrupted { resume, fleet }.into();
+    }
+    // A fleet can fail half-way (its workers gone, refused or silent); other errors happen
+    // before the run starts or concern the checkpoints themselves.
+    let fleet_failed = error.chain().any(|e| {
+        matches!(
+            e.downcast_ref::<crate::experiment::RunError>(),
+            Some(crate::experiment::RunError::Fleet(_))
+        )
+    });
+    match resume {
+        Some(resume) if fleet_failed && dir.join("checkpoints").is_dir() => Stopped::Failed { error, resume }.into(),
+        _ => error,
+    }
+}
+
+/// True when `error` is a run stopped by Ctrl-C.
+fn interrupted(error: &anyhow::Error) -> bool {
     use crate::experiment::RunError;
     use acps_fleet::FleetError;
     error.chain().any(|e| {
         matches!(
             e.downcast_ref::<RunError>(),
-            Some(RunError::Fleet(FleetError::Interrupted))
+            Some(RunError::Fleet(FleetError::Interrupted) | RunError::Interrupted)
         ) || matches!(e.downcast_ref::<FleetError>(), Some(FleetError::Interrupted))
     })
 }
@@ -77,6 +170,27 @@ fn check_resumable(args: &ExperimentArgs, jobs: &[Job]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Make every job's output directory before anything is computed or started, and write its
+/// resolved experiment file there: an output that cannot be written fails now, not after the run.
+fn prepare_outputs(jobs: &[Job]) -> anyhow::Result<()> {
+    for job in jobs {
+        let dir = &job.dir;
+        if dir.exists() && !dir.is_dir() {
+            bail!(
+                "output directory {} exists and is not a directory: choose another --out",
+                dir.display()
+            );
+        }
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("output directory {}: cannot create it: {e}", dir.display()))?;
+        job.config.write_resolved(dir)?;
+    }
+    Ok(())
+}
+
+/// Set by the Ctrl-C handler of `acps experiment`.
+static STOP: AtomicBool = AtomicBool::new(false);
+
 pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     let Some(jobs) = jobs(&args)? else {
         return Ok(());
@@ -85,20 +199,17 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         job.experiment.check_in_process()?;
     }
     check_resumable(&args, &jobs)?;
-    for Job {
-        experiment,
-        dir,
-        config,
-    } in jobs
-    {
+    prepare_outputs(&jobs)?;
+    ctrlc::set_handler(|| STOP.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
+    for Job { experiment, dir, .. } in jobs {
         let progress = Progress::of(&experiment, args.quiet);
-        let summary = match checkpoints(&args, &dir) {
-            Some(checkpoints) => experiment.run_with_checkpoints(&progress, &checkpoints),
-            None => experiment.run(&progress),
-        }
-        .with_context(|| format!("experiment {}", experiment.name))?;
+        let checkpoints = checkpoints(&args, &dir);
+        let summary = experiment
+            .run_until(&progress, checkpoints.as_ref(), &STOP)
+            .with_context(|| format!("experiment {}", experiment.name))
+            .map_err(|e| stopped(e, checkpoints.as_ref(), &dir, false))?;
         progress.finish();
-        write(&experiment, &summary, &dir, &config, args.quiet)?;
+        write(&experiment, &summary, &dir, args.quiet)?;
     }
     Ok(())
 }
@@ -137,6 +248,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         );
     }
     check_resumable(&args.experiment, &jobs)?;
+    prepare_outputs(&jobs)?;
     let name = args.run.clone().unwrap_or_else(|| {
         // Run names take letters, digits and '-' only; problem names also '_' and '.'.
         let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
@@ -145,12 +257,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     let workers = args
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    for Job {
-        experiment,
-        dir,
-        config,
-    } in &jobs
-    {
+    for Job { experiment, dir, .. } in &jobs {
         let mut builder = Fleet::builder(name.as_str())
             .identity(experiment.identity())
             .ctrl_c(true);
@@ -184,14 +291,16 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             progress.show(&p.learning, p.outcomes, Some(p.workers));
         });
         progress.finish();
-        let (summary, report) = outcome.with_context(|| format!("experiment {} on run '{run}'", experiment.name))?;
+        let (summary, report) = outcome
+            .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
+            .map_err(|e| stopped(e, checkpoints.as_ref(), dir, true))?;
         if !args.experiment.quiet {
             println!(
                 "{} on {workers} workers: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
                 experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
             );
         }
-        write(experiment, &summary, dir, config, args.experiment.quiet)?;
+        write(experiment, &summary, dir, args.experiment.quiet)?;
     }
     Ok(())
 }
@@ -314,17 +423,11 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn write(
-    experiment: &Experiment,
-    summary: &Summary,
-    dir: &Path,
-    config: &ExperimentFile,
-    quiet: bool,
-) -> anyhow::Result<()> {
+/// Write the run directory's results; its config.toml was written before the run.
+fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) -> anyhow::Result<()> {
     summary
         .write(dir)
         .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
-    config.write_resolved(dir)?;
     crate::records::write(summary, dir)?;
     crate::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {

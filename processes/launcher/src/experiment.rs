@@ -18,6 +18,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 /// One problem instance: what the learner sees, the environment, and a known optimal score.
@@ -303,6 +304,9 @@ pub enum RunError {
     /// The fleet failed.
     #[error(transparent)]
     Fleet(#[from] FleetError),
+    /// An in-process run was stopped (Ctrl-C); with checkpoints on, every unfinished job wrote one.
+    #[error("interrupted")]
+    Interrupted,
     /// The experiment cannot run on a fleet.
     #[error(
         "experiment '{0}' cannot run on a worker fleet: its environment keeps state between rollouts (use `acps experiment`)"
@@ -360,22 +364,36 @@ impl Experiment {
 
     /// Run every (method, run) pair in parallel in this process and summarise.
     pub fn run(&self, progress: &Progress) -> Result<Summary, RunError> {
-        let jobs = self.jobs()?.into_iter().map(|job| (job, None)).collect();
-        self.run_jobs(jobs, progress)
+        self.run_until(progress, None, &AtomicBool::new(false))
     }
 
-    /// [`run`](Self::run) with checkpoints: every job continues from its checkpoint when
-    /// resuming, and writes checkpoints as it goes. The summary is the same bit for bit.
-    pub fn run_with_checkpoints(&self, progress: &Progress, checkpoints: &Checkpoints) -> Result<Summary, RunError> {
-        let jobs = self
-            .resumed_jobs(checkpoints)?
-            .into_iter()
-            .map(|(job, writer)| (job, Some(writer)))
-            .collect();
-        self.run_jobs(jobs, progress)
+    /// [`run`](Self::run), stopping with [`RunError::Interrupted`] once `stop` is set (by
+    /// Ctrl-C). With `checkpoints`, every job continues from its checkpoint when resuming and
+    /// writes checkpoints as it goes, and an unfinished job writes one when stopped; the summary
+    /// is the same bit for bit.
+    pub fn run_until(
+        &self,
+        progress: &Progress,
+        checkpoints: Option<&Checkpoints>,
+        stop: &AtomicBool,
+    ) -> Result<Summary, RunError> {
+        let jobs = match checkpoints {
+            Some(checkpoints) => self
+                .resumed_jobs(checkpoints)?
+                .into_iter()
+                .map(|(job, writer)| (job, Some(writer)))
+                .collect(),
+            None => self.jobs()?.into_iter().map(|job| (job, None)).collect(),
+        };
+        self.run_jobs(jobs, progress, stop)
     }
 
-    fn run_jobs(&self, mut jobs: Vec<(Job, Option<Writer>)>, progress: &Progress) -> Result<Summary, RunError> {
+    fn run_jobs(
+        &self,
+        mut jobs: Vec<(Job, Option<Writer>)>,
+        progress: &Progress,
+        stop: &AtomicBool,
+    ) -> Result<Summary, RunError> {
         // Rollouts between two updates of the progress line by one job.
         const REPORT_EVERY: u64 = 256;
         let shown = Mutex::new(Shown {
@@ -400,7 +418,14 @@ impl Experiment {
                     .as_mut()
                     .ok_or_else(|| RunError::NeedsWorkers(self.name.clone()))?;
                 let mut unreported = 0;
-                while let Some(task) = job.learner.ask() {
+                loop {
+                    if stop.load(Ordering::Relaxed) {
+                        if let Some(writer) = writer.as_ref().filter(|w| w.enabled()) {
+                            writer.write(&job.learner, Some(environment.as_ref()))?;
+                        }
+                        return Err(RunError::Interrupted);
+                    }
+                    let Some(task) = job.learner.ask() else { break };
                     let outcome = environment.rollout(&task);
                     job.learner
                         .tell(outcome)

@@ -29,15 +29,15 @@ fn main() -> ExitCode {
     init_logging(cli.verbosity());
     match cli.run() {
         Ok(()) => ExitCode::SUCCESS,
-        Err(error) if acps::commands::interrupted(&error) => {
-            eprintln!(
-                "interrupted; the run's workers were stopped and its shared memory removed (with checkpoints on, --resume DIR continues the run)"
-            );
-            ExitCode::from(130)
-        }
-        Err(error) => {
-            eprintln!("error: {error:#}");
-            ExitCode::from(2)
-        }
+        Err(error) => match error.downcast_ref::<acps::commands::Stopped>() {
+            Some(stopped @ acps::commands::Stopped::Interrupted { .. }) => {
+                eprintln!("{stopped}");
+                ExitCode::from(130)
+            }
+            _ => {
+                eprintln!("error: {error:#}");
+                ExitCode::from(2)
+            }
+        },
     }
 }

@@ -366,45 +366,102 @@ fn a_paused_and_resumed_fleet_finishes_with_the_same_result() {
     assert_clean(&run);
 }
 
+/// Start `command` (arguments of `acps`) in a process group of its own, press Ctrl-C once its
+/// first checkpoint is in `out`, check that it stopped as interrupted without a summary, then
+/// run the command it printed to continue; returns the summary that command wrote.
+fn interrupt_and_continue(command: &[&str], out: &Path) -> Vec<u8> {
+    let started = watched()
+        .args(command)
+        .process_group(0)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_until("a first checkpoint", Duration::from_secs(60), || {
+        has_files(&out.join("checkpoints"))
+    });
+    // Ctrl-C in a shell signals the whole foreground group.
+    signal_group("-INT", started.id());
+    let output = started.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{command:?}: {stderr}");
+    assert!(
+        !out.join("summary.json").exists(),
+        "an interrupted run writes no summary"
+    );
+    let printed = stderr
+        .split("continue the run with\n")
+        .nth(1)
+        .and_then(|rest| rest.lines().next())
+        .unwrap_or_else(|| panic!("{command:?} printed no command that continues it: {stderr}"))
+        .trim();
+    assert!(printed.ends_with(&format!("--resume {}", out.display())), "{printed}");
+    let resumed = Command::new("sh").args(["-c", printed]).output().unwrap();
+    succeeded(&resumed);
+    std::fs::read(out.join("summary.json")).unwrap()
+}
+
 #[test]
-fn ctrl_c_stops_a_fleet_run_and_resume_finishes_it() {
+fn ctrl_c_stops_a_fleet_run_and_the_command_it_prints_finishes_it() {
     let SlowRun {
         dir: _dir,
         reference,
         run,
         out,
     } = slow_run("ctrl-c");
-    let fleet = |extra: &[&str]| {
-        watched()
-            .arg("run")
-            .args(SLOW)
-            .args(["--workers", "2", "--run", run.as_str(), "--checkpoint-every", "1"])
-            .args(extra)
-            .arg("--out")
-            .arg(&out)
-            .process_group(0)
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap()
-    };
-    let learner = fleet(&[]);
-    wait_until("a first checkpoint", Duration::from_secs(60), || {
-        has_files(&out.join("checkpoints"))
-    });
-    // Ctrl-C in a shell signals the whole foreground group.
-    signal_group("-INT", learner.id());
-    let output = learner.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(130), "{stderr}");
-    assert!(stderr.contains("interrupted"), "{stderr}");
-    assert!(
-        !out.join("summary.json").exists(),
-        "an interrupted run writes no summary"
-    );
+    let mut command = vec!["run"];
+    command.extend(SLOW);
+    command.extend(["--workers", "2", "--run", run.as_str(), "--checkpoint-every", "1"]);
+    command.extend(["--out", out.to_str().unwrap()]);
+    assert_eq!(interrupt_and_continue(&command, &out), reference);
     assert_clean(&run);
-    let resumed = fleet(&["--resume", out.to_str().unwrap()]).wait_with_output().unwrap();
-    assert!(resumed.status.success(), "{}", String::from_utf8_lossy(&resumed.stderr));
-    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+}
+
+#[test]
+fn ctrl_c_stops_an_in_process_experiment_and_the_command_it_prints_finishes_it() {
+    let SlowRun {
+        dir: _dir,
+        reference,
+        out,
+        ..
+    } = slow_run("ctrl-c-in-process");
+    let mut command = vec!["experiment"];
+    command.extend(SLOW);
+    command.extend(["--checkpoint-every", "1", "--out", out.to_str().unwrap()]);
+    assert_eq!(interrupt_and_continue(&command, &out), reference);
+}
+
+/// `acps learn`, the newcomer's command, continues with `acps learn --resume`.
+#[test]
+fn ctrl_c_stops_acps_learn_and_learn_resume_finishes_it() {
+    let dir = temp_dir("learn-resume");
+    let size = ["--runs", "2", "--episodes", "400"];
+    let mut same = vec![
+        "grid",
+        "--sim",
+        "rapier",
+        "--method",
+        "monotonic-progress",
+        "--in-flight",
+        "8",
+        "-q",
+    ];
+    same.extend(size);
+    let reference = in_process(&same, &dir.join("in-process"));
+    let out = dir.join("learn");
+    let run = run_name("learn-resume");
+    let mut command = vec![
+        "learn",
+        "--sim",
+        "rapier",
+        "--workers",
+        "2",
+        "-q",
+        "--run",
+        run.as_str(),
+    ];
+    command.extend(size);
+    command.extend(["--out", out.to_str().unwrap()]);
+    assert_eq!(interrupt_and_continue(&command, &out), reference);
     assert_clean(&run);
 }
 
