@@ -174,18 +174,26 @@ fn check_resumable(args: &ExperimentArgs, jobs: &[Job]) -> anyhow::Result<()> {
 /// resolved experiment file there: an output that cannot be written fails now, not after the run.
 fn prepare_outputs(jobs: &[Job]) -> anyhow::Result<()> {
     for job in jobs {
-        let dir = &job.dir;
-        if dir.exists() && !dir.is_dir() {
-            bail!(
-                "output directory {} exists and is not a directory: choose another --out",
-                dir.display()
-            );
-        }
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow::anyhow!("output directory {}: cannot create it: {e}", dir.display()))?;
-        job.config.write_resolved(dir)?;
+        output_dir(&job.dir)?;
+        job.config.write_resolved(&job.dir)?;
     }
     Ok(())
+}
+
+/// Create the output directory `dir` and make sure files can be written into it.
+fn output_dir(dir: &Path) -> anyhow::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        bail!(
+            "output directory {} exists and is not a directory: choose another --out",
+            dir.display()
+        );
+    }
+    let fail =
+        |what: &str, e: std::io::Error| anyhow::anyhow!("output directory {}: cannot {what}: {e}", dir.display());
+    std::fs::create_dir_all(dir).map_err(|e| fail("create it", e))?;
+    let probe = dir.join(format!(".acps-probe-{}", std::process::id()));
+    std::fs::write(&probe, b"").map_err(|e| fail("write into it", e))?;
+    std::fs::remove_file(&probe).map_err(|e| fail("write into it", e))
 }
 
 /// Set by the Ctrl-C handler of `acps experiment`.
@@ -313,6 +321,7 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
     if !(1..=100).contains(&args.rounds) {
         bail!("--rounds must be in 1..=100, got {}", args.rounds);
     }
+    output_dir(&args.out)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let options = crate::bench::BenchOptions {
         envs: args.env,
@@ -347,7 +356,6 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
         }
     })?;
     bar.finish_and_clear();
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let json = serde_json::to_string_pretty(&serde_json::json!({ "rows": rows }))?;
     let path = args.out.join("bench.json");
     std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;

@@ -1,0 +1,59 @@
+//! Outputs are checked before anything is computed or started: a run whose results could not be
+//! written fails at once, naming the directory.
+
+use crate::{acps, temp_dir};
+
+#[test]
+fn an_output_that_cannot_be_written_is_refused_before_the_run() {
+    let dir = temp_dir("outputs");
+    std::fs::create_dir_all(&*dir).unwrap();
+    let file = dir.join("a-file");
+    std::fs::write(&file, "not a directory").unwrap();
+    let file = file.to_str().unwrap().to_string();
+    let under = format!("{file}/run");
+    // Each command would run for minutes if it did not check its output first.
+    let long = ["--runs", "20", "--episodes", "1000000"];
+    let cases: Vec<(Vec<&str>, &str, String)> = vec![
+        (
+            [&["experiment", "grid", "--out", &file][..], &long].concat(),
+            "experiment, --out a file",
+            format!("output directory {file} exists and is not a directory"),
+        ),
+        (
+            [
+                &["experiment", "grid", "--checkpoint-every", "0", "--out", &under][..],
+                &long,
+            ]
+            .concat(),
+            "experiment without checkpoints, --out under a file",
+            format!("output directory {under}: cannot create it: Not a directory"),
+        ),
+        (
+            [&["run", "grid", "--workers", "2", "--out", &under][..], &long].concat(),
+            "run, --out under a file",
+            format!("output directory {under}: cannot create it"),
+        ),
+        (
+            vec!["learn", "--episodes", "1000000", "--out", &file],
+            "learn, --out a file",
+            format!("output directory {file} exists and is not a directory"),
+        ),
+        (
+            vec!["bench", "--scale", "50", "--out", &file],
+            "bench, --out a file",
+            format!("output directory {file} exists and is not a directory"),
+        ),
+    ];
+    for (args, case, expected) in cases {
+        let output = acps(&args);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{case}: {stderr}");
+        assert!(stderr.contains(&expected), "{case}: {stderr}");
+        // The OS error is said once.
+        assert_eq!(
+            stderr.matches("os error").count(),
+            usize::from(expected.contains("cannot")),
+            "{case}: {stderr}"
+        );
+    }
+}
