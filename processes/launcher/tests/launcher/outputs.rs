@@ -1,7 +1,7 @@
 //! Outputs are checked before anything is computed or started: a run whose results could not be
 //! written fails at once, naming the directory.
 
-use crate::{acps, temp_dir};
+use crate::{temp_dir, watched};
 
 #[test]
 fn an_output_that_cannot_be_written_is_refused_before_the_run() {
@@ -45,7 +45,7 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
         ),
     ];
     for (args, case, expected) in cases {
-        let output = acps(&args);
+        let output = watched().args(&args).output().unwrap();
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert_eq!(output.status.code(), Some(2), "{case}: {stderr}");
         assert!(stderr.contains(&expected), "{case}: {stderr}");
