@@ -16,8 +16,8 @@ pub enum DUcbCreateError {
     /// The discount factor is outside (0, 1].
     #[error("D-UCB gamma must be in (0, 1], got {0}")]
     Gamma(f64),
-    /// The padding strength is not finite and positive.
-    #[error("D-UCB xi must be finite and > 0, got {0}")]
+    /// The padding strength is not finite and non-negative.
+    #[error("D-UCB xi must be finite and >= 0, got {0}")]
     Xi(f64),
     /// The reward bound is not finite and positive.
     #[error("D-UCB b must be finite and > 0, got {0}")]
@@ -87,7 +87,8 @@ pub struct DUcbRestoreError {
 pub struct DUcbConfig {
     /// Discount factor gamma, in (0, 1]; 1 is plain UCB.
     pub gamma: f64,
-    /// Padding strength xi > 0 (dimensionless).
+    /// Padding strength xi >= 0 (dimensionless); 0 leaves no padding, so the bandit is greedy
+    /// on its discounted means once every arm has been pulled.
     pub xi: f64,
     /// The bound B > 0 of the intrinsic rewards, in their units; scales the padding.
     pub b: f64,
@@ -111,7 +112,7 @@ impl DUcbConfig {
         if !(self.gamma > 0.0 && self.gamma <= 1.0) {
             return Err(DUcbCreateError::Gamma(self.gamma));
         }
-        if !(self.xi.is_finite() && self.xi > 0.0) {
+        if !(self.xi.is_finite() && self.xi >= 0.0) {
             return Err(DUcbCreateError::Xi(self.xi));
         }
         if !(self.b.is_finite() && self.b > 0.0) {
@@ -507,7 +508,14 @@ mod tests {
             message(config(f64::NAN, 1e-8, 1.0)),
             "D-UCB gamma must be in (0, 1], got NaN"
         );
-        assert_eq!(message(config(1.0, 0.0, 1.0)), "D-UCB xi must be finite and > 0, got 0");
+        assert_eq!(
+            message(config(1.0, -1.0, 1.0)),
+            "D-UCB xi must be finite and >= 0, got -1"
+        );
+        assert!(
+            DUcb::new(3, config(1.0, 0.0, 1.0)).is_ok(),
+            "no padding is a valid bandit"
+        );
         assert_eq!(
             message(config(1.0, 1e-8, -1.0)),
             "D-UCB b must be finite and > 0, got -1"
