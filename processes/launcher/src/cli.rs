@@ -1,7 +1,9 @@
 //! The command line's arguments: what `acps --help` shows. `Cli::run` carries a command out
 //! ([`crate::commands`]).
 
-use crate::config::{self, ExperimentFile};
+use crate::config::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
+use acps_fleet::processes::MAX_NICE;
+use acps_wire::ipc::{MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -66,8 +68,8 @@ pub(crate) struct EvaluateArgs {
     /// The method whose policy to replay (default: the first by name).
     #[arg(long)]
     pub(crate) method: Option<String>,
-    /// The run whose policy to replay (default 0).
-    #[arg(long)]
+    /// The run whose policy to replay (0..=999, one of the experiment's runs; default 0).
+    #[arg(long, allow_hyphen_values = true, value_parser = integer::<usize>(0, MAX_RUNS as u64 - 1))]
     pub(crate) run: Option<usize>,
     /// A target X,Y to throw at (repeatable; default: the problem's test contexts).
     #[arg(long, value_name = "X,Y", allow_hyphen_values = true, value_parser = crate::evaluate::parse_target)]
@@ -79,14 +81,15 @@ pub(crate) struct EvaluateArgs {
 
 #[derive(clap::Args)]
 pub(crate) struct LearnArgs {
-    /// Worker processes (default: the number of cores).
-    #[arg(long)]
+    /// Worker processes (0..=128; 0: start them yourself with `acps worker`) [default: the number
+    /// of cores, at most 128].
+    #[arg(long, allow_hyphen_values = true, value_parser = integer::<usize>(0, MAX_WORKERS as u64))]
     pub(crate) workers: Option<usize>,
-    /// Independent learning runs (seeds 0 .. runs - 1), for the SEM band of the curve.
-    #[arg(long, default_value_t = 4)]
+    /// Independent learning runs (seeds 0 .. runs - 1, 1..=1000), for the SEM band of the curve.
+    #[arg(long, default_value_t = 4, allow_hyphen_values = true, value_parser = parse_option::<usize>("runs"))]
     pub(crate) runs: usize,
-    /// Training episodes (throws) per run.
-    #[arg(long, default_value_t = 10_000)]
+    /// Training episodes (throws) per run (1..=10000000).
+    #[arg(long, default_value_t = 10_000, allow_hyphen_values = true, value_parser = parse_option::<u64>("episodes"))]
     pub(crate) episodes: u64,
     /// How throws are simulated.
     #[arg(long, value_enum, default_value = "rapier")]
@@ -144,20 +147,21 @@ pub(crate) struct BenchArgs {
     /// Output directory.
     #[arg(long, default_value = "runs/bench")]
     pub(crate) out: PathBuf,
-    /// Largest fleet (default: the number of cores).
-    #[arg(long)]
+    /// Largest fleet (1..=128; fleets beyond the number of cores are not measured) [default: the
+    /// number of cores, at most 128].
+    #[arg(long, allow_hyphen_values = true, value_parser = integer::<usize>(1, MAX_WORKERS as u64))]
     pub(crate) max_workers: Option<usize>,
     /// Tasks each worker keeps in flight, asked for or queued (1..=128; at most 8 of rollouts
     /// slower than a batch's 800 us, which travel alone).
-    #[arg(long, default_value_t = 128)]
+    #[arg(long, default_value_t = 128, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
     pub(crate) worker_in_flight: usize,
-    /// Multiplies the work per measurement (1: a few seconds per row and round; the default
-    /// bench takes about a minute on 2 cores).
-    #[arg(long, default_value_t = 1.0)]
+    /// Multiplies the work per measurement, in (0, 100] (1: a few seconds per row and round; the
+    /// default bench takes about a minute on 2 cores).
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = number("a number in (0, 100]", |x| x > 0.0 && x <= 100.0))]
     pub(crate) scale: f64,
     /// Times every mode is measured, interleaved (1..=100): rows report the median round, and
     /// the table the range of the ratio over rounds.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, allow_hyphen_values = true, value_parser = integer::<usize>(1, 100))]
     pub(crate) rounds: usize,
     /// Environments to measure, comma separated.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "trivial,analytic,rapier")]
@@ -172,7 +176,7 @@ pub(crate) struct WorkerNiceArg {
     /// Niceness of the started workers (0..=19; default: 10 when the workers and the learner
     /// outnumber the cores, else 0). The learner gates every worker, so it should get a core as
     /// soon as it wakes; 0 keeps the workers at full priority next to other programs.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=acps_fleet::processes::MAX_NICE as i64))]
+    #[arg(long, allow_hyphen_values = true, value_parser = integer::<u8>(0, MAX_NICE.into()))]
     pub(crate) worker_nice: Option<u8>,
 }
 
@@ -180,12 +184,13 @@ pub(crate) struct WorkerNiceArg {
 pub(crate) struct RunArgs {
     #[command(flatten)]
     pub(crate) experiment: ExperimentArgs,
-    /// Worker processes to start (default: the number of cores).
-    #[arg(long)]
+    /// Worker processes to start (0..=128, the most a fleet serves; 0: start them yourself)
+    /// [default: the number of cores, at most 128].
+    #[arg(long, allow_hyphen_values = true, value_parser = integer::<usize>(0, MAX_WORKERS as u64))]
     pub(crate) workers: Option<usize>,
     /// Tasks each started worker keeps in flight, asked for or queued (1..=128; at most 8 of
     /// rollouts slower than a batch's 800 us, which travel alone).
-    #[arg(long, default_value_t = DEFAULT_WORKER_IN_FLIGHT)]
+    #[arg(long, default_value_t = DEFAULT_WORKER_IN_FLIGHT, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
     pub(crate) worker_in_flight: usize,
     #[command(flatten)]
     pub(crate) worker_nice: WorkerNiceArg,
@@ -210,20 +215,21 @@ pub(crate) struct WorkerArgs {
     /// Tasks kept in flight, asked for or queued (1..=128): more hides the wake-up latency
     /// between processes; cheap rollouts travel in batches of up to half of them, and at most 8
     /// of rollouts slower than a batch's 800 us, which travel alone, are in flight.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
     pub(crate) in_flight: usize,
     /// The worker's name in iceoryx2's node list (default: worker-PID).
     #[arg(long)]
     pub(crate) name: Option<String>,
-    /// Seconds to wait for the run's learner to appear.
-    #[arg(long, default_value_t = 30.0)]
+    /// Seconds to wait for the run's learner to appear (0..=86400, a day).
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true, value_parser = number("a number of seconds in 0..=86400", |x| (0.0..=86400.0).contains(&x)))]
     pub(crate) startup_timeout: f64,
-    /// Microseconds to poll for an answer before blocking (0 when processes outnumber cores).
-    #[arg(long, default_value_t = 0)]
+    /// Microseconds to poll for an answer before blocking (0..=1000000; 0 when processes
+    /// outnumber cores).
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true, value_parser = integer::<u64>(0, 1_000_000))]
     pub(crate) spin_us: u64,
     /// Lower this worker's priority to niceness N (0..=19), so that a learner sharing its
     /// cores gets the CPU first; a worker already at N or above keeps its niceness.
-    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=acps_fleet::processes::MAX_NICE as i64))]
+    #[arg(long, value_name = "N", default_value_t = 0, allow_hyphen_values = true, value_parser = integer::<u8>(0, MAX_NICE.into()))]
     pub(crate) nice: u8,
     /// Print nothing unless something goes wrong.
     #[arg(long, short)]
@@ -247,8 +253,9 @@ pub(crate) struct ExperimentArgs {
     pub(crate) out: Option<PathBuf>,
     /// Write each (method, run) job's checkpoint to DIR/checkpoints after every N learning
     /// rounds (C-REPS updates; evaluations for the toy model, which has no policy) and when the
-    /// job ends; 0: no checkpoints. A run started without --resume removes old checkpoints there.
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_CHECKPOINT_EVERY)]
+    /// job ends; 0: no checkpoints (0..=10000000: more than a run has rounds means at its end
+    /// only). A run started without --resume removes old checkpoints there.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CHECKPOINT_EVERY, allow_hyphen_values = true, value_parser = integer::<u64>(0, MAX_EPISODES))]
     pub(crate) checkpoint_every: u64,
     /// Continue the run whose output directory is DIR from its checkpoints, after a crash, a
     /// kill or Ctrl-C (which prints the whole command); give the arguments the run was started
@@ -258,6 +265,37 @@ pub(crate) struct ExperimentArgs {
     /// No progress bar.
     #[arg(long, short)]
     pub(crate) quiet: bool,
+}
+
+/// The value parser of an integer option in `low..=high`: every refusal, also of a negative or
+/// non-numeric value, names the range.
+fn integer<T: TryFrom<u64>>(low: u64, high: u64) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync + 'static {
+    move |text: &str| {
+        text.parse::<u64>()
+            .ok()
+            .filter(|n| (low..=high).contains(n))
+            .and_then(|n| T::try_from(n).ok())
+            .ok_or_else(|| format!("must be an integer in {low}..={high}"))
+    }
+}
+
+/// The value parser of a number option: `accepted` describes the numbers `ok` accepts (NaN
+/// never is).
+fn number(
+    accepted: &'static str,
+    ok: fn(f64) -> bool,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    move |text: &str| {
+        text.parse::<f64>()
+            .ok()
+            .filter(|&x| ok(x))
+            .ok_or_else(|| format!("must be {accepted}"))
+    }
+}
+
+/// A worker's tasks in flight: what the task service holds per worker.
+fn in_flight_per_worker() -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
+    integer(1, MAX_IN_FLIGHT_PER_WORKER as u64)
 }
 
 /// Default of `acps run --worker-in-flight`.
@@ -286,5 +324,102 @@ impl Cli {
     /// How many -v were given.
     pub fn verbosity(&self) -> u8 {
         self.verbose
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// The options checked by their value parsers accept their bounds and refuse beyond them.
+    #[test]
+    fn option_ranges_include_their_bounds() {
+        let parse = |args: &[&str]| {
+            Cli::command()
+                .try_get_matches_from(args)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        };
+        for args in [
+            &[
+                "acps",
+                "worker",
+                "--startup-timeout",
+                "0",
+                "--spin-us",
+                "0",
+                "--nice",
+                "0",
+                "--in-flight",
+                "1",
+            ][..],
+            &[
+                "acps",
+                "worker",
+                "--startup-timeout",
+                "86400",
+                "--spin-us",
+                "1000000",
+                "--nice",
+                "19",
+                "--in-flight",
+                "128",
+            ],
+            &[
+                "acps",
+                "bench",
+                "--scale",
+                "1e-9",
+                "--max-workers",
+                "1",
+                "--rounds",
+                "1",
+                "--worker-in-flight",
+                "1",
+            ],
+            &[
+                "acps",
+                "bench",
+                "--scale",
+                "100",
+                "--max-workers",
+                "128",
+                "--rounds",
+                "100",
+                "--worker-in-flight",
+                "128",
+            ],
+            &["acps", "evaluate", "dir", "--run", "0"],
+            &["acps", "evaluate", "dir", "--run", "999"],
+            &["acps", "learn", "--workers", "0", "--runs", "1", "--episodes", "1"],
+            &[
+                "acps",
+                "learn",
+                "--workers",
+                "128",
+                "--runs",
+                "1000",
+                "--episodes",
+                "10000000",
+            ],
+        ] {
+            assert_eq!(parse(args), Ok(()), "{args:?}");
+        }
+        for (args, expected) in [
+            (
+                &["acps", "worker", "--spin-us", "1e3"][..],
+                "must be an integer in 0..=1000000",
+            ),
+            (&["acps", "worker", "--nice", "256"], "must be an integer in 0..=19"),
+            (&["acps", "bench", "--scale", "-0"], "must be a number in (0, 100]"),
+            (
+                &["acps", "bench", "--rounds", "18446744073709551616"],
+                "must be an integer in 1..=100",
+            ),
+        ] {
+            let message = parse(args).unwrap_err();
+            assert!(message.contains(expected), "{args:?}: {message}");
+        }
     }
 }

@@ -143,7 +143,9 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
         (Some(dir), _) | (None, Some(dir)) => dir.clone(),
         (None, None) => config::default_out(args.config.as_deref(), plan.name()),
     };
-    Ok(Some(plan.jobs(&out)))
+    let jobs = plan.jobs(&out);
+    config::check_memory(&jobs)?;
+    Ok(Some(jobs))
 }
 
 /// The checkpoints of the experiment that writes into `dir`, if it keeps or resumes any.
@@ -222,19 +224,10 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Refuse a per-worker window the task service cannot hold.
-fn check_worker_in_flight(option: &str, value: usize) -> anyhow::Result<()> {
-    if !(1..=ipc::MAX_IN_FLIGHT_PER_WORKER).contains(&value) {
-        bail!("{option} must be in 1..={}, got {value}", ipc::MAX_IN_FLIGHT_PER_WORKER);
-    }
-    Ok(())
-}
-
 /// Run the experiments through a fleet: this process serves the learners, `--workers` worker
 /// processes simulate. The fleet removes the run's shared memory when it ends, also on errors
 /// and Ctrl-C.
 pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
-    check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
     let Some(jobs) = jobs(&args.experiment)? else {
         return Ok(());
     };
@@ -262,9 +255,11 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
         format!("{experiment}-{}", std::process::id())
     });
-    let workers = args
-        .workers
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let workers = args.workers.unwrap_or_else(|| {
+        std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .min(ipc::MAX_WORKERS)
+    });
     for Job { experiment, dir, .. } in &jobs {
         let mut builder = Fleet::builder(name.as_str())
             .identity(experiment.identity())
@@ -314,18 +309,11 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
 }
 
 pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
-    if !(args.scale.is_finite() && args.scale > 0.0) {
-        bail!("--scale must be finite and > 0, got {}", args.scale);
-    }
-    check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
-    if !(1..=100).contains(&args.rounds) {
-        bail!("--rounds must be in 1..=100, got {}", args.rounds);
-    }
     output_dir(&args.out)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let options = crate::bench::BenchOptions {
         envs: args.env,
-        max_workers: args.max_workers.unwrap_or(cores),
+        max_workers: args.max_workers.unwrap_or(cores.min(ipc::MAX_WORKERS)),
         worker_in_flight: args.worker_in_flight,
         worker_nice: args.worker_nice.worker_nice,
         scale: args.scale,
@@ -377,13 +365,6 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
             )
         })?,
     };
-    check_worker_in_flight("--in-flight", args.in_flight)?;
-    if !(args.startup_timeout.is_finite() && args.startup_timeout >= 0.0) {
-        bail!(
-            "--startup-timeout must be finite and >= 0 seconds, got {}",
-            args.startup_timeout
-        );
-    }
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;

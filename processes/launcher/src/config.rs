@@ -19,7 +19,7 @@ use acps_wire::ipc;
 use acps_wire::wire::MAX_THETA;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::ops::Range;
+use std::ops::{Range, RangeInclusive};
 use std::path::{Path, PathBuf};
 
 /// Training tasks in flight at most: what a full fleet holds (every worker's every request).
@@ -27,6 +27,24 @@ pub const MAX_IN_FLIGHT: usize = ipc::MAX_WORKERS * ipc::MAX_IN_FLIGHT_PER_WORKE
 
 /// The largest integer TOML holds (a signed 64-bit integer).
 const TOML_MAX: u64 = i64::MAX as u64;
+
+/// Most runs per method: statistical repetitions (the paper uses 20); each is a learner held in
+/// memory at once (docs/CHOICES.md, "Accepted ranges").
+pub const MAX_RUNS: usize = 1000;
+
+/// Most training episodes per run: every episode is recorded in memory while the run lasts.
+pub const MAX_EPISODES: u64 = 10_000_000;
+
+/// Accepted Sigma_0 = X I: a variance in the parameters' units, standard deviations 1e-6..=1e6.
+const INITIAL_SIGMA: RangeInclusive<f64> = 1e-12..=1e12;
+
+/// Accepted C-REPS KL bounds, in nats: below, a policy barely moves in a run; above, the bound
+/// binds for no memory acps keeps (at most 400 samples: ln 400 = 6.0).
+const EPSILON: RangeInclusive<f64> = 1e-4..=10.0;
+
+/// Largest D-UCB xi: its bonus 2 B sqrt(xi ln n / N_i) is then about 2000 B, beyond any spread of
+/// the discounted means.
+const MAX_XI: f64 = 1e6;
 
 /// The paper's experiments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -106,29 +124,31 @@ pub struct ExperimentFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub panel: Option<char>,
     /// dims only: one context dimension (1..=4) into DIR; without it all four go to DIR/ns-1 .. DIR/ns-4.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<usize>("n_s"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub n_s: Option<usize>,
     /// grid and dartboard only: how throws are simulated [default: analytic].
     #[arg(long, value_enum)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sim: Option<SimName>,
-    /// Runs per method [default: 20].
-    #[arg(long)]
+    /// Runs per method (1..=1000; all are held in memory at once) [default: 20].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<usize>("runs"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub runs: Option<usize>,
-    /// Training episodes per run [default: the paper's: toy 1000, function 2500, dims 5000, grid
-    /// 10000, dartboard 50000].
-    #[arg(long)]
+    /// Training episodes per run (1..=10000000; each is kept in memory, about 300 bytes per episode
+    /// and run) [default: the paper's: toy 1000, function 2500, dims 5000, grid 10000, dartboard
+    /// 50000].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<u64>("episodes"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub episodes: Option<u64>,
-    /// Seed of run 0; run r uses seed + r for the problem instance and the learner [default: 0].
-    #[arg(long)]
+    /// Seed of run 0; run r uses seed + r for the problem instance and the learner (seed + runs - 1
+    /// at most 2^63-1) [default: 0].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<u64>("seed"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
-    /// Training tasks in flight (P): task t is created after outcome t - P is consumed; 1 is the
-    /// paper's sequential algorithm [default: 1].
-    #[arg(long)]
+    /// Training tasks in flight (P, 1..=16384): task t is created after outcome t - P is consumed;
+    /// 1 is the paper's sequential algorithm [default: 1].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<usize>("in_flight"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub in_flight: Option<usize>,
     /// Run only this method (repeatable): round-robin, random, random-continuous, corners,
@@ -138,8 +158,8 @@ pub struct ExperimentFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub methods: Option<Vec<Method>>,
     /// function and dims only: number of low-level parameters n_theta of the contextual function
-    /// (the paper does not say) [default: 20].
-    #[arg(long)]
+    /// (5..=64; the paper does not say) [default: 20].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<usize>("n_theta"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub n_theta: Option<usize>,
     /// Baseline of a context's first visit for the progress heuristics [default: initial-return].
@@ -151,17 +171,19 @@ pub struct ExperimentFile {
     #[arg(long, value_enum)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub memory: Option<Memory>,
-    /// Not toy: initial exploration covariance Sigma_0 = X I [default: 1 for function and dims,
-    /// 0.02 for grid and dartboard].
-    #[arg(long, value_name = "X")]
+    /// Not toy: initial exploration covariance Sigma_0 = X I (1e-12..=1e12, a variance in the
+    /// parameters' units) [default: 1 for function and dims, 0.02 for grid and dartboard].
+    #[arg(long, value_name = "X", allow_hyphen_values = true, value_parser = parse_option::<f64>("initial_sigma"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub initial_sigma: Option<f64>,
-    /// Not toy: C-REPS KL bound epsilon [default: function 2, dims 1, grid and dartboard 0.5].
-    #[arg(long)]
+    /// Not toy: C-REPS KL bound epsilon (1e-4..=10 nats) [default: function 2, dims 1, grid and
+    /// dartboard 0.5].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<f64>("epsilon"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub epsilon: Option<f64>,
-    /// D-UCB padding strength xi [default: 1e-8, grid and dartboard 1e-9].
-    #[arg(long)]
+    /// D-UCB padding strength xi (0..=1e6; the bonus is 2 B sqrt(xi ln n / N_i)) [default: 1e-8,
+    /// grid and dartboard 1e-9].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<f64>("xi"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub xi: Option<f64>,
     /// toy only: use the learning factors of the paper's Fig. 3 in every run instead of a random
@@ -236,10 +258,9 @@ const WITH_CREPS: &[Kind] = &[
 ];
 const FILE: &[Kind] = &[Kind::File];
 /// What a list of contexts accepts.
-const CONTEXTS: &str =
-    "a non-empty list of points, each of 1 to 8 finite coordinates (as many as context_low's), inside the context box";
+const CONTEXTS: &str = "a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box";
 /// What a context grid accepts.
-const GRID: &str = "a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: finite low <= high, points >= 1 per dimension and at most 100000 in all, inside the context box";
+const GRID: &str = "a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: low <= high in -1e6..=1e6, points >= 1 per dimension and at most 100000 in all, inside the context box";
 
 /// Every key, in file order.
 const KEYS: &[Key] = &[
@@ -265,12 +286,12 @@ const KEYS: &[Key] = &[
     },
     Key {
         name: "runs",
-        accepted: "an integer in 1..=2^63-1",
+        accepted: "an integer in 1..=1000 (repetitions with seeds seed ..= seed + runs - 1, all in memory at once)",
         applies: ALL,
     },
     Key {
         name: "episodes",
-        accepted: "an integer in 1..=2^63-1",
+        accepted: "an integer in 1..=10000000 (training episodes per run, each kept in memory: about 300 bytes per episode and run)",
         applies: ALL,
     },
     Key {
@@ -305,17 +326,17 @@ const KEYS: &[Key] = &[
     },
     Key {
         name: "initial_sigma",
-        accepted: "a finite number > 0",
+        accepted: "a number in 1e-12..=1e12 (a variance in the parameters' units: standard deviations 1e-6 to 1e6)",
         applies: WITH_CREPS,
     },
     Key {
         name: "epsilon",
-        accepted: "a finite number > 0",
+        accepted: "a number in 1e-4..=10 (C-REPS's KL bound in nats)",
         applies: WITH_CREPS,
     },
     Key {
         name: "xi",
-        accepted: "a finite number >= 0",
+        accepted: "a number in 0..=1e6 (D-UCB's exploration bonus is 2 B sqrt(xi ln n / N_i))",
         applies: ALL,
     },
     Key {
@@ -355,17 +376,17 @@ const KEYS: &[Key] = &[
     },
     Key {
         name: "problem.context_low",
-        accepted: "a list of 1 to 8 finite numbers, one per context dimension (default: the lower corner of the contexts' bounding box)",
+        accepted: "a list of 1 to 8 numbers in -1e6..=1e6, one per context dimension (default: the lower corner of the contexts' bounding box)",
         applies: FILE,
     },
     Key {
         name: "problem.context_high",
-        accepted: "a list of finite numbers, one per context dimension, each above context_low's (default: the upper corner of the contexts' bounding box)",
+        accepted: "a list of numbers in -1e6..=1e6, one per context dimension, each above context_low's (default: the upper corner of the contexts' bounding box)",
         applies: FILE,
     },
     Key {
         name: "problem.theta0",
-        accepted: "a list of 1 to 64 finite numbers (the initial parameters)",
+        accepted: "a list of 1 to 64 numbers in -1e6..=1e6 (the initial parameters)",
         applies: FILE,
     },
     Key {
@@ -414,6 +435,14 @@ const KEYS: &[Key] = &[
         applies: FILE,
     },
 ];
+
+/// The value parser of the option of key `name`: a value that is not a `T` (a negative count, a
+/// word) is refused with what the key accepts, like an out-of-range one by [`Plan::new`].
+pub(crate) fn parse_option<T: std::str::FromStr>(
+    name: &'static str,
+) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync + 'static {
+    move |text: &str| text.parse().map_err(|_| format!("must be {}", key(name).accepted))
+}
 
 fn key(name: &str) -> &'static Key {
     KEYS.iter()
@@ -750,6 +779,68 @@ impl Plan {
     }
 }
 
+/// Memory a (method, run) job holds besides its episodes and evaluations: its learner and
+/// problem instance (measured: 85 kB for the function, 235 kB for the rapier arm).
+const JOB_BYTES: f64 = 256e3;
+/// Memory per training episode of a job until its experiment is written: the episode's record,
+/// its share of the updates and of the run directory's records (measured: 180 to 300 bytes for
+/// toy, function, grid and dartboard), plus 8 per context coordinate.
+const EPISODE_BYTES: f64 = 300.0;
+/// Memory per test context of an evaluation: the outcome and its diagnostics.
+const OUTCOME_BYTES: f64 = 80.0;
+
+/// Refuse experiments whose records cannot fit the memory available now: every (method, run)
+/// job of an experiment runs at once and keeps every episode and evaluation until the
+/// experiment is written; experiments (toy's panels, dims' dimensions) run one after another.
+pub fn check_memory(jobs: &[Job]) -> Result<(), ConfigError> {
+    // Without /proc/meminfo (not Linux) there is nothing to compare with.
+    let Some(available) = available_memory() else {
+        return Ok(());
+    };
+    for Job { experiment, .. } in jobs {
+        let problem = (experiment.instance)(experiment.base_seed).problem;
+        let dim = problem.training_contexts.first().map_or(0, Vec::len) as f64;
+        let episodes = experiment.learner.episodes;
+        // At episode 0, every eval_every episodes, and after the last one.
+        let evaluations = episodes / experiment.learner.eval_every.max(1) + 2;
+        let tests = problem.test_contexts.len();
+        let per_job = JOB_BYTES
+            + episodes as f64 * (EPISODE_BYTES + 8.0 * dim)
+            + evaluations as f64 * tests as f64 * OUTCOME_BYTES;
+        let jobs = experiment.methods.len() * experiment.runs;
+        let need = jobs as f64 * per_job;
+        if need > available {
+            return Err(ConfigError(format!(
+                "{}: {} methods x {} runs of {episodes} episodes ({evaluations} evaluations on {tests} test contexts each) would hold about {} in memory, more than the {} available now (MemAvailable in /proc/meminfo): lower runs (--runs), episodes (--episodes) or the number of methods (--method)",
+                experiment.name,
+                experiment.methods.len(),
+                experiment.runs,
+                bytes(need),
+                bytes(available)
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The memory available for starting new programs without swapping, in bytes.
+fn available_memory() -> Option<f64> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = meminfo.lines().find_map(|line| line.strip_prefix("MemAvailable:"))?;
+    let kib: f64 = line.trim().strip_suffix("kB")?.trim().parse().ok()?;
+    Some(kib * 1024.0)
+}
+
+/// `n` bytes in decimal units, such as "3.2 GB".
+fn bytes(n: f64) -> String {
+    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let power = ((n.max(1.0).log10() / 3.0).floor() as usize).min(units.len() - 1);
+    match power {
+        0 => format!("{n:.0} bytes"),
+        _ => format!("{:.1} {}", n / 1e3f64.powi(power as i32), units[power]),
+    }
+}
+
 /// The default output directory: runs/STEM for an experiment file STEM.toml, else runs/NAME.
 pub fn default_out(file: Option<&Path>, name: &str) -> PathBuf {
     let stem = file.and_then(|f| f.file_stem()).and_then(|s| s.to_str());
@@ -816,9 +907,9 @@ impl ExperimentFile {
             in_range("n_s", (1..=4).contains(&n_s), n_s.to_string())?;
         }
         let runs = self.runs.unwrap_or(Options::default().runs);
-        in_range("runs", (1..=TOML_MAX).contains(&(runs as u64)), runs.to_string())?;
+        in_range("runs", (1..=MAX_RUNS).contains(&runs), runs.to_string())?;
         if let Some(episodes) = self.episodes {
-            in_range("episodes", (1..=TOML_MAX).contains(&episodes), episodes.to_string())?;
+            in_range("episodes", (1..=MAX_EPISODES).contains(&episodes), episodes.to_string())?;
         }
         if let Some(seed) = self.seed {
             let last = seed.checked_add(runs as u64 - 1);
@@ -839,14 +930,14 @@ impl ExperimentFile {
         if let Some(n_theta) = self.n_theta {
             in_range("n_theta", (5..=MAX_THETA).contains(&n_theta), n_theta.to_string())?;
         }
-        let positive = |x: f64| x.is_finite() && x > 0.0;
-        for (key, value, ok) in [
-            ("initial_sigma", self.initial_sigma, positive as fn(f64) -> bool),
-            ("epsilon", self.epsilon, positive),
-            ("xi", self.xi, |x: f64| x.is_finite() && x >= 0.0),
+        for (key, value, range) in [
+            ("initial_sigma", self.initial_sigma, INITIAL_SIGMA),
+            ("epsilon", self.epsilon, EPSILON),
+            ("xi", self.xi, 0.0..=MAX_XI),
         ] {
             if let Some(value) = value {
-                in_range(key, ok(value), value.to_string())?;
+                // Debug writes 1e300 as such, where Display spells out 301 digits.
+                in_range(key, range.contains(&value), format!("{value:?}"))?;
             }
         }
         Ok(match (kind, &self.problem) {
@@ -1017,19 +1108,19 @@ mod tests {
             ("experiment = \"toy\"\nrunz = 3\n", "e.toml:2: unknown field `runz`"),
             (
                 "experiment = \"toy\"\n\nruns = \"3\"\n",
-                "e.toml:3: runs must be an integer in 1..=2^63-1, got \"3\"",
+                "e.toml:3: runs must be an integer in 1..=1000 (repetitions with seeds seed ..= seed + runs - 1, all in memory at once), got \"3\"",
             ),
             (
                 "experiment = \"toy\"\nruns = 0\n",
-                "e.toml:2: runs must be an integer in 1..=2^63-1, got 0",
+                "e.toml:2: runs must be an integer in 1..=1000 (repetitions with seeds seed ..= seed + runs - 1, all in memory at once), got 0",
             ),
             (
                 "experiment = \"toy\"\nxi = nan\n",
-                "e.toml:2: xi must be a finite number >= 0, got nan",
+                "e.toml:2: xi must be a number in 0..=1e6 (D-UCB's exploration bonus is 2 B sqrt(xi ln n / N_i)), got nan",
             ),
             (
                 "experiment = \"grid\"\nepsilon = -inf\n",
-                "e.toml:2: epsilon must be a finite number > 0, got -inf",
+                "e.toml:2: epsilon must be a number in 1e-4..=10 (C-REPS's KL bound in nats), got -inf",
             ),
             (
                 "experiment = \"toy\"\nepsilon = 1.0\n",
@@ -1087,6 +1178,63 @@ mod tests {
         }
     }
 
+    /// Every numeric key, just outside its range and absurdly far outside it (the values a
+    /// program could not run with: too large to allocate, finite but meaningless, negative).
+    #[test]
+    fn numbers_outside_their_ranges_are_refused() {
+        let cases = [
+            ("toy", "runs = 1001", "runs must be an integer in 1..=1000"),
+            ("grid", "runs = 9223372036854775807", "got 9223372036854775807"),
+            ("grid", "runs = -1", "runs must be an integer in 1..=1000"),
+            (
+                "toy",
+                "episodes = 10000001",
+                "episodes must be an integer in 1..=10000000",
+            ),
+            ("toy", "episodes = 9223372036854775807", "episodes must be an integer"),
+            ("toy", "episodes = 0", "episodes must be an integer"),
+            ("toy", "seed = -1", "seed must be an integer in 0..=2^63-1"),
+            ("toy", "in_flight = 0", "in_flight must be an integer in 1..=16384"),
+            ("dims", "n_theta = 4", "n_theta must be an integer in 5..=64"),
+            ("dims", "n_s = 0", "n_s must be an integer in 1..=4"),
+            (
+                "function",
+                "initial_sigma = 1e300",
+                "initial_sigma must be a number in 1e-12..=1e12",
+            ),
+            ("function", "initial_sigma = 1e-300", "got 1e-300"),
+            ("function", "initial_sigma = 9.9e-13", "got 9.9e-13"),
+            ("function", "initial_sigma = 0.0", "got 0.0"),
+            ("function", "initial_sigma = inf", "got inf"),
+            ("grid", "epsilon = 1e308", "epsilon must be a number in 1e-4..=10"),
+            ("grid", "epsilon = 1e-300", "got 1e-300"),
+            ("grid", "epsilon = 10.000001", "got 10.000001"),
+            ("grid", "epsilon = 0.0", "got 0.0"),
+            ("toy", "xi = 1e308", "xi must be a number in 0..=1e6"),
+            ("toy", "xi = 1000001.0", "got 1000001.0"),
+            ("toy", "xi = -1e-9", "got -1e-9"),
+        ];
+        for (experiment, line, expected) in cases {
+            let text = format!("experiment = \"{experiment}\"\n{line}\n");
+            let message = error(&text);
+            assert!(
+                message.starts_with("e.toml:2: ") && message.contains(expected),
+                "{text:?}: {message}"
+            );
+        }
+    }
+
+    #[test]
+    fn numbers_on_the_bounds_of_their_ranges_are_accepted() {
+        for text in [
+            "experiment = \"function\"\nruns = 1\nepisodes = 1\ninitial_sigma = 1e-12\nepsilon = 1e-4\nxi = 0.0\nn_theta = 5\n",
+            "experiment = \"function\"\nruns = 1000\nepisodes = 10000000\ninitial_sigma = 1e12\nepsilon = 10.0\nxi = 1e6\nn_theta = 64\nin_flight = 16384\n",
+        ] {
+            let file = LoadedFile::parse(Path::new("e.toml"), text.into()).unwrap();
+            assert!(Plan::new(Some(&file), &ExperimentFile::default()).is_ok(), "{text}");
+        }
+    }
+
     #[test]
     fn options_name_the_flag_and_override_the_file() {
         let file = LoadedFile::parse(Path::new("e.toml"), "experiment = \"toy\"\nruns = 0\n".into()).unwrap();
@@ -1111,7 +1259,10 @@ mod tests {
             ..Default::default()
         };
         let message = Plan::new(None, &cli).err().unwrap().to_string();
-        assert_eq!(message, "--xi must be a finite number >= 0, got inf");
+        assert_eq!(
+            message,
+            "--xi must be a number in 0..=1e6 (D-UCB's exploration bonus is 2 B sqrt(xi ln n / N_i)), got inf"
+        );
     }
 
     /// The resolved file's xi and first-visit rule are read from the recorded settings; they

@@ -19,6 +19,16 @@ use serde_json::json;
 /// Most points a context grid expands to.
 pub const MAX_GRID_POINTS: u64 = 100_000;
 
+/// Largest magnitude of a context coordinate or an initial parameter, in the problem's units:
+/// the scale of `initial_sigma`'s standard deviations (at most 1e6). Quadratic features square a
+/// coordinate and the C-REPS regression squares it again; rescale a problem beyond it.
+const MAX_MAGNITUDE: f64 = 1e6;
+
+/// Whether every value is a number of magnitude at most [`MAX_MAGNITUDE`] (NaN is not).
+fn bounded(values: &[f64]) -> bool {
+    values.iter().all(|x| x.abs() <= MAX_MAGNITUDE)
+}
+
 /// Evaluations of the greedy policy on the test contexts happen every this many training
 /// episodes (or once at the end of shorter runs), as in the paper's Section 5.1.2.
 const EVAL_EVERY: u64 = 50;
@@ -146,8 +156,7 @@ impl ProblemFile {
     /// default name.
     pub(crate) fn check(&self, stem: Option<&str>) -> Result<CheckedProblem, Invalid> {
         let theta0 = self.theta0.clone().ok_or(Invalid::missing("problem.theta0"))?;
-        let finite = |values: &[f64]| values.iter().all(|x| x.is_finite());
-        if !(1..=MAX_THETA).contains(&theta0.len()) || !finite(&theta0) {
+        if !(1..=MAX_THETA).contains(&theta0.len()) || !bounded(&theta0) {
             return Err(out_of_range("problem.theta0", format!("{theta0:?}")));
         }
         let training = contexts(
@@ -270,7 +279,7 @@ impl ProblemFile {
 
     /// The context box: as given, or the bounding box of the contexts.
     fn context_box(&self, dim: usize, training: &Contexts, test: &Contexts) -> Result<(Vec<f64>, Vec<f64>), Invalid> {
-        let valid = |corner: &[f64]| corner.len() == dim && corner.iter().all(|x| x.is_finite());
+        let valid = |corner: &[f64]| corner.len() == dim && bounded(corner);
         match (&self.context_low, &self.context_high) {
             (Some(low), Some(high)) => {
                 if !valid(low) {
@@ -326,11 +335,7 @@ fn contexts(
             if points.is_empty() {
                 return Err(out_of_range(list_key, "[]"));
             }
-            if let Some((i, point)) = points
-                .iter()
-                .enumerate()
-                .find(|(_, p)| p.is_empty() || p.iter().any(|x| !x.is_finite()))
-            {
+            if let Some((i, point)) = points.iter().enumerate().find(|(_, p)| p.is_empty() || !bounded(p)) {
                 return Err(Invalid::element(list_key, format!("point {i} {point:?}")));
             }
             Ok(Some(Contexts {
@@ -358,7 +363,7 @@ impl ContextGrid {
                 .low
                 .iter()
                 .zip(&self.high)
-                .all(|(l, h)| l.is_finite() && h.is_finite() && l <= h)
+                .all(|(l, h)| bounded(&[*l, *h]) && l <= h)
             && self.points.iter().all(|&n| n >= 1);
         let total = self.points.iter().try_fold(1u64, |total, &n| total.checked_mul(n));
         if !valid || total.is_none_or(|total| total > MAX_GRID_POINTS) {

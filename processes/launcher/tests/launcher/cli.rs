@@ -143,7 +143,7 @@ fn bad_options_are_refused_naming_the_option() {
         ),
         (
             &["experiment", "function", "--runs", "0"],
-            "--runs must be an integer in 1..=2^63-1, got 0",
+            "--runs must be an integer in 1..=1000 (repetitions with seeds seed ..= seed + runs - 1, all in memory at once), got 0",
         ),
         (
             &[
@@ -313,9 +313,9 @@ fn bench_writes_its_table_and_json() {
         .collect();
     assert_eq!(envs, ["rapier", "rapier", "rapier", "trivial", "trivial", "trivial"]);
     let error = acps(&["bench", "--scale", "0"]);
-    assert!(String::from_utf8_lossy(&error.stderr).contains("--scale must be finite and > 0"));
+    assert!(String::from_utf8_lossy(&error.stderr).contains("'--scale <SCALE>': must be a number in (0, 100]"));
     let error = acps(&["bench", "--rounds", "0"]);
-    assert!(String::from_utf8_lossy(&error.stderr).contains("--rounds must be in 1..=100, got 0"));
+    assert!(String::from_utf8_lossy(&error.stderr).contains("'--rounds <ROUNDS>': must be an integer in 1..=100"));
     let error = acps(&["bench", "--env", "mujoco"]);
     assert!(
         String::from_utf8_lossy(&error.stderr).contains("invalid value 'mujoco' for '--env <ENV>'"),
@@ -334,28 +334,28 @@ fn fleet_options_are_checked_before_anything_starts() {
         ),
         (
             &["run", "grid", "--worker-in-flight", "0"],
-            "--worker-in-flight must be in 1..=128, got 0",
+            "invalid value '0' for '--worker-in-flight <WORKER_IN_FLIGHT>': must be an integer in 1..=128",
         ),
         (
             &["worker", "--run", "x", "--in-flight", "129"],
-            "--in-flight must be in 1..=128, got 129",
+            "invalid value '129' for '--in-flight <IN_FLIGHT>': must be an integer in 1..=128",
         ),
         (
             &["worker", "--run", "x", "--startup-timeout=-1"],
-            "--startup-timeout must be finite and >= 0",
+            "invalid value '-1' for '--startup-timeout <STARTUP_TIMEOUT>': must be a number of seconds in 0..=86400",
         ),
         (&["worker", "--run", "bad/name"], "must be 1 to 40 characters"),
         (
             &["worker", "--run", "x", "--nice", "20"],
-            "'--nice <N>': 20 is not in 0..=19",
+            "invalid value '20' for '--nice <N>': must be an integer in 0..=19",
         ),
         (
             &["run", "grid", "--worker-nice", "25"],
-            "'--worker-nice <WORKER_NICE>': 25 is not in 0..=19",
+            "invalid value '25' for '--worker-nice <WORKER_NICE>': must be an integer in 0..=19",
         ),
         (
             &["bench", "--worker-nice", "20"],
-            "'--worker-nice <WORKER_NICE>': 20 is not in 0..=19",
+            "invalid value '20' for '--worker-nice <WORKER_NICE>': must be an integer in 0..=19",
         ),
     ];
     for (args, expected) in cases {
@@ -367,6 +367,378 @@ fn fleet_options_are_checked_before_anything_starts() {
             "{args:?}: {stderr}"
         );
     }
+}
+
+/// Every numeric setting and option outside its range, by class: values that used to crash
+/// (a panic, or an allocation that exhausts memory), finite but absurd ones, tiny, negative (which
+/// clap used to take for an option), NaN and infinite ones, and those just outside a bound. Each
+/// is refused before anything runs, with exit code 2, naming the option, the value and the range.
+#[test]
+fn numbers_outside_their_ranges_are_refused_before_anything_runs() {
+    let runs = "must be an integer in 1..=1000 (repetitions";
+    let episodes = "must be an integer in 1..=10000000 (training episodes";
+    let sigma = "--initial-sigma must be a number in 1e-12..=1e12 (a variance in the parameters' units";
+    let epsilon = "--epsilon must be a number in 1e-4..=10 (C-REPS's KL bound in nats)";
+    let xi = "--xi must be a number in 0..=1e6";
+    let cases: &[(&[&str], i32, &str)] = &[
+        // Crashed: a capacity overflow, an allocation the allocator aborted, a Duration panic.
+        (
+            &["experiment", "grid", "--runs", "9223372036854775807"],
+            2,
+            "--runs must be an integer in 1..=1000",
+        ),
+        (&["experiment", "grid", "--runs", "100000000"], 2, runs),
+        (
+            &["worker", "--run", "x", "--startup-timeout", "1e30"],
+            2,
+            "invalid value '1e30' for '--startup-timeout <STARTUP_TIMEOUT>': must be a number of seconds in 0..=86400",
+        ),
+        // Huge: ran forever, or could not learn.
+        (
+            &["experiment", "function", "--episodes", "9223372036854775807"],
+            2,
+            "--episodes must be an integer in 1..=10000000",
+        ),
+        (&["experiment", "function", "--xi", "1e308"], 2, xi),
+        (&["experiment", "function", "--epsilon", "1e308"], 2, epsilon),
+        (&["experiment", "function", "--initial-sigma", "1e300"], 2, sigma),
+        (
+            &["experiment", "function", "--n-theta", "1000"],
+            2,
+            "--n-theta must be an integer in 5..=64",
+        ),
+        (
+            &["experiment", "function", "--in-flight", "100000"],
+            2,
+            "--in-flight must be an integer in 1..=16384",
+        ),
+        (
+            &["experiment", "function", "--runs", "2", "--seed", "9223372036854775807"],
+            2,
+            "--seed must be an integer in 0..=2^63-1 - (runs - 1)",
+        ),
+        (
+            &["run", "function", "--workers", "130"],
+            2,
+            "invalid value '130' for '--workers <WORKERS>': must be an integer in 0..=128",
+        ),
+        (
+            &["learn", "--workers", "130"],
+            2,
+            "invalid value '130' for '--workers <WORKERS>': must be an integer in 0..=128",
+        ),
+        (&["learn", "--runs", "5000"], 2, "--runs must be an integer in 1..=1000"),
+        (
+            &["bench", "--scale", "1e9"],
+            2,
+            "invalid value '1e9' for '--scale <SCALE>': must be a number in (0, 100]",
+        ),
+        (
+            &["bench", "--max-workers", "129"],
+            2,
+            "invalid value '129' for '--max-workers <MAX_WORKERS>': must be an integer in 1..=128",
+        ),
+        (
+            &["bench", "--rounds", "101"],
+            2,
+            "invalid value '101' for '--rounds <ROUNDS>': must be an integer in 1..=100",
+        ),
+        (
+            &["bench", "--worker-in-flight", "129"],
+            2,
+            "'--worker-in-flight <WORKER_IN_FLIGHT>': must be an integer in 1..=128",
+        ),
+        (
+            &["worker", "--run", "x", "--spin-us", "1000001"],
+            2,
+            "invalid value '1000001' for '--spin-us <SPIN_US>': must be an integer in 0..=1000000",
+        ),
+        (
+            &["experiment", "toy", "--checkpoint-every", "10000001"],
+            2,
+            "invalid value '10000001' for '--checkpoint-every <N>': must be an integer in 0..=10000000",
+        ),
+        (
+            &["evaluate", "nowhere", "--run", "1000"],
+            2,
+            "invalid value '1000' for '--run <RUN>': must be an integer in 0..=999",
+        ),
+        // Every value in range, but more records than any machine holds: refused before running.
+        (
+            &["experiment", "function", "--runs", "1000", "--episodes", "10000000"],
+            2,
+            "function: 6 methods x 1000 runs of 10000000 episodes (200002 evaluations on 100 test contexts each) would hold about 28.6 TB in memory, more than the",
+        ),
+        (
+            &[
+                "run",
+                "grid",
+                "--runs",
+                "1000",
+                "--episodes",
+                "10000000",
+                "--workers",
+                "0",
+            ],
+            2,
+            "available now (MemAvailable in /proc/meminfo): lower runs (--runs), episodes (--episodes) or the number of methods (--method)",
+        ),
+        // Tiny.
+        (&["experiment", "function", "--epsilon", "1e-300"], 2, epsilon),
+        (&["experiment", "function", "--initial-sigma", "1e-300"], 2, sigma),
+        (&["experiment", "function", "--initial-sigma", "0"], 2, sigma),
+        (
+            &["bench", "--scale", "0"],
+            2,
+            "'--scale <SCALE>': must be a number in (0, 100]",
+        ),
+        // Negative: refused with the range, not with clap's tip to write `-- -1`.
+        (
+            &["experiment", "toy", "--runs", "-1"],
+            2,
+            "invalid value '-1' for '--runs <RUNS>': must be an integer in 1..=1000",
+        ),
+        (
+            &["learn", "--runs", "-1"],
+            2,
+            "invalid value '-1' for '--runs <RUNS>': must be an integer in 1..=1000",
+        ),
+        (
+            &["experiment", "toy", "--episodes", "-5"],
+            2,
+            "invalid value '-5' for '--episodes <EPISODES>': must be an integer in 1..=10000000",
+        ),
+        (
+            &["experiment", "toy", "--seed", "-1"],
+            2,
+            "invalid value '-1' for '--seed <SEED>': must be an integer in 0..=2^63-1",
+        ),
+        (
+            &["experiment", "toy", "--in-flight", "-1"],
+            2,
+            "invalid value '-1' for '--in-flight <IN_FLIGHT>'",
+        ),
+        (
+            &["experiment", "dims", "--n-s", "-2"],
+            2,
+            "invalid value '-2' for '--n-s <N_S>': must be an integer in 1..=4",
+        ),
+        (
+            &["experiment", "function", "--n-theta", "-3"],
+            2,
+            "invalid value '-3' for '--n-theta <N_THETA>'",
+        ),
+        (&["experiment", "toy", "--xi", "-1e-9"], 2, xi),
+        (&["experiment", "function", "--epsilon", "-1"], 2, epsilon),
+        (
+            &["run", "grid", "--workers", "-1"],
+            2,
+            "invalid value '-1' for '--workers <WORKERS>': must be an integer in 0..=128",
+        ),
+        (
+            &["run", "grid", "--worker-in-flight", "-1"],
+            2,
+            "invalid value '-1' for '--worker-in-flight",
+        ),
+        (
+            &["run", "grid", "--worker-nice", "-1"],
+            2,
+            "invalid value '-1' for '--worker-nice <WORKER_NICE>': must be an integer in 0..=19",
+        ),
+        (
+            &["experiment", "toy", "--checkpoint-every", "-1"],
+            2,
+            "invalid value '-1' for '--checkpoint-every <N>'",
+        ),
+        (
+            &["bench", "--max-workers", "-1"],
+            2,
+            "invalid value '-1' for '--max-workers <MAX_WORKERS>'",
+        ),
+        (
+            &["bench", "--rounds", "-1"],
+            2,
+            "invalid value '-1' for '--rounds <ROUNDS>'",
+        ),
+        (
+            &["bench", "--scale", "-1"],
+            2,
+            "invalid value '-1' for '--scale <SCALE>'",
+        ),
+        (
+            &["worker", "--run", "x", "--in-flight", "-1"],
+            2,
+            "invalid value '-1' for '--in-flight <IN_FLIGHT>'",
+        ),
+        (
+            &["worker", "--run", "x", "--spin-us", "-1"],
+            2,
+            "invalid value '-1' for '--spin-us <SPIN_US>'",
+        ),
+        (
+            &["worker", "--run", "x", "--nice", "-1"],
+            2,
+            "invalid value '-1' for '--nice <N>'",
+        ),
+        (
+            &["worker", "--run", "x", "--startup-timeout", "-1"],
+            2,
+            "invalid value '-1' for '--startup-timeout",
+        ),
+        (
+            &["evaluate", "nowhere", "--run", "-1"],
+            2,
+            "invalid value '-1' for '--run <RUN>': must be an integer in 0..=999",
+        ),
+        // NaN and infinities.
+        (&["experiment", "toy", "--xi", "nan"], 2, xi),
+        (&["experiment", "function", "--epsilon", "inf"], 2, epsilon),
+        (&["experiment", "function", "--initial-sigma", "-inf"], 2, sigma),
+        (
+            &["bench", "--scale", "NaN"],
+            2,
+            "invalid value 'NaN' for '--scale <SCALE>'",
+        ),
+        (
+            &["worker", "--run", "x", "--startup-timeout", "inf"],
+            2,
+            "invalid value 'inf' for '--startup-timeout",
+        ),
+        // Just outside a bound.
+        (&["experiment", "toy", "--runs", "1001"], 2, runs),
+        (&["experiment", "toy", "--episodes", "10000001"], 2, episodes),
+        (&["experiment", "function", "--epsilon", "0.0000999"], 2, epsilon),
+        (&["experiment", "function", "--initial-sigma", "1.1e12"], 2, sigma),
+        (&["experiment", "toy", "--xi", "1000000.1"], 2, xi),
+        (
+            &["worker", "--run", "x", "--startup-timeout", "86400.5"],
+            2,
+            "must be a number of seconds in 0..=86400",
+        ),
+        (&["bench", "--scale", "100.01"], 2, "must be a number in (0, 100]"),
+        (&["run", "grid", "--workers", "129"], 2, "must be an integer in 0..=128"),
+        // Not a number at all.
+        (
+            &["experiment", "toy", "--runs", "three"],
+            2,
+            "invalid value 'three' for '--runs <RUNS>': must be an integer in 1..=1000",
+        ),
+        (
+            &["experiment", "toy", "--xi", "0x10"],
+            2,
+            "invalid value '0x10' for '--xi <XI>': must be a number in 0..=1e6",
+        ),
+    ];
+    for &(args, code, expected) in cases {
+        let out = acps(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(expected) && !stderr.contains("panicked") && !stderr.contains("tip:"),
+            "{args:?}: {stderr}"
+        );
+    }
+}
+
+/// The bounds themselves are accepted: `--save-config` checks every setting and the fleet's
+/// options and writes the file without running anything.
+#[test]
+fn numbers_on_the_bounds_of_their_ranges_are_accepted() {
+    let dir = temp_dir("bounds");
+    std::fs::create_dir_all(&*dir).unwrap();
+    let cases: &[&[&str]] = &[
+        &[
+            "experiment",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "1",
+            "--in-flight",
+            "1",
+            "--n-theta",
+            "5",
+            "--initial-sigma",
+            "1e-12",
+            "--epsilon",
+            "1e-4",
+            "--xi",
+            "0",
+            "--checkpoint-every",
+            "0",
+        ],
+        &[
+            "experiment",
+            "function",
+            "--runs",
+            "1000",
+            "--episodes",
+            "10000000",
+            "--in-flight",
+            "16384",
+            "--n-theta",
+            "64",
+            "--initial-sigma",
+            "1e12",
+            "--epsilon",
+            "10",
+            "--xi",
+            "1e6",
+            "--checkpoint-every",
+            "10000000",
+        ],
+        &[
+            "run",
+            "grid",
+            "--workers",
+            "128",
+            "--worker-in-flight",
+            "128",
+            "--worker-nice",
+            "19",
+            "--runs",
+            "1000",
+        ],
+        &[
+            "run",
+            "grid",
+            "--workers",
+            "0",
+            "--worker-in-flight",
+            "1",
+            "--worker-nice",
+            "0",
+        ],
+    ];
+    for (i, args) in cases.iter().enumerate() {
+        let saved = dir.join(format!("{i}.toml"));
+        let mut args = args.to_vec();
+        args.extend(["--save-config", saved.to_str().unwrap()]);
+        let out = acps(&args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(saved.is_file());
+    }
+    // xi = 0 (no exploration bonus) also runs: the D-UCB methods are greedy on their means.
+    let out = acps(&[
+        "experiment",
+        "toy",
+        "--panel",
+        "a",
+        "--xi",
+        "0",
+        "--runs",
+        "1",
+        "--episodes",
+        "30",
+        "-q",
+        "--out",
+        dir.join("xi-0").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// The function experiment with a checkpoint every 2 C-REPS updates, into `dir`.

@@ -97,7 +97,7 @@ fn bad_files_are_refused_with_file_line_and_range() {
         ),
         (
             "experiment = \"grid\"\n# a comment\nepisodes = \"300\"\n",
-            ":3: episodes must be an integer in 1..=2^63-1, got \"300\"",
+            ":3: episodes must be an integer in 1..=10000000 (training episodes per run, each kept in memory: about 300 bytes per episode and run), got \"300\"",
         ),
         (
             "experiment = \"dims\"\nn_s = 7\n",
@@ -105,23 +105,45 @@ fn bad_files_are_refused_with_file_line_and_range() {
         ),
         (
             "experiment = \"function\"\nruns = 0\n",
-            ":2: runs must be an integer in 1..=2^63-1, got 0",
+            ":2: runs must be an integer in 1..=1000 (repetitions with seeds seed ..= seed + runs - 1, all in memory at once), got 0",
         ),
         (
             "experiment = \"function\"\nepsilon = nan\n",
-            ":2: epsilon must be a finite number > 0, got nan",
+            ":2: epsilon must be a number in 1e-4..=10 (C-REPS's KL bound in nats), got nan",
         ),
         (
             "experiment = \"dartboard\"\n\nxi = inf\n",
-            ":3: xi must be a finite number >= 0, got inf",
+            ":3: xi must be a number in 0..=1e6 (D-UCB's exploration bonus is 2 B sqrt(xi ln n / N_i)), got inf",
         ),
         (
             "experiment = \"grid\"\ninitial_sigma = -0.5\n",
-            ":2: initial_sigma must be a finite number > 0, got -0.5",
+            ":2: initial_sigma must be a number in 1e-12..=1e12 (a variance in the parameters' units: standard deviations 1e-6 to 1e6), got -0.5",
         ),
         (
             "experiment = \"grid\"\nn_theta = 10\n",
             ":2: n_theta applies to function, dims only, not to the grid experiment",
+        ),
+        // Values that crashed (capacity overflow) or were accepted though nothing can learn with
+        // them: refused with the key's range.
+        (
+            "experiment = \"grid\"\nruns = 9223372036854775807\n",
+            ":2: runs must be an integer in 1..=1000",
+        ),
+        (
+            "experiment = \"toy\"\nepisodes = 9223372036854775807\n",
+            ":2: episodes must be an integer in 1..=10000000",
+        ),
+        (
+            "experiment = \"toy\"\nxi = 1e308\n",
+            ":2: xi must be a number in 0..=1e6",
+        ),
+        (
+            "experiment = \"function\"\nepsilon = 1e-300\n",
+            ":2: epsilon must be a number in 1e-4..=10 (C-REPS's KL bound in nats), got 1e-300",
+        ),
+        (
+            "experiment = \"function\"\ninitial_sigma = 1e300\n",
+            ":2: initial_sigma must be a number in 1e-12..=1e12",
         ),
     ];
     for (i, (text, expected)) in cases.into_iter().enumerate() {
@@ -129,7 +151,7 @@ fn bad_files_are_refused_with_file_line_and_range() {
         std::fs::write(&path, text).unwrap();
         let out = acps(&["experiment", "--config", path.to_str().unwrap(), "-q"]);
         let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{text:?} was accepted");
+        assert_eq!(out.status.code(), Some(2), "{text:?}: {stderr}");
         let expected = format!("{}{expected}", path.display());
         assert!(
             stderr.contains(&expected) && !stderr.contains("panicked"),

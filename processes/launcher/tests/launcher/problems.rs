@@ -110,13 +110,14 @@ fn refusal(text: &str) -> String {
 fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
     // A valid table; every case changes one thing.
     let valid = "runs = 1\n[problem]\ntraining_contexts = [[0.0, 0.0], [1.0, 1.0]]\ntheta0 = [0.0, 0.0]\n";
-    assert!(
-        Plan::new(
-            Some(&LoadedFile::parse(Path::new("e.toml"), valid.into()).unwrap()),
-            &ExperimentFile::default()
-        )
-        .is_ok()
-    );
+    // So is one with numbers on the bounds of their ranges.
+    let bounds = valid
+        .replace("theta0 = [0.0, 0.0]", "theta0 = [1e6, -1e6]")
+        .replace("[[0.0, 0.0], [1.0, 1.0]]", "[[-1e6, 0.0], [1e6, 1.0]]");
+    for text in [valid.to_string(), bounds] {
+        let file = LoadedFile::parse(Path::new("e.toml"), text.clone()).unwrap();
+        assert!(Plan::new(Some(&file), &ExperimentFile::default()).is_ok(), "{text}");
+    }
     let with = |line: &str| format!("{valid}{line}\n");
     let contexts = |points: &str| valid.replace("[[0.0, 0.0], [1.0, 1.0]]", points);
     let cases = [
@@ -138,11 +139,11 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
         ),
         (
             valid.replace("theta0 = [0.0, 0.0]\n", ""),
-            "e.toml:2: problem.theta0 must be set: a list of 1 to 64 finite numbers",
+            "e.toml:2: problem.theta0 must be set: a list of 1 to 64 numbers in -1e6..=1e6",
         ),
         (
             valid.replace("[0.0, 0.0]\n", "[]\n"),
-            "e.toml:4: problem.theta0 must be a list of 1 to 64 finite numbers (the initial parameters), got []",
+            "e.toml:4: problem.theta0 must be a list of 1 to 64 numbers in -1e6..=1e6 (the initial parameters), got []",
         ),
         (
             valid.replace("theta0 = [0.0, 0.0]", &format!("theta0 = {:?}", vec![0.0; 65])),
@@ -150,15 +151,35 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
         ),
         (
             valid.replace("theta0 = [0.0, 0.0]", "theta0 = [0.0, nan]"),
-            "e.toml:4: problem.theta0 must be a list of 1 to 64 finite numbers (the initial parameters), got [0.0, nan]",
+            "e.toml:4: problem.theta0 must be a list of 1 to 64 numbers in -1e6..=1e6 (the initial parameters), got [0.0, nan]",
         ),
         (
             valid.replace("theta0 = [0.0, 0.0]", "theta0 = [0.0, \"x\"]"),
-            "e.toml:4: problem.theta0 must be a list of 1 to 64 finite numbers (the initial parameters), got \"x\"",
+            "e.toml:4: problem.theta0 must be a list of 1 to 64 numbers in -1e6..=1e6 (the initial parameters), got \"x\"",
+        ),
+        (
+            valid.replace("theta0 = [0.0, 0.0]", "theta0 = [0.0, -1000001.0]"),
+            "e.toml:4: problem.theta0 must be a list of 1 to 64 numbers in -1e6..=1e6 (the initial parameters), got [0.0, -1000001.0]",
+        ),
+        (
+            valid.replace("theta0 = [0.0, 0.0]", "theta0 = [1e300]"),
+            "e.toml:4: problem.theta0 must be a list of 1 to 64 numbers in -1e6..=1e6 (the initial parameters), got [1e300]",
         ),
         (
             contexts("[]"),
             "e.toml:3: problem.training_contexts must be a non-empty list of points",
+        ),
+        (
+            contexts("[[0.0, 0.0], [1.0, 1e7]]"),
+            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0, 10000000.0]",
+        ),
+        (
+            with("test_grid = { low = [-1e300, 0.0], high = [1e300, 1.0], points = [2, 2] }"),
+            "e.toml:5: problem.test_grid must be a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: low <= high in -1e6..=1e6",
+        ),
+        (
+            with("context_low = [-2e6, 0.0]\ncontext_high = [1.0, 1.0]"),
+            "e.toml:5: problem.context_low must be a list of 1 to 8 numbers in -1e6..=1e6, one per context dimension (default: the lower corner of the contexts' bounding box), got [-2e6, 0.0]",
         ),
         (
             valid.replace("training_contexts = [[0.0, 0.0], [1.0, 1.0]]\n", ""),
@@ -170,27 +191,27 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
         ),
         (
             contexts("[[0.0, 0.0], [1.0]]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 finite coordinates (as many as context_low's), inside the context box, got point 1 [1.0] of 1 coordinates, not 2",
+            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0] of 1 coordinates, not 2",
         ),
         (
             contexts("[[0.0, inf]]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 finite coordinates (as many as context_low's), inside the context box, got point 0 [0.0, inf]",
+            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 0 [0.0, inf]",
         ),
         (
             contexts(&format!("[{:?}, {:?}]", vec![0.0; 9], vec![1.0; 9])),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 finite coordinates (as many as context_low's), inside the context box, got 9-D contexts",
+            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got 9-D contexts",
         ),
         (
             with("context_low = [0.0, 0.0]\ncontext_high = [0.5, 2.0]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 finite coordinates (as many as context_low's), inside the context box, got point 1 [1.0, 1.0], outside the context box [0.0, 0.0] .. [0.5, 2.0]",
+            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0, 1.0], outside the context box [0.0, 0.0] .. [0.5, 2.0]",
         ),
         (
             with("context_low = [0.0, 0.0]\ncontext_high = [1.0, 1.0]\ntest_contexts = [[0.5, 0.5], [0.5, -0.5]]"),
-            "e.toml:7: problem.test_contexts must be a non-empty list of points, each of 1 to 8 finite coordinates (as many as context_low's), inside the context box, got point 1 [0.5, -0.5], outside the context box [0.0, 0.0] .. [1.0, 1.0]",
+            "e.toml:7: problem.test_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [0.5, -0.5], outside the context box [0.0, 0.0] .. [1.0, 1.0]",
         ),
         (
             with("test_grid = { low = [0.0, 0.0], high = [1.0, 1.0], points = [0, 2] }"),
-            "e.toml:5: problem.test_grid must be a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: finite low <= high, points >= 1 per dimension and at most 100000 in all, inside the context box, got { low = [0.0, 0.0], high = [1.0, 1.0], points = [0, 2] }",
+            "e.toml:5: problem.test_grid must be a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: low <= high in -1e6..=1e6, points >= 1 per dimension and at most 100000 in all, inside the context box, got { low = [0.0, 0.0], high = [1.0, 1.0], points = [0, 2] }",
         ),
         (
             with("test_grid = { low = [0.0, 0.0], high = [1.0, 1.0], points = [-1, 2] }"),
@@ -198,15 +219,15 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
         ),
         (
             with("test_grid = { low = [0.0, 0.0], high = [1.0, 1.0], points = [1, 1], step = 2 }"),
-            "e.toml:5: problem.test_grid must be a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: finite low <= high, points >= 1 per dimension and at most 100000 in all, inside the context box, got step",
+            "e.toml:5: problem.test_grid must be a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: low <= high in -1e6..=1e6, points >= 1 per dimension and at most 100000 in all, inside the context box, got step",
         ),
         (
             with("context_low = [0.0, 0.0]\ncontext_high = [1.0, 1.0, 1.0]"),
-            "e.toml:6: problem.context_high must be a list of finite numbers, one per context dimension, each above context_low's (default: the upper corner of the contexts' bounding box), got [1.0, 1.0, 1.0]",
+            "e.toml:6: problem.context_high must be a list of numbers in -1e6..=1e6, one per context dimension, each above context_low's (default: the upper corner of the contexts' bounding box), got [1.0, 1.0, 1.0]",
         ),
         (
             with("context_low = [0.0, 1.0]\ncontext_high = [1.0, 1.0]"),
-            "e.toml:6: problem.context_high must be a list of finite numbers, one per context dimension, each above context_low's",
+            "e.toml:6: problem.context_high must be a list of numbers in -1e6..=1e6, one per context dimension, each above context_low's",
         ),
         (
             with("context_low = [0.0, 0.0]"),
@@ -214,7 +235,7 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
         ),
         (
             contexts("[[0.0, 0.0], [1.0, 0.0]]"),
-            "e.toml:2: problem.context_low must be a list of 1 to 8 finite numbers, one per context dimension (default: the lower corner of the contexts' bounding box), got nothing, and every context has coordinate 1 = 0: set context_low and context_high",
+            "e.toml:2: problem.context_low must be a list of 1 to 8 numbers in -1e6..=1e6, one per context dimension (default: the lower corner of the contexts' bounding box), got nothing, and every context has coordinate 1 = 0: set context_low and context_high",
         ),
         (
             contexts("[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]") + "features = \"polar\"\n",
