@@ -11,8 +11,9 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
     std::fs::write(&file, "not a directory").unwrap();
     let file = file.to_str().unwrap().to_string();
     let under = format!("{file}/run");
-    // Each command would run for minutes if it did not check its output first.
-    let long = ["--runs", "20", "--episodes", "1000000"];
+    // Each command would run for a minute or more if it did not check its output first, and
+    // fits in memory (a larger request is refused for that, also before it runs).
+    let long = ["--runs", "1", "--episodes", "300000"];
     let cases: Vec<(Vec<&str>, &str, String)> = vec![
         (
             [&["experiment", "grid", "--out", &file][..], &long].concat(),
@@ -34,7 +35,7 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
             format!("output directory {under}: cannot create it"),
         ),
         (
-            vec!["learn", "--episodes", "1000000", "--out", &file],
+            vec!["learn", "--episodes", "300000", "--out", &file],
             "learn, --out a file",
             format!("output directory {file} exists and is not a directory"),
         ),
