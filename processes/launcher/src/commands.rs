@@ -5,7 +5,7 @@ use crate::checkpoints::Checkpoints;
 use crate::cli::{BenchArgs, EvaluateArgs, ExperimentArgs, RunArgs, WorkerArgs};
 use crate::config::{self, Job, LoadedFile, Plan};
 use crate::experiment::{Experiment, Summary};
-use crate::progress::Progress;
+use crate::progress::{Progress, ScoreFormat};
 use crate::workers::ModelFactory;
 use acps_fleet::Fleet;
 use acps_wire::ipc::{self, RunName};
@@ -212,11 +212,14 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     for Job { experiment, dir, .. } in jobs {
         let progress = Progress::of(&experiment, args.quiet);
         let checkpoints = checkpoints(&args, &dir);
-        let summary = experiment
-            .run_until(&progress, checkpoints.as_ref(), &STOP)
+        let outcome = experiment.run_until(&progress, checkpoints.as_ref(), &STOP);
+        match &outcome {
+            Ok(summary) => progress.finish(summary),
+            Err(_) => progress.abandon(),
+        }
+        let summary = outcome
             .with_context(|| format!("experiment {}", experiment.name))
             .map_err(|e| stopped(e, checkpoints.as_ref(), &dir, false))?;
-        progress.finish();
         write(&experiment, &summary, &dir, args.quiet)?;
     }
     Ok(())
@@ -298,7 +301,10 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), |p| {
             progress.show(&p.learning, p.outcomes, Some(p.workers));
         });
-        progress.finish();
+        match &outcome {
+            Ok((summary, _)) => progress.finish(summary),
+            Err(_) => progress.abandon(),
+        }
         let (summary, report) = outcome
             .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
             .map_err(|e| stopped(e, checkpoints.as_ref(), dir, true))?;
@@ -440,13 +446,10 @@ fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) ->
     crate::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
+        let score = ScoreFormat::of(experiment);
         for (method, result) in &summary.methods {
-            let fmt = |x: Option<f64>| x.map_or("n/a".to_string(), |x| format!("{x:.3}"));
-            println!(
-                "  {method:>20}: final {} +- {}",
-                fmt(result.final_mean),
-                fmt(result.final_sem)
-            );
+            let line = score.final_line(result.final_mean, result.final_sem, summary.runs);
+            println!("  {method:>20}: {line}");
         }
     }
     Ok(())

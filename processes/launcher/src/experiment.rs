@@ -703,7 +703,7 @@ mod tests {
         });
         let expected = ContextualFunction::new(2, 20, 0).unwrap().spec();
         let found = ContextualFunction::new(2, 20, 1).unwrap().spec();
-        let error = experiment.run(&Progress::new("function", true)).unwrap_err();
+        let error = experiment.run(&Progress::new("function", 0, true)).unwrap_err();
         assert!(matches!(error, RunError::Environment(_)), "{error}");
         assert_eq!(
             error.to_string(),
