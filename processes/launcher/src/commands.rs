@@ -368,6 +368,9 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
     crate::plot::save_bench(&rows, &args.out)
         .map_err(|e| anyhow::anyhow!("drawing {}: {e}", args.out.join("bench.svg").display()))?;
     println!("-> {} and bench.svg / bench.png", path.display());
+    if let Some(warning) = crate::bench::busy_warning(&rows) {
+        eprintln!("{warning}");
+    }
     Ok(())
 }
 
