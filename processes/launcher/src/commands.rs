@@ -12,7 +12,7 @@ use acps_wire::ipc::{self, RunName};
 use acps_worker::{WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -53,7 +53,12 @@ fn continue_hint(resume: Option<&str>) -> String {
 /// The command line this process was started with, with `--resume DIR` in place of any
 /// `--resume` it had: the exact command that continues the run writing into `dir`.
 fn continue_command(dir: &Path) -> String {
-    let mut args = std::env::args_os().map(|a| a.to_string_lossy().into_owned());
+    resumed(std::env::args_os().map(|a| a.to_string_lossy().into_owned()), dir)
+}
+
+/// The command `args` (the program first) with `--resume dir` in place of any `--resume`, as a
+/// shell reads it.
+fn resumed(mut args: impl Iterator<Item = String>, dir: &Path) -> String {
     let mut command: Vec<String> = args.next().into_iter().collect();
     let mut args = args.peekable();
     while let Some(arg) = args.next() {
@@ -83,16 +88,17 @@ fn shell_quoted(arg: &str) -> String {
     }
 }
 
-/// `error` of a run into `dir` as the user should read it: with the command that continues the
-/// run when it keeps checkpoints.
+/// `error` of a job of the run whose output directory is `out`, as the user should read it:
+/// with the command that continues the run when the job keeps checkpoints.
 fn stopped(
     error: impl Into<anyhow::Error>,
     checkpoints: Option<&Checkpoints>,
-    dir: &Path,
+    out: &Path,
     fleet: bool,
 ) -> anyhow::Error {
     let error = error.into();
-    let resume = checkpoints.filter(|c| c.every > 0).map(|_| continue_command(dir));
+    let checkpoints = checkpoints.filter(|c| c.every > 0);
+    let resume = checkpoints.map(|_| continue_command(out));
     if interrupted(&error) {
         return Stopped::Interrupted { resume, fleet }.into();
     }
@@ -105,7 +111,9 @@ fn stopped(
         )
     });
     match resume {
-        Some(resume) if fleet_failed && dir.join("checkpoints").is_dir() => Stopped::Failed { error, resume }.into(),
+        Some(resume) if fleet_failed && checkpoints.is_some_and(|c| c.dir.is_dir()) => {
+            Stopped::Failed { error, resume }.into()
+        }
         _ => error,
     }
 }
@@ -122,9 +130,10 @@ fn interrupted(error: &anyhow::Error) -> bool {
     })
 }
 
-/// The experiments `args` ask for, checked, with their output directories and resolved files;
-/// `None` when `--save-config` wrote the resolved file instead.
-fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
+/// The run's output directory and the experiments `args` ask for, checked, with their own
+/// directories (the run's, or one per panel in it) and resolved files; `None` when
+/// `--save-config` wrote the resolved file instead.
+fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<(PathBuf, Vec<Job>)>> {
     let file = args.config.as_deref().map(LoadedFile::read).transpose()?;
     let plan = Plan::new(file.as_ref(), &args.settings)?;
     if let Some(path) = &args.save_config {
@@ -143,7 +152,8 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
         (Some(dir), _) | (None, Some(dir)) => dir.clone(),
         (None, None) => config::default_out(args.config.as_deref(), plan.name()),
     };
-    Ok(Some(plan.jobs(&out)))
+    let jobs = plan.jobs(&out);
+    Ok(Some((out, jobs)))
 }
 
 /// The checkpoints of the experiment that writes into `dir`, if it keeps or resumes any.
@@ -200,7 +210,7 @@ fn output_dir(dir: &Path) -> anyhow::Result<()> {
 static STOP: AtomicBool = AtomicBool::new(false);
 
 pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
-    let Some(jobs) = jobs(&args)? else {
+    let Some((out, jobs)) = jobs(&args)? else {
         return Ok(());
     };
     for job in &jobs {
@@ -219,7 +229,7 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         }
         let summary = outcome
             .with_context(|| format!("experiment {}", experiment.name))
-            .map_err(|e| stopped(e, checkpoints.as_ref(), &dir, false))?;
+            .map_err(|e| stopped(e, checkpoints.as_ref(), &out, false))?;
         write(&experiment, &summary, &dir, args.quiet)?;
     }
     Ok(())
@@ -238,7 +248,7 @@ fn check_worker_in_flight(option: &str, value: usize) -> anyhow::Result<()> {
 /// and Ctrl-C.
 pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     check_worker_in_flight("--worker-in-flight", args.worker_in_flight)?;
-    let Some(jobs) = jobs(&args.experiment)? else {
+    let Some((out, jobs)) = jobs(&args.experiment)? else {
         return Ok(());
     };
     if let Some(command) = &args.worker_command {
@@ -307,7 +317,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         }
         let (summary, report) = outcome
             .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
-            .map_err(|e| stopped(e, checkpoints.as_ref(), dir, true))?;
+            .map_err(|e| stopped(e, checkpoints.as_ref(), &out, true))?;
         if !args.experiment.quiet {
             println!(
                 "{} on {workers} workers: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
@@ -456,4 +466,40 @@ fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) ->
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_continuing_command_is_the_started_one_with_resume_in_place() {
+        let cases: [(&[&str], &str); 5] = [
+            (&["acps", "learn"], "acps learn --resume runs/x"),
+            (&["acps", "learn", "--resume", "-q"], "acps learn -q --resume runs/x"),
+            (
+                &["acps", "experiment", "toy", "--resume=runs/x", "--runs", "3"],
+                "acps experiment toy --runs 3 --resume runs/x",
+            ),
+            (
+                &["acps", "run", "--resume", "runs/x", "--config", "a b.toml"],
+                "acps run --config 'a b.toml' --resume runs/x",
+            ),
+            (
+                &[
+                    "/opt/acps",
+                    "run",
+                    "--worker-command",
+                    "python -c 'print(1)'",
+                    "--workers",
+                    "2",
+                ],
+                r"/opt/acps run --worker-command 'python -c '\''print(1)'\''' --workers 2 --resume runs/x",
+            ),
+        ];
+        for (args, expected) in cases {
+            let args = args.iter().map(|a| a.to_string());
+            assert_eq!(resumed(args, Path::new("runs/x")), expected);
+        }
+    }
 }
