@@ -319,6 +319,32 @@ fn evaluate_names_the_simulator_and_its_settings() {
 }
 
 #[test]
+fn a_method_that_cannot_work_on_the_experiment_is_refused_before_running() {
+    let dir = temp_dir("toy-continuous");
+    std::fs::create_dir_all(&*dir).unwrap();
+    let file = dir.join("toy.toml");
+    std::fs::write(
+        &file,
+        "experiment = \"toy\"\nmethods = [\"round-robin\", \"random-continuous\"]\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let (out, file) = (out.to_str().unwrap(), file.to_str().unwrap());
+    let cases: [&[&str]; 2] = [
+        &["experiment", "toy", "--method", "random-continuous", "--out", out],
+        &["experiment", "--config", file, "--out", out],
+    ];
+    for args in cases {
+        let error = refusal(args);
+        assert!(
+            error.contains("method random-continuous draws contexts from the continuous space, but experiment 'toy' takes only its training contexts; choose a method that selects among them"),
+            "{args:?}: {error}"
+        );
+        assert!(!Path::new(out).exists(), "{args:?} wrote {out}");
+    }
+}
+
+#[test]
 fn evaluate_reproduces_a_function_run() {
     let dir = experiment("function", "random", "100");
     let s = summary(&dir);
