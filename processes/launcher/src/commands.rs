@@ -428,7 +428,11 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     use crate::records::{SavedPolicy, policy_file};
     let path = policy_file(&args.dir, args.method.as_deref(), args.run)?;
     let (saved, policy) = SavedPolicy::load(&path)?;
+    if path != args.dir {
+        saved.check_name(&path)?;
+    }
     evaluate::check_simulated(&saved, &path)?;
+    let mut environment = evaluate::rebuild(&saved, &path)?;
     evaluate::check_targets(&saved, &args.target)?;
     if let Some(file) = &args.render {
         evaluate::check_render(&saved, file)?;
@@ -439,8 +443,8 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     } else {
         args.target
     };
-    let replay =
-        evaluate::replay(&saved, &policy, &contexts).with_context(|| format!("replaying {}", path.display()))?;
+    let replay = evaluate::replay(&saved, &policy, environment.as_mut(), &contexts)
+        .with_context(|| format!("replaying {}", path.display()))?;
     print!("{}", evaluate::report(&saved, &replay, test_set));
     if let Some(file) = args.render {
         let first = replay.throws.first().context("--render: there is no throw to draw")?;
