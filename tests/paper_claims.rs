@@ -17,7 +17,7 @@ fn options(runs: usize, methods: &[Method]) -> Options {
 fn toy(panel: char, runs: usize, methods: &[Method]) -> Summary {
     let model = paper::toy_panel(panel).unwrap();
     paper::toy(model, &options(runs, methods))
-        .run(&Progress::new("test", true))
+        .run(&Progress::new("test", 0, true))
         .unwrap()
 }
 
@@ -94,7 +94,7 @@ fn function_corners_fast_and_reward_heuristics_worse_than_random() {
     // worse than random.
     let methods = [Method::Random, Method::Corners, Method::BestReward, Method::Diversity];
     let s = paper::function(&options(5, &methods))
-        .run(&Progress::new("test", true))
+        .run(&Progress::new("test", 0, true))
         .unwrap();
     assert!(at(&s, Method::Corners, 250) < at(&s, Method::Random, 250) - 1.5);
     assert!(at(&s, Method::BestReward, 2500) > at(&s, Method::Random, 2500) + 1.0);

@@ -44,6 +44,9 @@ pub struct Row {
     pub round_rates: Vec<f64>,
     /// Every round's ratio, in order.
     pub round_ratios: Vec<f64>,
+    /// The largest share of the machine's CPU time that other processes used during a round of
+    /// this row (`None` where the system does not say: Linux's /proc only).
+    pub others_share: Option<f64>,
 }
 
 impl Row {
@@ -245,7 +248,62 @@ struct Measurement {
     rollouts: u64,
     seconds: f64,
     fleet: Option<FleetCost>,
+    /// The share of the machine's CPU time other processes used meanwhile.
+    others_share: Option<f64>,
 }
+
+/// CPU time, in clock ticks, that the whole machine and this process with its reaped children
+/// (a fleet's workers) had used, from Linux's /proc.
+#[derive(Clone, Copy)]
+struct CpuTicks {
+    machine_busy: u64,
+    machine_total: u64,
+    own: u64,
+}
+
+impl CpuTicks {
+    fn now() -> Option<Self> {
+        let stat = std::fs::read_to_string("/proc/stat").ok()?;
+        // cpu user nice system idle iowait irq softirq steal ...
+        let machine: Vec<u64> = stat
+            .lines()
+            .next()?
+            .split_whitespace()
+            .skip(1)
+            .map(|field| field.parse().ok())
+            .collect::<Option<_>>()?;
+        let field = |i: usize| machine.get(i).copied().unwrap_or(0);
+        let machine_busy = field(0) + field(1) + field(2) + field(5) + field(6) + field(7);
+        let own_stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+        // After the command name in parentheses: utime, stime, cutime, cstime are the 12th to
+        // 15th fields.
+        let own: u64 = own_stat
+            .rsplit_once(')')?
+            .1
+            .split_whitespace()
+            .skip(11)
+            .take(4)
+            .map(|field| field.parse::<u64>().ok())
+            .sum::<Option<u64>>()?;
+        Some(Self {
+            machine_busy,
+            machine_total: machine_busy + field(3) + field(4),
+            own,
+        })
+    }
+
+    /// The share of the machine's CPU time between `self` and `later` that other processes used.
+    fn others_share(self, later: Self) -> Option<f64> {
+        let total = later.machine_total.checked_sub(self.machine_total)?;
+        let busy = later.machine_busy.checked_sub(self.machine_busy)?;
+        let own = later.own.checked_sub(self.own)?;
+        (total > 0).then(|| (busy.saturating_sub(own) as f64 / total as f64).min(1.0))
+    }
+}
+
+/// Above this share of the machine's CPU used by other processes, a bench warns that its ratios
+/// measure the competition rather than the fleet.
+pub const BUSY_SHARE: f64 = 0.1;
 
 impl Measurement {
     fn rate(&self) -> f64 {
@@ -294,11 +352,15 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
                     total,
                 });
                 index += 1;
-                samples.push(match mode {
+                let before = CpuTicks::now();
+                let mut measurement = match mode {
                     Mode::Single => in_process(workload, options.scale, false)?,
                     Mode::Rayon => in_process(workload, options.scale, true)?,
+                    // Returns once its workers are reaped, so their CPU time counts as ours.
                     Mode::Fleet(workers) => fleet(workload, options, workers)?,
-                });
+                };
+                measurement.others_share = before.zip(CpuTicks::now()).and_then(|(a, b)| a.others_share(b));
+                samples.push(measurement);
             }
         }
         let single_rates: Vec<f64> = measured[0].iter().map(Measurement::rate).collect();
@@ -327,6 +389,7 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
                 seconds: chosen.seconds,
                 round_rates: rates,
                 round_ratios: ratios,
+                others_share: samples.iter().filter_map(|m| m.others_share).reduce(f64::max),
             };
             report(BenchEvent::Row(&row));
             rows.push(row);
@@ -349,6 +412,7 @@ fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<
         seconds: start.elapsed().as_secs_f64(),
         rollouts: jobs.iter().map(|j| consumed(&j.learner)).sum(),
         fleet: None,
+        others_share: None,
     })
 }
 
@@ -394,14 +458,15 @@ fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::
             learner_seconds: progress.learner_seconds,
             startup_seconds: total_seconds - progress.serving_seconds,
         }),
+        others_share: None,
     })
 }
 
 /// The rows as an aligned table.
 pub fn table(rows: &[Row]) -> String {
     let mut text = format!(
-        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>13} {:>14} {:>11}\n",
-        "env", "mode", "workers", "rollouts/s", "ratio", "ratio range", "learner share", "startup ms"
+        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>13} {:>14} {:>11} {:>7}\n",
+        "env", "mode", "workers", "rollouts/s", "ratio", "ratio range", "learner share", "startup ms", "others"
     );
     for row in rows {
         let share = row
@@ -413,10 +478,110 @@ pub fn table(rows: &[Row]) -> String {
         let range = row
             .ratio_range()
             .map_or("-".to_string(), |(lowest, highest)| format!("{lowest:.2}-{highest:.2}"));
+        let others = row
+            .others_share
+            .map_or("-".to_string(), |s| format!("{:.0}%", 100.0 * s));
         text += &format!(
-            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>13} {:>14} {:>11}\n",
-            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, range, share, startup
+            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>13} {:>14} {:>11} {:>7}\n",
+            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, range, share, startup, others
         );
     }
     text
+}
+
+/// What a reader should know before trusting the ratios of `rows`: whether other processes
+/// competed for the CPU (their largest share in any round), or the single-thread rate of an
+/// environment varied between rounds by more than a fifth; `None` when neither happened.
+pub fn busy_warning(rows: &[Row]) -> Option<String> {
+    let mut reasons = Vec::new();
+    let busiest = rows.iter().filter_map(|r| r.others_share).reduce(f64::max);
+    if let Some(share) = busiest.filter(|&s| s > BUSY_SHARE) {
+        reasons.push(format!(
+            "other processes used up to {:.0}% of the machine's CPU time during a measurement (column 'others')",
+            100.0 * share
+        ));
+    }
+    for row in rows
+        .iter()
+        .filter(|r| r.mode == Mode::Single.name() && r.round_rates.len() > 1)
+    {
+        let lowest = row.round_rates.iter().copied().fold(f64::INFINITY, f64::min);
+        let highest = row.round_rates.iter().copied().fold(0.0, f64::max);
+        if highest > 1.2 * lowest {
+            reasons.push(format!(
+                "the {} single-thread rate varied by {:.0}% between rounds",
+                row.env,
+                100.0 * (highest / lowest - 1.0)
+            ));
+        }
+    }
+    (!reasons.is_empty()).then(|| {
+        format!(
+            "warning: the machine was busy: {}. Ratios below 1 then show the competition for the cores, not a slow fleet; measure again on an idle machine.",
+            reasons.join("; ")
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(mode: Mode, rates: &[f64], others: Option<f64>) -> Row {
+        Row {
+            env: "analytic",
+            mode: mode.name(),
+            workers: 1,
+            rollouts_per_s: rates[0],
+            ratio: 1.0,
+            learner_share: None,
+            startup_seconds: None,
+            rollouts: 1,
+            seconds: 1.0,
+            round_rates: rates.to_vec(),
+            round_ratios: vec![1.0; rates.len()],
+            others_share: others,
+        }
+    }
+
+    #[test]
+    fn a_busy_machine_is_named_and_a_quiet_one_is_not() {
+        let quiet = [
+            row(Mode::Single, &[100.0, 110.0], Some(0.05)),
+            row(Mode::Fleet(2), &[10.0], Some(0.1)),
+        ];
+        assert_eq!(busy_warning(&quiet), None);
+        let competed = [
+            row(Mode::Single, &[100.0, 101.0], Some(0.02)),
+            row(Mode::Fleet(2), &[10.0], Some(0.35)),
+        ];
+        let warning = busy_warning(&competed).unwrap();
+        assert!(warning.contains("up to 35% of the machine's CPU time"), "{warning}");
+        // Without /proc, the spread of the single-thread rate still tells.
+        let spread = [row(Mode::Single, &[100.0, 130.0, 90.0], None)];
+        let warning = busy_warning(&spread).unwrap();
+        assert!(
+            warning.contains("analytic single-thread rate varied by 44%"),
+            "{warning}"
+        );
+    }
+
+    #[test]
+    fn the_others_share_leaves_out_this_process_and_its_children() {
+        let before = CpuTicks {
+            machine_busy: 1000,
+            machine_total: 4000,
+            own: 100,
+        };
+        // 400 ticks of the machine's 800 busy, 300 of them ours: others took 100 of 800.
+        let after = CpuTicks {
+            machine_busy: 1400,
+            machine_total: 4800,
+            own: 400,
+        };
+        assert_eq!(before.others_share(after), Some(0.125));
+        assert_eq!(after.others_share(before), None);
+        let now = CpuTicks::now().expect("Linux has /proc/stat and /proc/self/stat");
+        assert!(now.machine_total >= now.machine_busy && now.machine_busy > 0);
+    }
 }

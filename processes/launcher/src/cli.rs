@@ -51,8 +51,9 @@ pub(crate) enum Command {
     /// interleaved rounds; print a table and write DIR/bench.json, bench.svg and bench.png.
     Bench(BenchArgs),
     /// Replay a learned policy from a run directory greedily (its mean, exploration off) at
-    /// --target points or at the problem's test contexts, printing the landing point, error and
-    /// reward of every throw (the return of every context for the contextual function).
+    /// --target points or at the problem's test contexts, in the simulator the run used (named
+    /// in the report), printing the landing point, error and reward of every throw (the return of
+    /// every context for the contextual function).
     Evaluate(EvaluateArgs),
     /// Print the wire protocol's layout as JSON: every payload's fields (type, offset, size,
     /// alignment), the iceoryx2 type names, capacities, codes and service settings. Workers in
@@ -65,7 +66,8 @@ pub(crate) struct EvaluateArgs {
     /// A run directory written by `acps experiment` or `acps run` (or one of its
     /// policies/METHOD-runR.json files).
     pub(crate) dir: PathBuf,
-    /// The method whose policy to replay (default: the first by name).
+    /// The method whose policy to replay: one with a file of the run in DIR/policies (default:
+    /// the first by name).
     #[arg(long)]
     pub(crate) method: Option<String>,
     /// The run whose policy to replay (0..=999, one of the experiment's runs; default 0).

@@ -5,14 +5,14 @@ use crate::checkpoints::Checkpoints;
 use crate::cli::{BenchArgs, EvaluateArgs, ExperimentArgs, RunArgs, WorkerArgs};
 use crate::config::{self, Job, LoadedFile, Plan};
 use crate::experiment::{Experiment, Summary};
-use crate::progress::Progress;
+use crate::progress::{Progress, ScoreFormat};
 use crate::workers::ModelFactory;
 use acps_fleet::Fleet;
 use acps_wire::ipc::{self, RunName};
 use acps_worker::{WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -53,7 +53,12 @@ fn continue_hint(resume: Option<&str>) -> String {
 /// The command line this process was started with, with `--resume DIR` in place of any
 /// `--resume` it had: the exact command that continues the run writing into `dir`.
 fn continue_command(dir: &Path) -> String {
-    let mut args = std::env::args_os().map(|a| a.to_string_lossy().into_owned());
+    resumed(std::env::args_os().map(|a| a.to_string_lossy().into_owned()), dir)
+}
+
+/// The command `args` (the program first) with `--resume dir` in place of any `--resume`, as a
+/// shell reads it.
+fn resumed(mut args: impl Iterator<Item = String>, dir: &Path) -> String {
     let mut command: Vec<String> = args.next().into_iter().collect();
     let mut args = args.peekable();
     while let Some(arg) = args.next() {
@@ -83,16 +88,17 @@ fn shell_quoted(arg: &str) -> String {
     }
 }
 
-/// `error` of a run into `dir` as the user should read it: with the command that continues the
-/// run when it keeps checkpoints.
+/// `error` of a job of the run whose output directory is `out`, as the user should read it:
+/// with the command that continues the run when the job keeps checkpoints.
 fn stopped(
     error: impl Into<anyhow::Error>,
     checkpoints: Option<&Checkpoints>,
-    dir: &Path,
+    out: &Path,
     fleet: bool,
 ) -> anyhow::Error {
     let error = error.into();
-    let resume = checkpoints.filter(|c| c.every > 0).map(|_| continue_command(dir));
+    let checkpoints = checkpoints.filter(|c| c.every > 0);
+    let resume = checkpoints.map(|_| continue_command(out));
     if interrupted(&error) {
         return Stopped::Interrupted { resume, fleet }.into();
     }
@@ -105,7 +111,9 @@ fn stopped(
         )
     });
     match resume {
-        Some(resume) if fleet_failed && dir.join("checkpoints").is_dir() => Stopped::Failed { error, resume }.into(),
+        Some(resume) if fleet_failed && checkpoints.is_some_and(|c| c.dir.is_dir()) => {
+            Stopped::Failed { error, resume }.into()
+        }
         _ => error,
     }
 }
@@ -122,9 +130,10 @@ fn interrupted(error: &anyhow::Error) -> bool {
     })
 }
 
-/// The experiments `args` ask for, checked, with their output directories and resolved files;
-/// `None` when `--save-config` wrote the resolved file instead.
-fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
+/// The run's output directory and the experiments `args` ask for, checked, with their own
+/// directories (the run's, or one per panel in it) and resolved files; `None` when
+/// `--save-config` wrote the resolved file instead.
+fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<(PathBuf, Vec<Job>)>> {
     let file = args.config.as_deref().map(LoadedFile::read).transpose()?;
     let plan = Plan::new(file.as_ref(), &args.settings)?;
     if let Some(path) = &args.save_config {
@@ -145,7 +154,7 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<Vec<Job>>> {
     };
     let jobs = plan.jobs(&out);
     config::check_memory(&jobs)?;
-    Ok(Some(jobs))
+    Ok(Some((out, jobs)))
 }
 
 /// The checkpoints of the experiment that writes into `dir`, if it keeps or resumes any.
@@ -202,7 +211,7 @@ fn output_dir(dir: &Path) -> anyhow::Result<()> {
 static STOP: AtomicBool = AtomicBool::new(false);
 
 pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
-    let Some(jobs) = jobs(&args)? else {
+    let Some((out, jobs)) = jobs(&args)? else {
         return Ok(());
     };
     for job in &jobs {
@@ -214,11 +223,14 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     for Job { experiment, dir, .. } in jobs {
         let progress = Progress::of(&experiment, args.quiet);
         let checkpoints = checkpoints(&args, &dir);
-        let summary = experiment
-            .run_until(&progress, checkpoints.as_ref(), &STOP)
+        let outcome = experiment.run_until(&progress, checkpoints.as_ref(), &STOP);
+        match &outcome {
+            Ok(summary) => progress.finish(summary),
+            Err(_) => progress.abandon(),
+        }
+        let summary = outcome
             .with_context(|| format!("experiment {}", experiment.name))
-            .map_err(|e| stopped(e, checkpoints.as_ref(), &dir, false))?;
-        progress.finish();
+            .map_err(|e| stopped(e, checkpoints.as_ref(), &out, false))?;
         write(&experiment, &summary, &dir, args.quiet)?;
     }
     Ok(())
@@ -228,7 +240,7 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
 /// processes simulate. The fleet removes the run's shared memory when it ends, also on errors
 /// and Ctrl-C.
 pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
-    let Some(jobs) = jobs(&args.experiment)? else {
+    let Some((out, jobs)) = jobs(&args.experiment)? else {
         return Ok(());
     };
     if let Some(command) = &args.worker_command {
@@ -293,10 +305,13 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), |p| {
             progress.show(&p.learning, p.outcomes, Some(p.workers));
         });
-        progress.finish();
+        match &outcome {
+            Ok((summary, _)) => progress.finish(summary),
+            Err(_) => progress.abandon(),
+        }
         let (summary, report) = outcome
             .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
-            .map_err(|e| stopped(e, checkpoints.as_ref(), dir, true))?;
+            .map_err(|e| stopped(e, checkpoints.as_ref(), &out, true))?;
         if !args.experiment.quiet {
             println!(
                 "{} on {workers} workers: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
@@ -350,6 +365,9 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
     crate::plot::save_bench(&rows, &args.out)
         .map_err(|e| anyhow::anyhow!("drawing {}: {e}", args.out.join("bench.svg").display()))?;
     println!("-> {} and bench.svg / bench.png", path.display());
+    if let Some(warning) = crate::bench::busy_warning(&rows) {
+        eprintln!("{warning}");
+    }
     Ok(())
 }
 
@@ -390,7 +408,11 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     use crate::records::{SavedPolicy, policy_file};
     let path = policy_file(&args.dir, args.method.as_deref(), args.run)?;
     let (saved, policy) = SavedPolicy::load(&path)?;
+    if path != args.dir {
+        saved.check_name(&path)?;
+    }
     evaluate::check_simulated(&saved, &path)?;
+    let mut environment = evaluate::rebuild(&saved, &path)?;
     evaluate::check_targets(&saved, &args.target)?;
     if let Some(file) = &args.render {
         evaluate::check_render(&saved, file)?;
@@ -401,8 +423,8 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     } else {
         args.target
     };
-    let replay =
-        evaluate::replay(&saved, &policy, &contexts).with_context(|| format!("replaying {}", path.display()))?;
+    let replay = evaluate::replay(&saved, &policy, environment.as_mut(), &contexts)
+        .with_context(|| format!("replaying {}", path.display()))?;
     print!("{}", evaluate::report(&saved, &replay, test_set));
     if let Some(file) = args.render {
         let first = replay.throws.first().context("--render: there is no throw to draw")?;
@@ -421,14 +443,47 @@ fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) ->
     crate::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
+        let score = ScoreFormat::of(experiment);
         for (method, result) in &summary.methods {
-            let fmt = |x: Option<f64>| x.map_or("n/a".to_string(), |x| format!("{x:.3}"));
-            println!(
-                "  {method:>20}: final {} +- {}",
-                fmt(result.final_mean),
-                fmt(result.final_sem)
-            );
+            let line = score.final_line(result.final_mean, result.final_sem, summary.runs);
+            println!("  {method:>20}: {line}");
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_continuing_command_is_the_started_one_with_resume_in_place() {
+        let cases: [(&[&str], &str); 5] = [
+            (&["acps", "learn"], "acps learn --resume runs/x"),
+            (&["acps", "learn", "--resume", "-q"], "acps learn -q --resume runs/x"),
+            (
+                &["acps", "experiment", "toy", "--resume=runs/x", "--runs", "3"],
+                "acps experiment toy --runs 3 --resume runs/x",
+            ),
+            (
+                &["acps", "run", "--resume", "runs/x", "--config", "a b.toml"],
+                "acps run --config 'a b.toml' --resume runs/x",
+            ),
+            (
+                &[
+                    "/opt/acps",
+                    "run",
+                    "--worker-command",
+                    "python -c 'print(1)'",
+                    "--workers",
+                    "2",
+                ],
+                r"/opt/acps run --worker-command 'python -c '\''print(1)'\''' --workers 2 --resume runs/x",
+            ),
+        ];
+        for (args, expected) in cases {
+            let args = args.iter().map(|a| a.to_string());
+            assert_eq!(resumed(args, Path::new("runs/x")), expected);
+        }
+    }
 }

@@ -1,12 +1,16 @@
 //! `acps evaluate`: replay a learned policy greedily (its mean, exploration off) at chosen
 //! targets or at the problem's test contexts, in the environment the run learned in.
 
+use crate::experiment::Experiment;
+use crate::paper::{self, Options, Overrides, Sim};
 use crate::records::SavedPolicy;
 use acps_learner::creps::RestoredPolicy;
+use acps_models::contextual_function;
 use acps_models::environment;
+use acps_models::rapier_sim::RapierConfig;
 use acps_models::robot::Robot;
-use acps_models::throw::{ThrowDesign, ThrowPolicy};
-use acps_shared::{ContextSpace, Environment, Outcome, Stream, Task, TaskKind, derive_seed};
+use acps_models::throw::{DARTBOARD_ENVIRONMENT, GRID_ENVIRONMENT, ThrowDesign, ThrowPolicy};
+use acps_shared::{ContextSpace, Environment, EnvironmentSpec, Outcome, Stream, Task, TaskKind, derive_seed};
 use anyhow::{Context, bail};
 use std::path::Path;
 
@@ -68,6 +72,163 @@ pub fn check_simulated(saved: &SavedPolicy, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The environment the saved run learned in, as this build's experiment builds it for the run's
+/// seed, after checking that the file's problem is the problem that experiment gives that run:
+/// a file relabelled as another experiment, edited, or written by a build with other settings is
+/// refused, naming the field that differs.
+pub fn rebuild(saved: &SavedPolicy, path: &Path) -> anyhow::Result<Box<dyn Environment>> {
+    let instance = (experiment_of(saved)
+        .map_err(|(field, reason)| anyhow::anyhow!("{}: {field} {reason}", path.display()))?
+        .instance)(saved.seed);
+    let (problem, expected) = (&saved.problem, &instance.problem);
+    let differs = |field: &str, ours: String, theirs: String| {
+        anyhow::anyhow!(
+            "{}: {field} is {ours}, but the {} experiment's run of seed {} has {theirs} (an edited file, or one written by another build)",
+            path.display(),
+            saved.experiment,
+            saved.seed
+        )
+    };
+    if problem.name != expected.name {
+        return Err(differs(
+            "problem.name",
+            format!("{:?}", problem.name),
+            format!("{:?}", expected.name),
+        ));
+    }
+    let environment = instance
+        .environment
+        .context("the paper experiment has no environment in this process")?;
+    problem
+        .check_environment(environment.as_ref())
+        .with_context(|| format!("{}: rebuilding the run's environment", path.display()))?;
+    if problem.space != expected.space {
+        return Err(differs(
+            "problem.space",
+            describe(&problem.space),
+            describe(&expected.space),
+        ));
+    }
+    for (field, ours, theirs) in [
+        (
+            "problem.training_contexts",
+            &problem.training_contexts,
+            &expected.training_contexts,
+        ),
+        ("problem.test_contexts", &problem.test_contexts, &expected.test_contexts),
+    ] {
+        if ours.len() != theirs.len() {
+            return Err(differs(
+                field,
+                format!("{} contexts", ours.len()),
+                format!("{}", theirs.len()),
+            ));
+        }
+        if let Some(i) = (0..ours.len()).find(|&i| ours[i] != theirs[i]) {
+            return Err(differs(
+                &format!("{field}[{i}]"),
+                format!("({})", coordinates(&ours[i])),
+                format!("({})", coordinates(&theirs[i])),
+            ));
+        }
+    }
+    if problem.theta0 != expected.theta0 {
+        return Err(differs(
+            "problem.theta0",
+            format!("{:?}", problem.theta0),
+            format!("{:?}", expected.theta0),
+        ));
+    }
+    if (problem.score, &problem.metric) != (expected.score, &expected.metric) {
+        return Err(differs(
+            "problem.score and metric",
+            format!("{:?}, {:?}", problem.score, problem.metric),
+            format!("{:?}, {:?}", expected.score, expected.metric),
+        ));
+    }
+    Ok(environment)
+}
+
+/// The paper experiment that wrote `saved`, with the settings its environment's spec records
+/// (the simulator; the function's n_s and n_theta), or the field that names none. The spec's
+/// sizes are checked against the file's own before anything is built from them, so that a file
+/// cannot make this process build an environment larger than the file.
+fn experiment_of(saved: &SavedPolicy) -> Result<Experiment, (&'static str, String)> {
+    let problem = &saved.problem;
+    let spec = &problem.environment;
+    let [first, n_theta, problem_seed] = spec.parameters();
+    let options = Options {
+        runs: 1,
+        ..Options::default()
+    };
+    let environment_name = |expected: &str| {
+        if spec.name() == expected {
+            Ok(())
+        } else {
+            Err((
+                "problem.environment.name",
+                format!(
+                    "{:?} is not the {} experiment's environment {expected:?} (was the file's experiment or problem edited?)",
+                    spec.name(),
+                    saved.experiment
+                ),
+            ))
+        }
+    };
+    match saved.experiment.as_str() {
+        name @ ("grid" | "dartboard") => {
+            environment_name(if name == "grid" { GRID_ENVIRONMENT } else { DARTBOARD_ENVIRONMENT })?;
+            let sim = Sim::from_parameter(first).ok_or((
+                "problem.environment.parameters",
+                format!("[{first}, ..] must start with 0 (analytic) or 1 (rapier), the simulator"),
+            ))?;
+            Ok(if name == "grid" {
+                paper::grid(sim, &options)
+            } else {
+                paper::dartboard(sim, &options)
+            })
+        }
+        name @ ("function" | "dims") => {
+            environment_name(contextual_function::ENVIRONMENT)?;
+            let (n_s, dim, n) = (first, problem.context_dim(), problem.theta0.len());
+            if (n_s, n_theta, problem_seed) != (dim as u64, n as u64, saved.seed) || n <= dim {
+                return Err((
+                    "problem.environment.parameters",
+                    format!(
+                        "[n_s, n_theta, problem seed] = [{n_s}, {n_theta}, {problem_seed}] must be the problem's context dimension {dim}, its n_theta {n} (theta0's entries, more than n_s) and the run's seed {}",
+                        saved.seed
+                    ),
+                ));
+            }
+            let options = Options {
+                overrides: Overrides {
+                    n_theta: Some(n),
+                    ..Overrides::default()
+                },
+                ..options
+            };
+            match name {
+                "function" if dim == 2 => Ok(paper::function(&options)),
+                "function" => Err((
+                    "problem.space",
+                    format!("must have 2 dimensions in the function experiment, got {dim}"),
+                )),
+                _ => Ok(paper::dims(dim, &options)),
+            }
+        }
+        "toy" => Err((
+            "experiment",
+            "\"toy\" learns no policy (its Section 4 model has no parameters); policy files come from function, dims, grid and dartboard".into(),
+        )),
+        other => Err((
+            "experiment",
+            format!(
+                "must be one of function, dims, grid, dartboard (the experiments acps simulates; a problem of your own has a user_problem field), got {other:?}"
+            ),
+        )),
+    }
+}
+
 /// Refuse targets the saved problem cannot take: a wrong dimension or a point outside the
 /// context space.
 pub fn check_targets(saved: &SavedPolicy, targets: &[Vec<f64>]) -> anyhow::Result<()> {
@@ -107,20 +268,18 @@ fn describe(space: &ContextSpace) -> String {
     }
 }
 
-/// Throw `policy` greedily at `contexts` in the environment `saved` names, refused when this
-/// build builds it with other settings. Task ids and seeds are the context's index and its
+/// Throw `policy` greedily at `contexts` in `environment`, the one [`rebuild`] made for
+/// `saved`. Task ids and seeds are the context's index and its
 /// derived seed; the built-in environments of saved policies do not draw random numbers, so the
 /// outcome depends on the context and the policy only. On the dartboard, whose reward exists at
 /// field centres only, other targets get the grid's reward.
-pub fn replay(saved: &SavedPolicy, policy: &RestoredPolicy, contexts: &[Vec<f64>]) -> anyhow::Result<Replay> {
-    let spec = &saved.problem.environment;
-    let rebuilding = "rebuilding the run's environment";
-    let mut environment = environment::build(spec).context(rebuilding)?;
-    saved
-        .problem
-        .check_environment(environment.as_ref())
-        .context(rebuilding)?;
-    let mut free = environment::free_targets(spec).context(rebuilding)?;
+pub fn replay(
+    saved: &SavedPolicy,
+    policy: &RestoredPolicy,
+    environment: &mut dyn Environment,
+    contexts: &[Vec<f64>],
+) -> anyhow::Result<Replay> {
+    let mut free = environment::free_targets(&saved.problem.environment).context("rebuilding the run's environment")?;
     let throws: Vec<Throw> = contexts
         .iter()
         .enumerate()
@@ -161,15 +320,45 @@ pub fn is_throwing(saved: &SavedPolicy) -> bool {
     saved.user_problem.is_none() && matches!(saved.problem.name.as_str(), "grid" | "dartboard")
 }
 
+/// What performs the rollouts of the environment `spec` names, with the settings that change
+/// them: the throwing simulator, or the contextual function's sizes and seed.
+fn simulator(spec: &EnvironmentSpec) -> String {
+    let [first, second, third] = spec.parameters();
+    match (spec.name(), Sim::from_parameter(first)) {
+        (GRID_ENVIRONMENT | DARTBOARD_ENVIRONMENT, Some(Sim::Analytic)) => {
+            "analytic (the PA-10's commanded joint state at release, closed-form flight)".into()
+        }
+        (GRID_ENVIRONMENT | DARTBOARD_ENVIRONMENT, Some(Sim::Rapier)) => {
+            // The environment's spec matched this build's, whose arm has the default settings.
+            let c = RapierConfig::default();
+            format!(
+                "rapier (the PA-10 as a rapier3d multibody tracking the throw with joint motors: step {} s, {} solver iterations, motor stiffness {:e} 1/s^2, damping {:e} 1/s; closed-form flight after release)",
+                c.dt, c.solver_iterations, c.motor_stiffness, c.motor_damping
+            )
+        }
+        (contextual_function::ENVIRONMENT, _) => {
+            format!("the contextual function of n_s = {first}, n_theta = {second}, problem seed {third}")
+        }
+        (name, _) => name.to_string(),
+    }
+}
+
 /// The replay as a table, one line per context, then the statistics of the per-context scores.
 pub fn report(saved: &SavedPolicy, replay: &Replay, test_set: bool) -> String {
     let throwing = is_throwing(saved);
     let score_name = if throwing { "error (cm)" } else { "score" };
     let format = |v: &[f64]| v.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");
-    let mut lines = vec![format!(
-        "{} {} run {} (seed {}, {} training episodes), greedy policy:",
-        saved.experiment, saved.method, saved.run, saved.seed, saved.training_episodes
-    )];
+    let mut lines = vec![
+        format!(
+            "{} {} run {} (seed {}, {} training episodes), greedy policy:",
+            saved.experiment, saved.method, saved.run, saved.seed, saved.training_episodes
+        ),
+        format!(
+            "simulator: {}; environment {}",
+            simulator(&saved.problem.environment),
+            saved.problem.environment
+        ),
+    ];
     for throw in &replay.throws {
         let o = &throw.outcome;
         let line = match (o.is_ok(), throwing) {

@@ -68,6 +68,10 @@ pub struct Experiment {
     /// For a problem file's problem: how its scores read. Such a problem has no environment in
     /// this process; only a fleet of the user's workers runs it.
     pub user_problem: Option<UserProblem>,
+    /// Whether the environment takes contexts other than the training contexts. The Section 4
+    /// model does not (its ten contexts are indices): a method that draws contexts from the
+    /// continuous space is refused before the run instead of failing every rollout.
+    pub continuous_contexts: bool,
 }
 
 /// How the scores of a problem of the user's read, as its problem file says; recorded in the
@@ -317,11 +321,48 @@ pub enum RunError {
         "problem '{0}' is a problem of your own, simulated by your workers: use `acps run --config FILE --worker-command CMD` (or --workers 0 and start them yourself)"
     )]
     NeedsWorkers(String),
+    /// A method that cannot work on the experiment's environment.
+    #[error(
+        "method {method} draws contexts from the continuous space, but experiment '{experiment}' takes only its training contexts; choose a method that selects among them (round-robin, random, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac)"
+    )]
+    Method {
+        /// The method's name.
+        method: &'static str,
+        /// The experiment's name.
+        experiment: String,
+    },
+    /// A run whose every training rollout, or every rollout of every evaluation, failed: it
+    /// learnt or measured nothing.
+    #[error("experiment '{experiment}', method {method}, run {run} (seed {seed}): {what}")]
+    AllFailed {
+        /// The experiment's name.
+        experiment: String,
+        /// The method's name.
+        method: &'static str,
+        /// The run's index.
+        run: usize,
+        /// The run's seed.
+        seed: u64,
+        /// Which rollouts failed, and where the first did.
+        what: String,
+    },
 }
 
 impl Experiment {
-    /// Every (method, run) learner of the experiment, method-major.
+    /// Every (method, run) learner of the experiment, method-major, after refusing a method
+    /// that cannot work on its environment.
     pub fn jobs(&self) -> Result<Vec<Job>, RunError> {
+        if !self.continuous_contexts
+            && let Some(selector) = self
+                .methods
+                .iter()
+                .find(|s| s.method() == acps_learner::Method::RandomContinuous)
+        {
+            return Err(RunError::Method {
+                method: selector.method().name(),
+                experiment: self.name.clone(),
+            });
+        }
         (0..self.methods.len())
             .flat_map(|m| (0..self.runs).map(move |r| (m, r)))
             .map(|(method, run)| self.job(&self.methods[method], self.base_seed + run as u64))
@@ -444,7 +485,61 @@ impl Experiment {
             })
             .collect::<Result<Vec<()>, RunError>>()?;
         let jobs: Vec<Job> = jobs.into_iter().map(|(job, _)| job).collect();
-        Ok(self.summary(&jobs))
+        self.finished(&jobs)
+    }
+
+    /// The summary of the finished `jobs` (method-major, as [`jobs`](Self::jobs) made them),
+    /// refused when one of them learnt or measured nothing.
+    fn finished(&self, jobs: &[Job]) -> Result<Summary, RunError> {
+        for (index, job) in jobs.iter().enumerate() {
+            let method = self.methods[index / self.runs].method().name();
+            self.check_rollouts(method, index % self.runs, &job.learner)?;
+        }
+        Ok(self.summary(jobs))
+    }
+
+    /// Refuse a finished run whose every training rollout failed, or whose every evaluation had
+    /// no successful rollout. Outcomes carry no reason for a failure, so the error says where
+    /// the first one happened.
+    fn check_rollouts(&self, method: &'static str, run: usize, learner: &Learner) -> Result<(), RunError> {
+        let problem = learner.problem();
+        let episodes = learner.episodes();
+        let evaluations = learner.evaluations();
+        let what = if !episodes.is_empty() && episodes.iter().all(|e| !e.reward.is_finite()) {
+            let off = if problem.training_contexts.contains(&episodes[0].context) {
+                ""
+            } else {
+                ", not one of the problem's training contexts"
+            };
+            format!(
+                "every one of its {} training rollouts failed, so it learnt nothing; the first at episode 0, context ({}){off} (the environment gives no reason for a failed rollout)",
+                episodes.len(),
+                coordinates(&episodes[0].context)
+            )
+        } else if !evaluations.is_empty() && evaluations.iter().all(|e| e.score.is_none()) {
+            let first = evaluations[0]
+                .outcomes
+                .iter()
+                .position(|o| !o.as_ref().is_some_and(|o| o.is_ok()));
+            let context = first
+                .and_then(|i| problem.test_contexts.get(i))
+                .map_or(String::new(), |s| {
+                    format!("; the first at test context ({})", coordinates(s))
+                });
+            format!(
+                "every rollout of its {} evaluations failed, so no score was measured{context} (the environment gives no reason for a failed rollout)",
+                evaluations.len()
+            )
+        } else {
+            return Ok(());
+        };
+        Err(RunError::AllFailed {
+            experiment: self.name.clone(),
+            method,
+            run,
+            seed: learner.seed(),
+            what,
+        })
     }
 
     /// The checkpoint stamp of job `index`.
@@ -485,6 +580,8 @@ impl Experiment {
             .as_mut()
             .ok_or_else(|| RunError::NeedsWorkers(self.name.clone()))?;
         run_in_process(&mut job.learner, environment.as_mut())?;
+        let run = seed.wrapping_sub(self.base_seed) as usize;
+        self.check_rollouts(selector.method().name(), run, &job.learner)?;
         Ok(job.result())
     }
 
@@ -545,7 +642,7 @@ impl Experiment {
                 optimal_score,
             })
             .collect();
-        Ok((self.summary(&jobs), progress))
+        Ok((self.finished(&jobs)?, progress))
     }
 
     /// A hash of everything that determines the run's results: workers of another run are
@@ -666,6 +763,11 @@ fn longest_stay(episodes: &[Episode]) -> usize {
     longest
 }
 
+/// A context as `x, y, ...` for messages.
+fn coordinates(s: &[f64]) -> String {
+    s.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ")
+}
+
 /// Arithmetic mean.
 pub fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
@@ -703,12 +805,102 @@ mod tests {
         });
         let expected = ContextualFunction::new(2, 20, 0).unwrap().spec();
         let found = ContextualFunction::new(2, 20, 1).unwrap().spec();
-        let error = experiment.run(&Progress::new("function", true)).unwrap_err();
+        let error = experiment.run(&Progress::new("function", 0, true)).unwrap_err();
         assert!(matches!(error, RunError::Environment(_)), "{error}");
         assert_eq!(
             error.to_string(),
             format!("problem 'function' is defined for environment {expected}, not for {found}")
         );
+    }
+
+    /// The contextual function, failing every rollout of one kind in the instance of one seed.
+    struct Failing {
+        function: ContextualFunction,
+        fails: Option<acps_shared::TaskKind>,
+    }
+
+    impl Environment for Failing {
+        fn spec(&self) -> acps_shared::EnvironmentSpec {
+            self.function.spec()
+        }
+
+        fn context_dim(&self) -> usize {
+            self.function.context_dim()
+        }
+
+        fn param_dim(&self) -> usize {
+            self.function.param_dim()
+        }
+
+        fn rollout(&mut self, task: &acps_shared::Task) -> acps_shared::Outcome {
+            if Some(task.kind) == self.fails {
+                acps_shared::Outcome::failed(task.id)
+            } else {
+                self.function.rollout(task)
+            }
+        }
+    }
+
+    #[test]
+    fn a_run_whose_every_rollout_of_a_kind_failed_is_refused() {
+        use acps_shared::TaskKind;
+        let cases = [
+            (
+                TaskKind::Train,
+                "experiment 'function', method random, run 1 (seed 4): every one of its 20 training rollouts failed, so it learnt nothing; the first at episode 0, context (",
+            ),
+            (
+                TaskKind::Evaluate,
+                "experiment 'function', method random, run 1 (seed 4): every rollout of its 3 evaluations failed, so no score was measured; the first at test context (",
+            ),
+        ];
+        for (kind, expected) in cases {
+            let options = crate::paper::Options {
+                runs: 2,
+                seed: 3,
+                episodes: Some(20),
+                methods: Some(vec![acps_learner::Method::Random]),
+                ..Default::default()
+            };
+            let mut experiment = crate::paper::function(&options);
+            experiment.learner.eval_every = 10;
+            // Only run 1 (seed 4) fails: the error names that run.
+            experiment.instance = Box::new(move |seed| {
+                let function = ContextualFunction::new(2, 20, seed).unwrap();
+                Instance {
+                    problem: function.grid_problem().unwrap(),
+                    environment: Some(Box::new(Failing {
+                        function,
+                        fails: (seed == 4).then_some(kind),
+                    })),
+                    optimal_score: None,
+                    keeps_state: false,
+                }
+            });
+            let error = experiment.run(&Progress::new("function", true)).unwrap_err();
+            assert!(matches!(error, RunError::AllFailed { run: 1, .. }), "{error}");
+            assert!(error.to_string().starts_with(expected), "{kind:?}: {error}");
+        }
+    }
+
+    #[test]
+    fn a_method_the_environment_cannot_serve_is_refused_before_the_run() {
+        let options = crate::paper::Options {
+            runs: 1,
+            episodes: Some(10),
+            methods: Some(vec![acps_learner::Method::RandomContinuous]),
+            ..Default::default()
+        };
+        let toy = crate::paper::toy(crate::paper::toy_panel('a').unwrap(), &options);
+        let error = toy.jobs().err().unwrap();
+        assert!(
+            error
+                .to_string()
+                .starts_with("method random-continuous draws contexts from the continuous space, but experiment 'toy' takes only its training contexts"),
+            "{error}"
+        );
+        // The same method on an experiment whose environment takes any context in the space.
+        assert!(crate::paper::function(&options).jobs().is_ok());
     }
 
     #[test]

@@ -170,6 +170,8 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
         detail: None,
         best_policy: false,
         user_problem: None,
+        // The model's contexts are the indices of its ten: it fails any other.
+        continuous_contexts: false,
     }
 }
 
@@ -276,6 +278,7 @@ fn function_experiment(
         detail: None,
         best_policy: false,
         user_problem: None,
+        continuous_contexts: true,
     }
 }
 
@@ -388,6 +391,7 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
         detail: None,
         best_policy: true,
         user_problem: None,
+        continuous_contexts: true,
     }
 }
 
@@ -423,6 +427,7 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
         detail: Some(Box::new(move |runs| dartboard_detail(&fields, runs))),
         best_policy: false,
         user_problem: None,
+        continuous_contexts: true,
     }
 }
 

@@ -1486,6 +1486,7 @@ mod tests {
                     seconds: 0.0,
                     round_rates: vec![rate, rate],
                     round_ratios: vec![rate, 0.0],
+                    others_share: None,
                 })
                 .collect();
             let dir = dir.clone();

@@ -458,6 +458,7 @@ pub fn experiment(checked: &CheckedProblem, options: &Options) -> Experiment {
         detail: None,
         best_policy: false,
         user_problem: Some(checked.user.clone()),
+        continuous_contexts: true,
     }
 }
 

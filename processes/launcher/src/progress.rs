@@ -1,10 +1,68 @@
 //! What a running experiment shows: training episodes done of all, the latest test score
-//! averaged over the runs, rollouts per second and, for fleets, the live workers.
+//! averaged over the runs, rollouts per second and, for fleets, the live workers; and, once it
+//! is done, the final scores in the same words and unit.
 
-use crate::experiment::Experiment;
+use crate::experiment::{Experiment, Summary};
 use acps_learner::LearningProgress;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::time::Duration;
+
+/// How an experiment's score reads: its name and unit (with a leading space, or empty).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ScoreFormat {
+    /// For example "test error".
+    pub name: &'static str,
+    /// For example " cm".
+    pub unit: String,
+}
+
+impl ScoreFormat {
+    /// The score of one of the paper's experiments, by name.
+    fn of_paper(experiment: &str) -> Self {
+        let (name, unit) = match experiment {
+            "grid" | "dartboard" => ("test error", " cm"),
+            "function" | "dims" => ("test ln cost", ""),
+            "toy" => ("test J", ""),
+            _ => ("test score", ""),
+        };
+        Self {
+            name,
+            unit: unit.to_string(),
+        }
+    }
+
+    /// The score of `experiment`, in the unit a problem file gives its scores.
+    pub fn of(experiment: &Experiment) -> Self {
+        match &experiment.user_problem {
+            None => Self::of_paper(&experiment.name),
+            Some(user) if user.unit.is_empty() => Self::of_paper(""),
+            Some(user) => Self {
+                name: "test score",
+                unit: format!(" {}", user.unit),
+            },
+        }
+    }
+
+    /// `score` with its unit, to two decimals.
+    fn value(&self, score: Option<f64>) -> String {
+        score.map_or("-".to_string(), |score| format!("{score:.2}{}", self.unit))
+    }
+
+    /// A method's final line: "final test error 4.05 cm ± 0.27 cm (mean ± SEM over 4 runs)".
+    pub fn final_line(&self, mean: Option<f64>, sem: Option<f64>, runs: usize) -> String {
+        match (mean, sem) {
+            (Some(mean), Some(sem)) => format!(
+                "final {} {mean:.3}{unit} ± {sem:.3}{unit} (mean ± SEM over {runs} runs)",
+                self.name,
+                unit = self.unit
+            ),
+            _ => format!(
+                "final {}: none (every rollout of the last evaluation failed)",
+                self.name
+            ),
+        }
+    }
+}
 
 /// A progress line for an experiment, hidden when quiet.
 pub struct Progress {
@@ -12,80 +70,105 @@ pub struct Progress {
     score: ScoreFormat,
 }
 
-/// How the score of an experiment reads on the progress line: a name and a unit.
-type ScoreFormat = (&'static str, String);
-
-fn score_format(experiment: &str) -> ScoreFormat {
-    let (name, unit) = match experiment {
-        "grid" | "dartboard" => ("test error", " cm"),
-        "function" | "dims" => ("test ln cost", ""),
-        "toy" => ("test J", ""),
-        _ => ("test score", ""),
-    };
-    (name, unit.to_string())
-}
-
 impl Progress {
-    /// A progress line for `experiment`; nothing is drawn when `quiet`.
-    pub fn new(experiment: &str, quiet: bool) -> Self {
+    /// A progress line for `experiment` (its name), of `total` training episodes over all its
+    /// runs; nothing is drawn when `quiet`.
+    pub fn new(experiment: &str, total: u64, quiet: bool) -> Self {
         let bar = if quiet {
             ProgressBar::hidden()
         } else {
-            let bar = ProgressBar::new(0);
-            bar.set_style(
-                ProgressStyle::with_template(
-                    "{prefix} [{bar:25}] {human_pos}/{human_len} episodes, {msg}, {elapsed} (eta {eta})",
+            // The length is known from the start: no "0/0" bar drawn full before the first report.
+            let bar = ProgressBar::new(total)
+                .with_style(
+                    ProgressStyle::with_template(
+                        "{prefix} [{bar:25}] {human_pos}/{human_len} episodes, {msg}, {elapsed} (eta {eta})",
+                    )
+                    .expect("a valid template")
+                    .progress_chars("=> "),
                 )
-                .expect("a valid template")
-                .progress_chars("=> "),
-            );
-            bar.set_prefix(experiment.to_string());
-            bar.set_message("starting");
+                .with_prefix(experiment.to_string())
+                .with_message("starting");
             bar.enable_steady_tick(Duration::from_millis(250));
             bar
         };
         Self {
             bar,
-            score: score_format(experiment),
+            score: ScoreFormat::of_paper(experiment),
         }
     }
 
     /// A progress line for `experiment`, in the unit a problem file gives its scores.
     pub fn of(experiment: &Experiment, quiet: bool) -> Self {
-        let mut progress = Self::new(&experiment.name, quiet);
-        if let Some(user) = &experiment.user_problem {
-            let unit = if user.unit.is_empty() {
-                String::new()
-            } else {
-                format!(" {}", user.unit)
-            };
-            progress.score = ("test score", unit);
+        let total = experiment.learner.episodes * (experiment.methods.len() * experiment.runs) as u64;
+        Self {
+            score: ScoreFormat::of(experiment),
+            ..Self::new(&experiment.name, total, quiet)
         }
-        progress
     }
 
     /// Show `learning`, with `rollouts` done so far and, for fleets, the live `workers`.
     pub fn show(&self, learning: &LearningProgress, rollouts: u64, workers: Option<usize>) {
         self.bar.set_length(learning.total_episodes);
         self.bar.set_position(learning.episodes);
-        self.bar.set_message(self.message(learning, rollouts, workers));
-    }
-
-    fn message(&self, learning: &LearningProgress, rollouts: u64, workers: Option<usize>) -> String {
         let rate = rollouts as f64 / self.bar.elapsed().as_secs_f64().max(1e-3);
-        let (name, unit) = &self.score;
-        let score = learning
-            .score
-            .map_or("-".to_string(), |score| format!("{score:.2}{unit}"));
-        let mut message = format!("{name} {score}, {rate:.0} rollouts/s");
+        let mut message = format!(
+            "{} {}, {rate:.0} rollouts/s",
+            self.score.name,
+            self.score.value(learning.score)
+        );
         if let Some(workers) = workers {
             message += &format!(", {workers} workers");
         }
-        message
+        self.bar.set_message(message);
     }
 
-    /// Remove the line.
-    pub fn finish(&self) {
+    /// End the line with the final score of all runs, the mean the summary's lines break down
+    /// per method.
+    pub fn finish(&self, summary: &Summary) {
+        let finals: Vec<f64> = summary
+            .methods
+            .values()
+            .flat_map(|method| method.final_scores.iter().flatten().copied())
+            .collect();
+        let score = (!finals.is_empty()).then(|| crate::experiment::mean(&finals));
+        let of = match summary.methods.len() {
+            1 => String::new(),
+            methods => format!(" (mean of {methods} methods)"),
+        };
+        self.bar.set_position(self.bar.length().unwrap_or(0));
+        self.bar
+            .finish_with_message(format!("final {} {}{of}", self.score.name, self.score.value(score)));
+        if !self.bar.is_hidden() {
+            // The bar stays; what is printed next starts below it.
+            eprintln!();
+        }
+    }
+
+    /// Remove the line (the run failed or was stopped).
+    pub fn abandon(&self) {
         self.bar.finish_and_clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn final_lines_carry_the_unit_and_name_the_sem() {
+        let cm = ScoreFormat::of_paper("grid");
+        assert_eq!(
+            cm.final_line(Some(4.0451), Some(0.2724), 4),
+            "final test error 4.045 cm ± 0.272 cm (mean ± SEM over 4 runs)"
+        );
+        let none = ScoreFormat::of_paper("function");
+        assert_eq!(
+            none.final_line(Some(-2.5), Some(0.125), 20),
+            "final test ln cost -2.500 ± 0.125 (mean ± SEM over 20 runs)"
+        );
+        assert!(
+            cm.final_line(None, None, 4)
+                .contains("every rollout of the last evaluation failed")
+        );
     }
 }

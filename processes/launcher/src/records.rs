@@ -17,7 +17,7 @@
 
 use crate::experiment::{RunResult, Summary, UserProblem};
 use acps_learner::creps::{PolicySnapshot, Rejection, RestoredPolicy};
-use acps_shared::Problem;
+use acps_shared::{ContextSpace, Problem};
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -62,10 +62,11 @@ impl SavedPolicy {
         dir.join(POLICY_DIR).join(format!("{method}-run{run}.json"))
     }
 
-    /// Read and check a policy file: its format, the policy's shapes and values, and that the
-    /// policy fits the problem (context dimension, n_theta). Errors name the file and the field.
+    /// Read and check a policy file: its format, the problem's space, contexts and theta_0, the
+    /// policy's shapes and values, and that the policy fits the problem (context dimension,
+    /// n_theta). Errors name the file and the field.
     pub fn load(path: &Path) -> anyhow::Result<(Self, RestoredPolicy)> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = read_regular(path)?;
         let not_a_policy = || format!("{}: not an acps policy file", path.display());
         let json: serde_json::Value = serde_json::from_str(&text).with_context(not_a_policy)?;
         let bad = |field: &str, reason: String| anyhow::anyhow!("{}: {field} {reason}", path.display());
@@ -76,11 +77,16 @@ impl SavedPolicy {
             return Err(bad("format", format!("must be {POLICY_FORMAT:?}, got {got}")));
         }
         let saved: SavedPolicy = serde_json::from_value(json).with_context(not_a_policy)?;
-        let restored = saved
-            .policy
-            .restore()
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         let problem = &saved.problem;
+        check_problem(problem).map_err(|(field, reason)| bad(field, reason))?;
+        let n_theta = problem.theta0.len();
+        let restored = saved.policy.restore(n_theta).map_err(|e| {
+            let source = match e.field {
+                "weights" | "covariance" => format!(" (n_theta: problem.theta0 has {n_theta} entries)"),
+                _ => String::new(),
+            };
+            anyhow::anyhow!("{}: {e}{source}", path.display())
+        })?;
         if restored.context_dim() != problem.context_dim() {
             return Err(bad(
                 "policy.context_dim",
@@ -91,29 +97,129 @@ impl SavedPolicy {
                 ),
             ));
         }
-        if restored.n_params() != problem.theta0.len() {
-            return Err(bad(
-                "policy.weights",
-                format!(
-                    "must have {} columns (the problem's n_theta), got {}",
-                    problem.theta0.len(),
-                    restored.n_params()
-                ),
-            ));
-        }
-        if let Some(context) = problem
-            .test_contexts
-            .iter()
-            .chain(&problem.training_contexts)
-            .find(|s| s.len() != problem.context_dim() || s.iter().any(|x| !x.is_finite()))
-        {
-            return Err(bad(
-                "problem contexts",
-                format!("must be finite with {} entries, got {context:?}", problem.context_dim()),
-            ));
-        }
         Ok((saved, restored))
     }
+
+    /// Refuse a file of a run directory whose method or run is not the one its name says (a
+    /// relabelled file would replay another run's policy under this one's name).
+    pub fn check_name(&self, path: &Path) -> anyhow::Result<()> {
+        let named = format!("{}-run{}.json", self.method, self.run);
+        if path.file_name() != Some(named.as_ref()) {
+            bail!(
+                "{}: method {:?} and run {} are not the ones the file's name says (they would be in {named}); was the file relabelled?",
+                path.display(),
+                self.method,
+                self.run
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The problem of a policy file as any problem must be: a valid context space, at least one
+/// training and one test context, each finite with the space's dimension, and a finite theta_0
+/// of at least one parameter. The error is the field and what it accepts.
+fn check_problem(problem: &Problem) -> Result<(), (&'static str, String)> {
+    let space = match problem.space.clone() {
+        ContextSpace::Box { low, high } => ContextSpace::new_box(low, high).map(drop),
+        ContextSpace::Ball { dim, radius } => ContextSpace::new_ball(dim, radius).map(drop),
+    };
+    space.map_err(|e| ("problem.space", format!("is not a context space: {e}")))?;
+    let dim = problem.context_dim();
+    for (field, contexts) in [
+        ("problem.training_contexts", &problem.training_contexts),
+        ("problem.test_contexts", &problem.test_contexts),
+    ] {
+        if contexts.is_empty() {
+            return Err((field, "must hold at least one context, got none".into()));
+        }
+        if let Some((i, context)) = contexts
+            .iter()
+            .enumerate()
+            .find(|(_, s)| s.len() != dim || s.iter().any(|x| !x.is_finite()))
+        {
+            return Err((
+                field,
+                format!("must be finite with {dim} entries (the space's dimension), got {context:?} at index {i}"),
+            ));
+        }
+    }
+    if problem.theta0.is_empty() || problem.theta0.iter().any(|x| !x.is_finite()) {
+        return Err((
+            "problem.theta0",
+            format!(
+                "must be at least one finite parameter, got {} entries{}",
+                problem.theta0.len(),
+                if problem.theta0.is_empty() {
+                    ""
+                } else {
+                    " with a non-finite one"
+                }
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Policy files of this build are far smaller (a problem file's problem holds at most a few
+/// hundred thousand contexts); a larger file is refused before it is read into memory.
+const MAX_POLICY_BYTES: u64 = 256 << 20;
+
+/// What a file that is neither a directory nor a regular file is, for messages.
+fn special_kind(file_type: &std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if file_type.is_fifo() {
+        "named pipe (FIFO)"
+    } else if file_type.is_char_device() {
+        "character device"
+    } else if file_type.is_block_device() {
+        "block device"
+    } else if file_type.is_socket() {
+        "socket"
+    } else if file_type.is_dir() {
+        "directory"
+    } else {
+        "special file"
+    }
+}
+
+/// The text of the regular file `path`, refusing anything else without blocking or reading it:
+/// a FIFO would block a plain open until a writer comes, a device could stream forever.
+fn read_regular(path: &Path) -> anyhow::Result<String> {
+    use std::io::Read as _;
+    use std::os::unix::fs::OpenOptionsExt;
+    let reading = || format!("reading {}", path.display());
+    let check = |metadata: std::fs::Metadata| {
+        if !metadata.is_file() {
+            bail!(
+                "{} is a {}, not a policy file",
+                path.display(),
+                special_kind(&metadata.file_type())
+            );
+        }
+        if metadata.len() > MAX_POLICY_BYTES {
+            bail!(
+                "{}: {} bytes is more than a policy file holds (at most {MAX_POLICY_BYTES} bytes)",
+                path.display(),
+                metadata.len()
+            );
+        }
+        Ok(())
+    };
+    // Look before opening (opening a socket fails, opening a device may act on it), then check
+    // what was opened, in case the path was replaced in between.
+    check(std::fs::metadata(path).with_context(reading)?)?;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .with_context(reading)?;
+    check(file.metadata().with_context(reading)?)?;
+    let mut text = String::new();
+    file.take(MAX_POLICY_BYTES)
+        .read_to_string(&mut text)
+        .with_context(reading)?;
+    Ok(text)
 }
 
 /// Write the CSV tables and the policy files of `summary` into `dir` (which exists).
@@ -251,9 +357,17 @@ fn saved_policy(summary: &Summary, method: &str, run: usize, result: &RunResult)
 }
 
 /// The policy file `acps evaluate DIR` uses: `--method` (default: the first method with a
-/// policy file, by name) and `--run` (default 0). `dir` may also be a policy file itself.
+/// policy file of the run, by name) and `--run` (default 0), both among the files that
+/// `DIR/policies` holds. `dir` may also be a policy file itself.
 pub fn policy_file(dir: &Path, method: Option<&str>, run: Option<usize>) -> anyhow::Result<PathBuf> {
-    if dir.is_file() {
+    let metadata = match std::fs::metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "{} does not exist; give a run directory (the --out of `acps experiment` or `acps run`) or one of its policies/METHOD-runR.json files",
+            dir.display()
+        ),
+        metadata => metadata.with_context(|| format!("reading {}", dir.display()))?,
+    };
+    if metadata.is_file() {
         if method.is_some() || run.is_some() {
             bail!(
                 "--method and --run choose a file in a run directory; {} is a policy file",
@@ -262,39 +376,47 @@ pub fn policy_file(dir: &Path, method: Option<&str>, run: Option<usize>) -> anyh
         }
         return Ok(dir.to_path_buf());
     }
-    let run = run.unwrap_or(0);
-    let method = match method {
-        Some(method) => method.to_string(),
-        None => first_method(dir, run)?,
-    };
-    let path = SavedPolicy::path(dir, &method, run);
-    if !path.is_file() {
-        let available = saved_methods(dir, run).unwrap_or_default();
+    if !metadata.is_dir() {
         bail!(
-            "{} does not exist; --method must be one of [{}] and --run within the runs of the experiment",
-            path.display(),
-            available.join(", ")
+            "{} is a {}, not a run directory or a policy file",
+            dir.display(),
+            special_kind(&metadata.file_type())
         );
     }
-    Ok(path)
-}
-
-fn first_method(dir: &Path, run: usize) -> anyhow::Result<String> {
-    let methods = saved_methods(dir, run)?;
-    match methods.into_iter().next() {
-        Some(method) => Ok(method),
-        None => bail!(
-            "{} holds no policy file of run {run} (--run)",
-            dir.join(POLICY_DIR).display()
+    let saved = saved_policies(dir)?;
+    let run = run.unwrap_or(0);
+    let policies = dir.join(POLICY_DIR);
+    let methods: Vec<&str> = saved
+        .iter()
+        .filter(|(_, r)| *r == run)
+        .map(|(m, _)| m.as_str())
+        .collect();
+    if saved.is_empty() {
+        bail!("{} holds no policy file (METHOD-runR.json)", policies.display());
+    }
+    if methods.is_empty() {
+        let mut runs: Vec<usize> = saved.iter().map(|(_, r)| *r).collect();
+        runs.dedup();
+        bail!(
+            "{} holds no policy file of run {run} (--run); --run must be one of {runs:?}",
+            policies.display()
+        );
+    }
+    // Only a name the directory lists: a --method such as ../x must not reach a file elsewhere.
+    let method = match method {
+        None => methods[0],
+        Some(method) if methods.contains(&method) => method,
+        Some(method) => bail!(
+            "--method {method}: {} holds no policy file of that method for run {run}; --method must be one of [{}]",
+            policies.display(),
+            methods.join(", ")
         ),
-    }
+    };
+    Ok(SavedPolicy::path(dir, method, run))
 }
 
-/// The methods with a policy file for `run`, sorted.
-fn saved_methods(dir: &Path, run: usize) -> anyhow::Result<Vec<String>> {
-    if !dir.is_dir() {
-        bail!("{} is not a run directory: it does not exist", dir.display());
-    }
+/// The (method, run) of every policy file in `dir/policies`, sorted by run, then method.
+fn saved_policies(dir: &Path) -> anyhow::Result<Vec<(String, usize)>> {
     let policies = dir.join(POLICY_DIR);
     if !policies.is_dir() {
         bail!(
@@ -303,17 +425,15 @@ fn saved_methods(dir: &Path, run: usize) -> anyhow::Result<Vec<String>> {
         );
     }
     let entries = std::fs::read_dir(&policies).with_context(|| format!("reading {}", policies.display()))?;
-    let suffix = format!("-run{run}.json");
-    let mut methods: Vec<String> = entries
+    let mut saved: Vec<(String, usize)> = entries
         .filter_map(|entry| {
-            entry
-                .ok()?
-                .file_name()
-                .to_str()?
-                .strip_suffix(&suffix)
-                .map(str::to_string)
+            let name = entry.ok()?.file_name().into_string().ok()?;
+            let (method, run) = name.strip_suffix(".json")?.rsplit_once("-run")?;
+            let run: usize = run.parse().ok()?;
+            // As SavedPolicy::path names it ("run01" is not run 1's file).
+            (name == format!("{method}-run{run}.json")).then(|| (method.to_string(), run))
         })
         .collect();
-    methods.sort();
-    Ok(methods)
+    saved.sort_by(|a, b| (a.1, &a.0).cmp(&(b.1, &b.0)));
+    Ok(saved)
 }

@@ -1315,7 +1315,7 @@ fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serv
         ..Options::default()
     };
     let experiment = paper::dims(9, &options);
-    let summary = experiment.run(&acps::progress::Progress::new("dims", true)).unwrap();
+    let summary = experiment.run(&acps::progress::Progress::new("dims", 0, true)).unwrap();
     assert_eq!(summary.methods["random"].episodes, [0, 20]);
     let run = run_name("too-large");
     let mut fleet = test_fleet(&run, 0);

@@ -58,3 +58,45 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
         );
     }
 }
+
+/// The lines a finished run prints are the summary's numbers, with the unit and the word SEM.
+#[test]
+fn the_final_lines_give_the_summarys_scores_with_unit_and_sem() {
+    let dir = temp_dir("final-lines");
+    let out = dir.to_str().unwrap();
+    let cases = [
+        (
+            vec!["grid", "--runs", "2", "--episodes", "200", "--method", "random"],
+            "test error",
+            " cm",
+        ),
+        (
+            vec!["function", "--runs", "3", "--episodes", "100", "--method", "random"],
+            "test ln cost",
+            "",
+        ),
+    ];
+    for (args, name, unit) in cases {
+        let stdout = crate::succeeded(
+            &watched()
+                .arg("experiment")
+                .args(&args)
+                .args(["--out", out])
+                .output()
+                .unwrap(),
+        );
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+        let random = &summary["methods"]["random"];
+        let (mean, sem) = (
+            random["final_mean"].as_f64().unwrap(),
+            random["final_sem"].as_f64().unwrap(),
+        );
+        let runs = summary["runs"].as_u64().unwrap();
+        let expected = format!("random: final {name} {mean:.3}{unit} ± {sem:.3}{unit} (mean ± SEM over {runs} runs)");
+        assert!(
+            stdout.contains(&expected),
+            "{args:?}: expected {expected:?} in {stdout}"
+        );
+    }
+}

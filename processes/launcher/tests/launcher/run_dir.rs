@@ -1,7 +1,7 @@
 //! The run directory's tables, policies and pictures, and `acps evaluate` replaying a saved
 //! policy.
 
-use crate::{TempDir, acps, temp_dir};
+use crate::{TempDir, acps, temp_dir, watched};
 use std::path::Path;
 use std::process::Output;
 
@@ -10,11 +10,13 @@ fn stdout(out: &Output) -> String {
     String::from_utf8(out.stdout.clone()).unwrap()
 }
 
-/// The error message of a command that must fail.
+/// The error message of a command that must be refused (exit code 2), under the watchdog: a
+/// command that blocks (on a FIFO, say) fails instead of hanging the test.
 fn refusal(args: &[&str]) -> String {
-    let out = acps(args);
-    assert!(!out.status.success(), "{args:?} succeeded");
-    String::from_utf8(out.stderr).unwrap()
+    let out = watched().args(args).output().unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+    stderr
 }
 
 fn experiment(name: &str, method: &str, episodes: &str) -> TempDir {
@@ -290,6 +292,59 @@ fn evaluate_reproduces_the_learners_final_test_score() {
 }
 
 #[test]
+fn evaluate_names_the_simulator_and_its_settings() {
+    let rapier = temp_dir("rapier");
+    #[rustfmt::skip]
+    let args = ["experiment", "grid", "--sim", "rapier", "--runs", "1", "--episodes", "50",
+        "--method", "round-robin", "-q", "--out", rapier.to_str().unwrap()];
+    stdout(&acps(&args));
+    let cases: [(TempDir, &str); 3] = [
+        (
+            grid(),
+            "simulator: analytic (the PA-10's commanded joint state at release, closed-form flight); environment throw-grid [0, 0, 0] (settings ",
+        ),
+        (
+            rapier,
+            "simulator: rapier (the PA-10 as a rapier3d multibody tracking the throw with joint motors: step 0.008 s, 32 solver iterations, motor stiffness 1e10 1/s^2, damping 1e7 1/s; closed-form flight after release); environment throw-grid [1, 0, 0] (settings ",
+        ),
+        (
+            experiment("function", "random", "20"),
+            "simulator: the contextual function of n_s = 2, n_theta = 20, problem seed 3; environment contextual-function [2, 20, 3] (settings ",
+        ),
+    ];
+    for (dir, expected) in cases {
+        let text = stdout(&acps(&["evaluate", dir.to_str().unwrap()]));
+        assert!(text.lines().nth(1).unwrap().starts_with(expected), "{text}");
+    }
+}
+
+#[test]
+fn a_method_that_cannot_work_on_the_experiment_is_refused_before_running() {
+    let dir = temp_dir("toy-continuous");
+    std::fs::create_dir_all(&*dir).unwrap();
+    let file = dir.join("toy.toml");
+    std::fs::write(
+        &file,
+        "experiment = \"toy\"\nmethods = [\"round-robin\", \"random-continuous\"]\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let (out, file) = (out.to_str().unwrap(), file.to_str().unwrap());
+    let cases: [&[&str]; 2] = [
+        &["experiment", "toy", "--method", "random-continuous", "--out", out],
+        &["experiment", "--config", file, "--out", out],
+    ];
+    for args in cases {
+        let error = refusal(args);
+        assert!(
+            error.contains("method random-continuous draws contexts from the continuous space, but experiment 'toy' takes only its training contexts; choose a method that selects among them"),
+            "{args:?}: {error}"
+        );
+        assert!(!Path::new(out).exists(), "{args:?} wrote {out}");
+    }
+}
+
+#[test]
 fn evaluate_reproduces_a_function_run() {
     let dir = experiment("function", "random", "100");
     let s = summary(&dir);
@@ -367,55 +422,214 @@ fn evaluate_refuses_bad_targets_with_the_accepted_range() {
 }
 
 #[test]
-fn evaluate_refuses_missing_and_corrupted_policies() {
+fn evaluate_refuses_what_is_not_a_policy_of_the_run_directory() {
     let grid = grid();
     let dir = grid.to_str().unwrap();
-    let error = refusal(&["evaluate", dir, "--method", "diversity"]);
-    assert!(
-        error.contains("diversity-run0.json does not exist; --method must be one of [monotonic-progress]"),
-        "{error}"
-    );
-    let error = refusal(&["evaluate", dir, "--run", "4"]);
-    assert!(error.contains("holds no policy file of run 4 (--run)"), "{error}");
-    let empty = temp_dir("empty");
-    std::fs::create_dir_all(&*empty).unwrap();
-    let error = refusal(&["evaluate", empty.to_str().unwrap()]);
-    assert!(error.contains("has no policies/ directory"), "{error}");
-
+    let other = temp_dir("not-policies");
+    std::fs::create_dir_all(other.join("policies")).unwrap();
+    let fifo = other.join("fifo");
+    let made = |path: &Path| {
+        let status = std::process::Command::new("mkfifo").arg(path).status().unwrap();
+        assert!(status.success(), "mkfifo {}", path.display());
+    };
+    made(&fifo);
+    // A FIFO among the policies, as --method could name it.
+    made(&grid.join("policies/fifo-run0.json"));
+    let empty = other.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    // A copy of the run whose policy says it is another method's.
+    let relabelled = other.join("relabelled");
+    std::fs::create_dir_all(relabelled.join("policies")).unwrap();
     let original = std::fs::read_to_string(grid.join("policies/monotonic-progress-run0.json")).unwrap();
+    std::fs::write(
+        relabelled.join("policies/monotonic-progress-run0.json"),
+        original.replace("\"method\": \"monotonic-progress\"", "\"method\": \"diversity\""),
+    )
+    .unwrap();
+    let at = |path: &Path| path.to_str().unwrap().to_string();
+    let cases: Vec<(Vec<String>, String)> = vec![
+        (
+            vec![dir.into(), "--method".into(), "diversity".into()],
+            format!(
+                "--method diversity: {dir}/policies holds no policy file of that method for run 0; --method must be one of [fifo, monotonic-progress]"
+            ),
+        ),
+        // A path is not a method: it cannot reach a file outside DIR/policies.
+        (
+            vec![dir.into(), "--method".into(), "../../x".into()],
+            "--method ../../x: ".into(),
+        ),
+        (
+            vec![dir.into(), "--run".into(), "4".into()],
+            "holds no policy file of run 4 (--run); --run must be one of [0]".into(),
+        ),
+        (
+            vec![dir.into(), "--method".into(), "fifo".into()],
+            format!("{dir}/policies/fifo-run0.json is a named pipe (FIFO), not a policy file"),
+        ),
+        (vec![at(&empty)], "has no policies/ directory".into()),
+        (
+            vec![at(&other)],
+            "policies holds no policy file (METHOD-runR.json)".into(),
+        ),
+        (
+            vec![at(&other.join("missing"))],
+            "missing does not exist; give a run directory".into(),
+        ),
+        (
+            vec!["/dev/zero".into()],
+            "/dev/zero is a character device, not a run directory or a policy file".into(),
+        ),
+        (
+            vec![at(&fifo)],
+            format!(
+                "{} is a named pipe (FIFO), not a run directory or a policy file",
+                fifo.display()
+            ),
+        ),
+        (
+            vec![at(&relabelled)],
+            "monotonic-progress-run0.json: method \"diversity\" and run 0 are not the ones the file's name says".into(),
+        ),
+    ];
+    for (args, expected) in cases {
+        let mut all = vec!["evaluate"];
+        all.extend(args.iter().map(String::as_str));
+        let error = refusal(&all);
+        assert!(error.contains(&expected), "{args:?}: {error}");
+    }
+}
+
+#[test]
+fn evaluate_refuses_edited_policy_files_naming_the_file_and_field() {
+    let grid = grid();
+    let function = experiment("function", "random", "20");
     let broken = temp_dir("broken");
     std::fs::create_dir_all(&*broken).unwrap();
     let file = broken.join("policy.json");
-    let check = |text: &str, expected: &str| {
-        std::fs::write(&file, text).unwrap();
-        let error = refusal(&["evaluate", file.to_str().unwrap()]);
-        assert!(error.contains(&file.display().to_string()), "{error}");
-        assert!(error.contains(expected), "{error}");
+    type Edit = fn(&mut serde_json::Value);
+    // (run directory, edit of its policy, message after the file's name)
+    let cases: [(&Path, Edit, &str); 20] = [
+        (
+            &grid,
+            |p| p["policy"]["weights"].as_array_mut().unwrap().truncate(5),
+            "policy weights: must have 6 rows, got 5",
+        ),
+        // The row that is short is the one blamed, also when it is the first.
+        (
+            &grid,
+            |p| p["policy"]["weights"][0].as_array_mut().unwrap().truncate(20),
+            "policy weights: every row must have 21 entries (n_theta), row 0 has 20 (n_theta: problem.theta0 has 21 entries)",
+        ),
+        (
+            &grid,
+            |p| p["policy"]["covariance"][3][4] = 1e3.into(),
+            "policy covariance: covariance must be",
+        ),
+        (
+            &grid,
+            |p| p["format"] = "acps-policy-0".into(),
+            "format must be \"acps-policy-2\", got \"acps-policy-0\"",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["theta0"].as_array_mut().unwrap().truncate(20),
+            "policy weights: every row must have 20 entries (n_theta), row 0 has 21 (n_theta: problem.theta0 has 20 entries)",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["space"]["Box"]["low"] = serde_json::json!([-3.0, -3.0]),
+            "problem.space is not a context space: context box: low and high must have the same non-zero length and finite low[i] < high[i]; got low [-3.0, -3.0], high [-3.0, -3.0]",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["space"]["Box"] = serde_json::json!({"low": [-3.0, -3.0], "high": [-5.0, -5.0]}),
+            "problem.space is not a context space: context box: low and high must have the same non-zero length and finite low[i] < high[i]; got low [-3.0, -3.0], high [-5.0, -5.0]",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["space"]["Box"]["high"] = serde_json::json!([-2.0, -3.0]),
+            "problem.space is coordinate 0 in [-5, -2], coordinate 1 in [-5, -3], but the grid experiment's run of seed 3 has coordinate 0 in [-5, -3], coordinate 1 in [-5, -3]",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["test_contexts"] = serde_json::json!([]),
+            "problem.test_contexts must hold at least one context, got none",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["training_contexts"][2] = serde_json::json!([-4.0]),
+            "problem.training_contexts must be finite with 2 entries (the space's dimension), got [-4.0] at index 2",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["test_contexts"][3] = serde_json::json!([-4.0, -4.0]),
+            "problem.test_contexts[3] is (-4,-4), but the grid experiment's run of seed 3 has (",
+        ),
+        // Relabelled as another experiment, or its problem as another problem.
+        (
+            &grid,
+            |p| p["experiment"] = "dartboard".into(),
+            "problem.environment.name \"throw-grid\" is not the dartboard experiment's environment \"throw-dartboard\"",
+        ),
+        (
+            &grid,
+            |p| p["experiment"] = "function".into(),
+            "problem.environment.name \"throw-grid\" is not the function experiment's environment \"contextual-function\"",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["name"] = "dartboard".into(),
+            "problem.name is \"dartboard\", but the grid experiment's run of seed 3 has \"grid\"",
+        ),
+        (
+            &grid,
+            |p| p["experiment"] = "toy".into(),
+            "experiment \"toy\" learns no policy",
+        ),
+        (
+            &grid,
+            |p| p["experiment"] = "bowl".into(),
+            "experiment must be one of function, dims, grid, dartboard (the experiments acps simulates; a problem of your own has a user_problem field), got \"bowl\"",
+        ),
+        (
+            &grid,
+            |p| p["problem"]["environment"]["parameters"] = serde_json::json!([7, 0, 0]),
+            "problem.environment.parameters [7, ..] must start with 0 (analytic) or 1 (rapier), the simulator",
+        ),
+        // A run whose environment this build builds with other settings (another time step, say).
+        (
+            &grid,
+            |p| p["problem"]["environment"]["settings"] = "0123456789abcdef".into(),
+            "problem 'grid' is defined for environment throw-grid [0, 0, 0] (settings 0123456789abcdef), not for throw-grid [0, 0, 0] (settings ",
+        ),
+        (
+            &function,
+            |p| p["seed"] = 4.into(),
+            "problem.environment.parameters [n_s, n_theta, problem seed] = [2, 20, 3] must be the problem's context dimension 2, its n_theta 20 (theta0's entries, more than n_s) and the run's seed 4",
+        ),
+        (
+            &function,
+            |p| p["problem"]["environment"]["parameters"] = serde_json::json!([2, 100000, 3]),
+            "[n_s, n_theta, problem seed] = [2, 100000, 3] must be the problem's context dimension 2, its n_theta 20",
+        ),
+    ];
+    let text = |dir: &Path| {
+        let name = if dir == &*grid { "monotonic-progress" } else { "random" };
+        std::fs::read_to_string(dir.join(format!("policies/{name}-run0.json"))).unwrap()
     };
-    check(&original[..original.len() / 2], "not an acps policy file");
-    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
-    policy["policy"]["weights"].as_array_mut().unwrap().pop();
-    check(&policy.to_string(), "policy weights: must have 6 rows, got 5");
-    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
-    policy["policy"]["covariance"][3][4] = serde_json::json!(1e3);
-    check(&policy.to_string(), "policy covariance: covariance must be");
-    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
-    policy["format"] = serde_json::json!("acps-policy-0");
-    check(
-        &policy.to_string(),
-        "format must be \"acps-policy-2\", got \"acps-policy-0\"",
+    std::fs::write(&file, &text(&grid)[..text(&grid).len() / 2]).unwrap();
+    let error = refusal(&["evaluate", file.to_str().unwrap()]);
+    assert!(
+        error.contains(&format!("{}: not an acps policy file", file.display())),
+        "{error}"
     );
-    // A run whose environment this build builds with other settings (another time step, say).
-    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
-    policy["problem"]["environment"]["settings"] = serde_json::json!("0123456789abcdef");
-    check(
-        &policy.to_string(),
-        "problem 'grid' is defined for environment throw-grid [0, 0, 0] (settings 0123456789abcdef), not for throw-grid [0, 0, 0] (settings ",
-    );
-    let mut policy: serde_json::Value = serde_json::from_str(&original).unwrap();
-    policy["problem"]["theta0"].as_array_mut().unwrap().pop();
-    check(
-        &policy.to_string(),
-        "policy.weights must have 20 columns (the problem's n_theta), got 21",
-    );
+    for (dir, edit, expected) in cases {
+        let mut policy: serde_json::Value = serde_json::from_str(&text(dir)).unwrap();
+        edit(&mut policy);
+        std::fs::write(&file, policy.to_string()).unwrap();
+        let error = refusal(&["evaluate", file.to_str().unwrap()]);
+        assert!(error.contains(&format!("{}: ", file.display())), "{error}");
+        assert!(error.contains(expected), "{expected}\n{error}");
+    }
 }

@@ -62,10 +62,12 @@ fn feature_map_name(features: &FeatureMap) -> Option<&'static str> {
 }
 
 impl PolicySnapshot {
-    /// The policy this snapshot describes, after checking every shape and value: a known
-    /// feature map valid for `context_dim`, W with as many rows as features and equal rows,
-    /// Sigma square of W's width, finite, symmetric and positive semi-definite.
-    pub fn restore(&self) -> Result<RestoredPolicy, PolicySnapshotRestoreError> {
+    /// The policy of `n_theta` parameters this snapshot describes, after checking every shape
+    /// and value: a known feature map valid for `context_dim`, W of as many rows as features and
+    /// `n_theta` columns, Sigma `n_theta` x `n_theta`, finite, symmetric and positive
+    /// semi-definite. The caller states n_theta (a saved policy's problem knows it), so that a
+    /// row of the wrong length is the one blamed, also when it is the first.
+    pub fn restore(&self, n_theta: usize) -> Result<RestoredPolicy, PolicySnapshotRestoreError> {
         let error = |field, reason: String| PolicySnapshotRestoreError { field, reason };
         let features = [FeatureMap::Affine, FeatureMap::Quadratic, FeatureMap::PolarQuadratic]
             .into_iter()
@@ -83,9 +85,11 @@ impl PolicySnapshot {
             .validate(self.context_dim, &[0.0])
             .map_err(|e| error("context_dim", e.to_string()))?;
         let n_phi = features.dim(self.context_dim);
-        let weights = matrix(&self.weights, "weights", n_phi, None)?;
-        let n_theta = weights.ncols();
-        let covariance = matrix(&self.covariance, "covariance", n_theta, Some(n_theta))?;
+        if n_theta == 0 {
+            return Err(error("weights", "n_theta must be >= 1, got 0".into()));
+        }
+        let weights = matrix(&self.weights, "weights", n_phi, n_theta)?;
+        let covariance = matrix(&self.covariance, "covariance", n_theta, n_theta)?;
         let policy = LinearGaussianPolicy::new(weights, covariance).map_err(|e| error("covariance", e.to_string()))?;
         Ok(RestoredPolicy {
             features,
@@ -95,25 +99,20 @@ impl PolicySnapshot {
     }
 }
 
-/// A `rows` x `columns` matrix from row vectors (`columns`: None takes the first row's length,
-/// which must be >= 1).
+/// A `rows` x `columns` matrix (columns = n_theta) from row vectors.
 fn matrix(
     data: &[Vec<f64>],
     field: &'static str,
     rows: usize,
-    columns: Option<usize>,
+    columns: usize,
 ) -> Result<DMatrix<f64>, PolicySnapshotRestoreError> {
     let error = |reason: String| PolicySnapshotRestoreError { field, reason };
     if data.len() != rows {
         return Err(error(format!("must have {rows} rows, got {}", data.len())));
     }
-    let columns = columns.unwrap_or_else(|| data.first().map_or(0, Vec::len));
-    if columns == 0 {
-        return Err(error("rows must not be empty".into()));
-    }
     if let Some((i, row)) = data.iter().enumerate().find(|(_, row)| row.len() != columns) {
         return Err(error(format!(
-            "every row must have {columns} entries, row {i} has {}",
+            "every row must have {columns} entries (n_theta), row {i} has {}",
             row.len()
         )));
     }
@@ -190,7 +189,7 @@ mod tests {
         let json = serde_json::to_string(&snapshot).unwrap();
         let restored = serde_json::from_str::<PolicySnapshot>(&json)
             .unwrap()
-            .restore()
+            .restore(3)
             .unwrap();
         for context in [[-1.5, -1.2], [-3.0, -0.5], [-0.1, -4.0]] {
             assert_eq!(restored.greedy(&context), creps.greedy(&context));
@@ -204,10 +203,10 @@ mod tests {
         let message = |change: &dyn Fn(&mut PolicySnapshot)| {
             let mut snapshot = good.clone();
             change(&mut snapshot);
-            snapshot.restore().unwrap_err().to_string()
+            snapshot.restore(3).unwrap_err().to_string()
         };
         type Change = dyn Fn(&mut PolicySnapshot);
-        let cases: [(&Change, &str); 7] = [
+        let cases: [(&Change, &str); 8] = [
             (&|s| s.features = "cubic".into(), "policy features: must be \"affine\""),
             (
                 &|s| s.context_dim = 3,
@@ -219,11 +218,16 @@ mod tests {
             ),
             (
                 &|s| s.weights[2].push(0.0),
-                "policy weights: every row must have 3 entries, row 2 has 4",
+                "policy weights: every row must have 3 entries (n_theta), row 2 has 4",
+            ),
+            // The first row is the one blamed, not the next one.
+            (
+                &|s| s.weights[0].pop().map(drop).unwrap(),
+                "policy weights: every row must have 3 entries (n_theta), row 0 has 2",
             ),
             (
                 &|s| s.covariance[1].pop().map(drop).unwrap(),
-                "policy covariance: every row must have 3 entries, row 1 has 2",
+                "policy covariance: every row must have 3 entries (n_theta), row 1 has 2",
             ),
             (
                 &|s| s.covariance[0][0] = f64::NAN,
