@@ -877,7 +877,7 @@ mod tests {
                     keeps_state: false,
                 }
             });
-            let error = experiment.run(&Progress::new("function", true)).unwrap_err();
+            let error = experiment.run(&Progress::new("function", 0, true)).unwrap_err();
             assert!(matches!(error, RunError::AllFailed { run: 1, .. }), "{error}");
             assert!(error.to_string().starts_with(expected), "{kind:?}: {error}");
         }
