@@ -83,19 +83,18 @@ def _dot(column: Sequence[float], phi: Sequence[float]) -> float:
     return res
 
 
-def _matrix(data: Any, field: str, rows: int, columns: int | None) -> list[list[float]]:
+def _matrix(data: Any, field: str, rows: int, columns: int) -> list[list[float]]:
     """A checked ``rows`` x ``columns`` matrix of finite floats from row lists."""
     if not isinstance(data, list) or len(data) != rows:
         got = len(data) if isinstance(data, list) else type(data).__name__
         raise ValueError(f"policy {field}: must have {rows} rows, got {got}")
-    width = columns if columns is not None else (len(data[0]) if data else 0)
-    if width == 0:
+    if columns == 0:
         raise ValueError(f"policy {field}: rows must not be empty")
     out: list[list[float]] = []
     for i, row in enumerate(data):
-        if not isinstance(row, list) or len(row) != width:
+        if not isinstance(row, list) or len(row) != columns:
             raise ValueError(
-                f"policy {field}: every row must have {width} entries, row {i} has "
+                f"policy {field}: every row must have {columns} entries (n_theta), row {i} has "
                 f"{len(row) if isinstance(row, list) else row!r}"
             )
         values = []
@@ -141,9 +140,13 @@ class Policy:
         if self.context_dim < 1:
             raise ValueError(f"{source}: policy context_dim must be >= 1, got {self.context_dim}")
         n_phi = feature_count(self.features, self.context_dim)
+        # The problem's initial parameters say how many there are, so that a short row is
+        # blamed itself rather than the rows after it.
+        theta0 = (data.get("problem") or {}).get("theta0")
+        first = weights[0] if isinstance(weights, list) and weights else None
+        self.n_theta = len(theta0) if isinstance(theta0, list) else len(first or [])
         try:
-            self.weights = _matrix(weights, "weights", n_phi, None)
-            self.n_theta = len(self.weights[0])
+            self.weights = _matrix(weights, "weights", n_phi, self.n_theta)
             self.covariance = _matrix(covariance, "covariance", self.n_theta, self.n_theta)
         except ValueError as error:
             raise ValueError(f"{source}: {error}") from error
@@ -177,13 +180,21 @@ class Policy:
             directory = path / POLICY_DIR
             if not directory.is_dir():
                 raise FileNotFoundError(f"{path} has no {POLICY_DIR}/ directory")
+            suffix = f"-run{run}.json"
+            # Only the files the directory lists: a method cannot name a path outside it.
+            methods = sorted(
+                p.name[: -len(suffix)] for p in directory.glob(f"*{suffix}") if p.is_file()
+            )
+            if not methods:
+                raise FileNotFoundError(f"{directory} holds no policy file of run {run}")
             if method is None:
-                suffix = f"-run{run}.json"
-                names = sorted(p.name for p in directory.glob(f"*{suffix}"))
-                if not names:
-                    raise FileNotFoundError(f"{directory} holds no policy file of run {run}")
-                method = names[0][: -len(suffix)]
-            path = directory / f"{method}-run{run}.json"
+                method = methods[0]
+            elif method not in methods:
+                raise FileNotFoundError(
+                    f"{directory} holds no policy of method {method!r} in run {run}; "
+                    f"its methods: {', '.join(methods)}"
+                )
+            path = directory / f"{method}{suffix}"
         text = path.read_text(encoding="utf-8")
         try:
             data = json.loads(text)

@@ -74,6 +74,11 @@ class PolicyTest(unittest.TestCase):
             (policy("cubic", 1, [[1.0], [1.0]]), "features must be one of"),
             (policy("affine", 1, [[1.0]]), "weights: must have 2 rows"),
             (policy("affine", 1, [[1.0], [1.0, 2.0]]), "row 1 has 2"),
+            # A short first row is blamed itself: theta0 says how long rows are.
+            (
+                {**policy("affine", 1, [[1.0], [1.0, 2.0]]), "problem": {"theta0": [0.0, 0.0]}},
+                r"must have 2 entries \(n_theta\), row 0 has 1",
+            ),
             (policy("affine", 1, [[1.0], [float("nan")]]), "must be finite"),
             (policy("polar-quadratic", 3, [[1.0]] * 6), "exactly 2"),
         ]
@@ -95,6 +100,11 @@ class PolicyTest(unittest.TestCase):
             self.assertEqual(Policy.load(directory, method="b-method").mean([1.0]), [2.0])
             with self.assertRaisesRegex(FileNotFoundError, "no policy file of run 1"):
                 Policy.load(directory, run=1)
+            # A file outside policies/ is not reached through the method's name.
+            outside = policy("affine", 1, [[9.0], [0.0]])
+            (Path(directory) / "x-run0.json").write_text(json.dumps(outside))
+            with self.assertRaisesRegex(FileNotFoundError, "its methods: a-method, b-method"):
+                Policy.load(directory, method="../x")
 
 
 if __name__ == "__main__":
