@@ -240,6 +240,10 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
 /// processes simulate. The fleet removes the run's shared memory when it ends, also on errors
 /// and Ctrl-C.
 pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
+    if let Some(name) = &args.run {
+        // Before the output directory is made: the fleet would refuse the name only then.
+        RunName::new(name).with_context(|| format!("--run {name}"))?;
+    }
     let Some((out, jobs)) = jobs(&args.experiment)? else {
         return Ok(());
     };

@@ -329,6 +329,16 @@ fn bench_writes_its_table_and_json() {
 
 #[test]
 fn fleet_options_are_checked_before_anything_starts() {
+    // A bad run name, before the output directory is made.
+    let dir = temp_dir("bad-run-name");
+    let out = acps(&["run", "grid", "--run", "a_b", "--out", dir.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--run a_b: "),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!dir.exists(), "wrote {}", dir.display());
     let cases: [(&[&str], &str); 9] = [
         (&["worker"], "--run is missing: name the run to join"),
         (
