@@ -215,6 +215,7 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         return Ok(());
     };
     for job in &jobs {
+        job.experiment.check_methods()?;
         job.experiment.check_in_process()?;
     }
     check_resumable(&args, &jobs)?;
@@ -263,6 +264,9 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             "problem '{}' needs your workers: --worker-command CMD or --workers 0",
             job.experiment.name
         );
+    }
+    for job in &jobs {
+        job.experiment.check_methods()?;
     }
     check_resumable(&args.experiment, &jobs)?;
     prepare_outputs(&jobs)?;

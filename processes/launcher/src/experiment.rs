@@ -352,17 +352,7 @@ impl Experiment {
     /// Every (method, run) learner of the experiment, method-major, after refusing a method
     /// that cannot work on its environment.
     pub fn jobs(&self) -> Result<Vec<Job>, RunError> {
-        if !self.continuous_contexts
-            && let Some(selector) = self
-                .methods
-                .iter()
-                .find(|s| s.method() == acps_learner::Method::RandomContinuous)
-        {
-            return Err(RunError::Method {
-                method: selector.method().name(),
-                experiment: self.name.clone(),
-            });
-        }
+        self.check_methods()?;
         (0..self.methods.len())
             .flat_map(|m| (0..self.runs).map(move |r| (m, r)))
             .map(|(method, run)| self.job(&self.methods[method], self.base_seed + run as u64))
@@ -393,6 +383,22 @@ impl Experiment {
             keeps_state,
             optimal_score,
         })
+    }
+
+    /// Refuse a method that cannot work on this experiment (random-continuous where contexts
+    /// are not points of a continuous space).
+    pub fn check_methods(&self) -> Result<(), RunError> {
+        match self
+            .methods
+            .iter()
+            .find(|s| !self.continuous_contexts && s.method() == acps_learner::Method::RandomContinuous)
+        {
+            Some(selector) => Err(RunError::Method {
+                method: selector.method().name(),
+                experiment: self.name.clone(),
+            }),
+            None => Ok(()),
+        }
     }
 
     /// Refuse to run in this process a problem only the user's workers simulate.
