@@ -213,11 +213,17 @@ fn throws_at_targets(summary: &Summary) -> bool {
 }
 
 /// What the recorded settings say about how the scores came about, for a title: the throws'
-/// simulator, or the noise of Section 4's model (what tells Fig. 2's panels apart).
+/// simulator, the context dimensions of Section 5.1.3 or the noise of Section 4's model (what
+/// tells Fig. 6's and Fig. 2's panels apart).
 fn setting_note(summary: &Summary) -> Option<String> {
     let settings = &summary.settings;
     if let Some(sim) = settings["sim"].as_str() {
         return Some(format!("{sim} simulator"));
+    }
+    if summary.experiment == "dims"
+        && let Some(n_s) = settings["n_s"].as_u64()
+    {
+        return Some(format!("n_s = {n_s}"));
     }
     let model = &settings["model"];
     let (r, b) = (model["sigma_r"].as_f64()?, model["sigma_b"].as_f64()?);
@@ -786,7 +792,7 @@ impl Exploration {
     fn of(summary: &Summary, methods: UpdateTraces) -> Self {
         Self {
             caption: format!(
-                "{}: exploration (trace Sigma, log scale) and effective sample size after every C-REPS update, each of {} runs thin, their median thick",
+                "{}: exploration (trace Sigma) and effective sample size after each C-REPS update, {} runs (thin) and their median (thick)",
                 summary.experiment, summary.runs
             ),
             methods,
@@ -817,7 +823,7 @@ impl Picture for Exploration {
     where
         DB::ErrorType: 'static,
     {
-        let root = titled(root, &self.caption, 18.0)?;
+        let root = titled(root, &self.caption, 17.0)?;
         let all = || self.methods.iter().flat_map(|(_, runs)| runs.iter().flatten());
         let x_max = all().map(|u| u.0).fold(1.0, f64::max);
         let trace_range = log_range(all().map(|u| u.1));
