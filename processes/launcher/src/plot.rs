@@ -241,12 +241,7 @@ fn compact(value: f64) -> String {
         return format!("{value:.1e}");
     }
     let text = format!("{value:.2}");
-    let text = text.trim_end_matches('0').trim_end_matches('.');
-    if text == "-0" {
-        "0".to_string()
-    } else {
-        text.to_string()
-    }
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
 /// A training context's label: its coordinates.
