@@ -4,12 +4,13 @@
 //! - `curves`: mean learning curve of every method with a +-1 SEM band (paper Fig. 4, 6, 8);
 //!   when the problem knows its optimum and round robin ran, curves are drawn relative to round
 //!   robin with the optimum as a dashed line (Fig. 2); the best policy of all runs, when the
-//!   summary names one, is a dashed line too, beside a zoom on the second half (Fig. 8).
+//!   summary names one, is a dashed line too, beside a zoom on the second half (Fig. 8). Curves
+//!   hidden under an identical one say so in the legend.
 //! - `selections`: for 1-D contexts, the context chosen in every episode of run 0 (Fig. 3);
-//!   for 2-D contexts, the log selection ratio of every training context over the first
-//!   episodes (Fig. 5).
-//! - `selections-time`: per method, the share of selections of every training context in bins
-//!   of episodes, averaged over runs (Fig. 3 and 5 over the whole run).
+//!   for 2-D contexts, every training context's share of the first episodes, on a log colour
+//!   scale centred on the uniform share (Fig. 5).
+//! - `selections-time`: per method, the share of selections of every training context in 50 bins
+//!   of episodes, averaged over runs, on one colour scale (Fig. 3 and 5 over the whole run).
 //! - `updates`: per method, the exploration (trace Sigma, log scale) and the effective sample
 //!   size of every C-REPS update, every run a thin line and the median a thick one, so that the
 //!   collapse of one run in twenty shows.
@@ -194,6 +195,168 @@ fn with_notes(text: String, notes: &[String]) -> String {
     }
 }
 
+/// Room right of a chart for the second half of its last x tick label ("10000" at the axis' end).
+const TICK_ROOM: u32 = 30;
+
+/// The scores' unit, when known: a problem file's, or cm for the paper's throws.
+fn score_unit(summary: &Summary) -> Option<&str> {
+    match &summary.user_problem {
+        Some(user) => Some(user.unit.as_str()).filter(|unit| !unit.is_empty()),
+        None if throws_at_targets(summary) => Some("cm"),
+        None => None,
+    }
+}
+
+/// Whether the training contexts are the paper's throwing targets: points on the ground, in m.
+fn throws_at_targets(summary: &Summary) -> bool {
+    summary.user_problem.is_none() && matches!(summary.experiment.as_str(), "grid" | "dartboard")
+}
+
+/// What the recorded settings say about how the scores came about, for a title: the throws'
+/// simulator, the context dimensions of Section 5.1.3 or the noise of Section 4's model (what
+/// tells Fig. 6's and Fig. 2's panels apart).
+fn setting_note(summary: &Summary) -> Option<String> {
+    let settings = &summary.settings;
+    if let Some(sim) = settings["sim"].as_str() {
+        return Some(format!("{sim} simulator"));
+    }
+    if summary.experiment == "dims"
+        && let Some(n_s) = settings["n_s"].as_u64()
+    {
+        return Some(format!("n_s = {n_s}"));
+    }
+    let model = &settings["model"];
+    let (r, b) = (model["sigma_r"].as_f64()?, model["sigma_b"].as_f64()?);
+    Some(format!("sigma_r {r}, sigma_b {b}"))
+}
+
+/// A number for a label: at most two decimals and no trailing zeros, or in powers of ten when
+/// that would hide it.
+fn compact(value: f64) -> String {
+    // A tick at 0 may come out of plotters' arithmetic as 1e-16.
+    if value.abs() < 1e-12 {
+        return "0".to_string();
+    }
+    if !(1e-2..1e5).contains(&value.abs()) {
+        return format!("{value:.1e}");
+    }
+    let text = format!("{value:.2}");
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// A training context's label: its coordinates.
+fn context_label(context: &[f64]) -> String {
+    let coordinates: Vec<String> = context.iter().map(|&v| compact(v)).collect();
+    match coordinates.as_slice() {
+        [one] => one.clone(),
+        _ => format!("({})", coordinates.join(", ")),
+    }
+}
+
+/// Draw `text` centred at the top of `area`, broken into lines that fit its width, and return
+/// the area below it.
+fn titled<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    text: &str,
+    size: f64,
+) -> Result<DrawingArea<DB, Shift>, Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let style = ("sans-serif", size)
+        .into_font()
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Center, VPos::Top));
+    let width = area.dim_in_pixel().0.saturating_sub(40);
+    let mut lines: Vec<String> = Vec::new();
+    for word in text.split(' ') {
+        match lines.last_mut() {
+            Some(line) if area.estimate_text_size(&format!("{line} {word}"), &style)?.0 <= width => {
+                line.push(' ');
+                line.push_str(word);
+            }
+            _ => lines.push(word.to_string()),
+        }
+    }
+    let height = (1.3 * area.estimate_text_size("Ag", &style)?.1 as f64).ceil() as i32;
+    let centre = area.dim_in_pixel().0 as i32 / 2;
+    for (row, line) in lines.iter().enumerate() {
+        area.draw_text(line, &style, (centre, 6 + row as i32 * height))?;
+    }
+    Ok(area.split_vertically(12 + lines.len() as i32 * height).1)
+}
+
+/// `full` faded towards white: `t` = 0 is white, 1 is `full` (clamped; NaN is white).
+fn fade(full: RGBColor, t: f64) -> RGBColor {
+    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+    let mix = |c: u8| (255.0 - t * (255.0 - f64::from(c))).round() as u8;
+    RGBColor(mix(full.0), mix(full.1), mix(full.2))
+}
+
+/// Below and above a reference: blue for `t` < 0 and red for `t` > 0, white at 0.
+fn diverging(t: f64) -> RGBColor {
+    if t < 0.0 {
+        fade(RGBColor(33, 102, 172), -t)
+    } else {
+        fade(RGBColor(178, 24, 43), t)
+    }
+}
+
+/// The colour of a cell no episode went to, beside every colour of [`diverging`].
+const NEVER: RGBColor = RGBColor(150, 150, 150);
+
+/// A horizontal colour bar in `area`: the `colour` of every value of `range`, ticks labelled by
+/// `tick`, `label` below; `extra` is a swatch left of the bar with its name (a colour outside
+/// the scale).
+fn colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    range: Range<f64>,
+    colour: &dyn Fn(f64) -> RGBColor,
+    tick: &dyn Fn(&f64) -> String,
+    label: &str,
+    extra: Option<(RGBColor, &str)>,
+) -> PlotResult
+where
+    DB::ErrorType: 'static,
+{
+    let (width, height) = area.dim_in_pixel();
+    let side = width / 5;
+    let mut chart = ChartBuilder::on(area)
+        .margin_left(side)
+        .margin_right(side)
+        .margin_top(8)
+        .x_label_area_size(44)
+        .build_cartesian_2d(range.clone(), 0.0..1.0)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_y_axis()
+        .label_style(("sans-serif", 12))
+        .axis_desc_style(("sans-serif", 13))
+        .x_labels(7)
+        .x_label_formatter(tick)
+        .x_desc(label)
+        .draw()?;
+    const STEPS: usize = 200;
+    let at = |i: usize| range.start + (range.end - range.start) * i as f64 / STEPS as f64;
+    chart.draw_series((0..STEPS).map(|i| {
+        Rectangle::new(
+            [(at(i), 0.0), (at(i + 1), 1.0)],
+            colour((at(i) + at(i + 1)) / 2.0).filled(),
+        )
+    }))?;
+    if let Some((swatch, name)) = extra {
+        let (x, bottom) = (side as i32 - 70, height as i32 - 44);
+        area.draw(&Rectangle::new([(x, 8), (x + 24, bottom)], swatch.filled()))?;
+        let style = ("sans-serif", 12)
+            .into_font()
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Center, VPos::Top));
+        area.draw_text(name, &style, (x + 12, bottom + 5))?;
+    }
+    Ok(())
+}
+
 /// Write every picture that fits the summary into `dir`.
 pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
     save(&LearningCurves(summary), dir, "curves")?;
@@ -226,10 +389,14 @@ pub fn write_all(summary: &Summary, dir: &Path) -> PlotResult {
         );
     }
     match summary.training_contexts.first().map(Vec::len) {
-        Some(2) => save(&SelectionMaps(summary), dir, "selections")?,
-        Some(1) => save(&SelectionTraces(summary), dir, "selections")?,
+        Some(2) => {
+            if let Some(maps) = SelectionMaps::new(summary) {
+                save(&maps, dir, "selections")?;
+            }
+        }
+        Some(1) => save(&SelectionTraces::new(summary), dir, "selections")?,
         // The context index stands for a point of 3 or more dimensions (a problem file's).
-        Some(_) if !paper => save(&SelectionTraces(summary), dir, "selections")?,
+        Some(_) if !paper => save(&SelectionTraces::new(summary), dir, "selections")?,
         _ => {}
     }
     Ok(())
@@ -274,11 +441,31 @@ fn curves(summary: &Summary) -> (Vec<Curve>, Option<f64>, String) {
         .collect();
     let optimum = reference.and(summary.j_opt_mean);
     let label = match (&reference, &summary.user_problem) {
-        (Some(_), _) => "J - J_RR".to_string(),
+        (Some(_), _) => "J - J_RR, J relative to round robin's".to_string(),
         (None, Some(user)) if !user.unit.is_empty() => format!("{} ({})", summary.metric, user.unit),
         (None, _) => summary.metric.clone(),
     };
     (curves, optimum, label)
+}
+
+/// For every curve, the name of the last curve drawn after it with the very same points, which
+/// hides it (Section 4's two progress heuristics without noise).
+fn hidden_under(curves: &[Curve]) -> Vec<Option<String>> {
+    let same = |a: &[(f64, f64, f64)], b: &[(f64, f64, f64)]| {
+        let bits = |p: &(f64, f64, f64)| [p.0.to_bits(), p.1.to_bits(), p.2.to_bits()];
+        !a.is_empty() && a.len() == b.len() && a.iter().zip(b).all(|(p, q)| bits(p) == bits(q))
+    };
+    curves
+        .iter()
+        .enumerate()
+        .map(|(i, curve)| {
+            curves[i + 1..]
+                .iter()
+                .rev()
+                .find(|later| same(&curve.points, &later.points))
+                .map(|later| later.name.clone())
+        })
+        .collect()
 }
 
 /// Mean learning curves with SEM bands. With a best-policy line (the grid, Fig. 8) a second
@@ -307,17 +494,33 @@ impl Picture for LearningCurves<'_> {
             Some(_) => ", higher is better",
             None => "",
         };
-        let caption = format!("{}: {} runs per method{direction}", summary.experiment, summary.runs);
+        let setting = setting_note(summary).map_or(String::new(), |s| format!(", {s}"));
+        let caption = format!(
+            "{}{setting}: mean ± SEM of {} runs per method{direction}",
+            summary.experiment, summary.runs
+        );
         if !self.zoomed() {
             return learning_curves(summary, root, 0.0, caption);
         }
         let (full, zoom) = root.split_horizontally(800);
         learning_curves(summary, &full, 0.0, caption)?;
-        learning_curves(summary, &zoom, 0.5, "the second half, zoomed".to_string())
+        learning_curves(
+            summary,
+            &zoom,
+            0.5,
+            "the second half, zoomed (the lines of the left panel)".to_string(),
+        )
     }
 }
 
-/// Draw the curves from `from` (a fraction of the episodes) on; the y range fits what is drawn.
+/// The legend's name of the SEM bands.
+const SEM: &str = "shaded: ± 1 SEM";
+
+/// The legend's name of Section 4's optimum.
+const OPTIMUM: &str = "J_opt, the best J";
+
+/// Draw the curves from `from` (a fraction of the episodes) on; the y range fits what is drawn,
+/// the optimum included.
 fn learning_curves<DB: DrawingBackend>(
     summary: &Summary,
     root: &DrawingArea<DB, Shift>,
@@ -328,6 +531,7 @@ where
     DB::ErrorType: 'static,
 {
     let (mut curves, optimum, y_label) = curves(summary);
+    let hidden = hidden_under(&curves);
     let best = summary.best_policy.as_ref().map(|b| b.score);
     let x_max = curves
         .iter()
@@ -338,23 +542,35 @@ where
     for curve in &mut curves {
         curve.points.retain(|p| p.0 >= x_min);
     }
-    // The range fits the curves and the best policy; the optimum line may leave it early on, as
-    // in the paper's Fig. 2.
+    // J_opt relative to round robin, at round robin's evaluations.
+    let optimum_line: Vec<Option<(f64, f64)>> = match (summary.methods.get("round-robin"), optimum) {
+        (Some(rr), Some(opt)) => rr
+            .episodes
+            .iter()
+            .zip(&rr.mean)
+            .filter(|(e, _)| **e as f64 >= x_min)
+            .map(|(&e, m)| Some((e as f64, opt - (*m)?)))
+            .collect(),
+        _ => Vec::new(),
+    };
     let y_range = linear_range(
         curves
             .iter()
             .flat_map(|c| c.points.iter())
             .flat_map(|&(_, m, s)| [m, m - s, m + s])
-            .chain(best),
+            .chain(best)
+            .chain(optimum_line.iter().flatten().map(|p| p.1)),
         0.05,
     );
     let best_note = match best {
         Some(best) if !best.is_finite() => format!("best policy {best} not drawn"),
         _ => String::new(),
     };
-    let mut chart = ChartBuilder::on(root)
-        .caption(with_notes(caption, &[best_note]), ("sans-serif", 20))
+    let area = titled(root, &with_notes(caption, &[best_note]), 20.0)?;
+    let mut chart = ChartBuilder::on(&area)
         .margin(12)
+        .margin_top(4)
+        .margin_right(TICK_ROOM)
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(x_min..x_max, y_range.clone())?;
@@ -362,10 +578,13 @@ where
         .configure_mesh()
         .x_desc("training episodes")
         .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| compact(*y))
         .y_desc(short(&y_label))
         .draw()?;
     let y = |value: f64| clip(value, &y_range, 0.0);
-    for (index, curve) in curves.iter().enumerate() {
+    // Where the lines run, for the legend to keep clear of, and the legend's lines.
+    let (mut drawn, mut labels): (Vec<(f64, f64)>, Vec<String>) = (Vec::new(), Vec::new());
+    for ((index, curve), hidden) in curves.iter().enumerate().zip(&hidden) {
         let color = COLORS[index % COLORS.len()];
         // A mean that is not finite (ln 0 of a log-mean metric) breaks the line; a SEM that is
         // not finite leaves the band out there.
@@ -385,6 +604,10 @@ where
                 })
         });
         chart.draw_series(bands)?;
+        drawn.extend(lines.iter().flatten().flat_map(|&(x, m, s)| {
+            let s = s.unwrap_or(0.0);
+            [(x, m), (x, m - s), (x, m + s)]
+        }));
         let means = curve.points.iter().filter(|p| !p.1.is_finite()).count();
         let sems = curve
             .points
@@ -396,8 +619,12 @@ where
             &[
                 left_out(means, "non-finite mean", "not drawn"),
                 left_out(sems, "non-finite SEM", "not drawn"),
+                hidden
+                    .as_ref()
+                    .map_or(String::new(), |other| format!("= {other}, under it")),
             ],
         );
+        labels.push(label.clone());
         chart
             .draw_series(lines.iter().map(|line| {
                 PathElement::new(
@@ -411,24 +638,30 @@ where
         let dots = lines.iter().filter(|line| line.len() == 1);
         chart.draw_series(dots.map(|line| Circle::new((line[0].0, line[0].1), 3, color.filled())))?;
     }
-    if let (Some(rr), Some(opt)) = (summary.methods.get("round-robin"), optimum) {
+    let dashed = |(x, y): (i32, i32)| DashedPathElement::new(vec![(x, y), (x + 20, y)], 4, 3, BLACK);
+    if !optimum_line.is_empty() {
         let lines = pieces(
-            rr.episodes
+            optimum_line
                 .iter()
-                .zip(&rr.mean)
-                .map(|(&e, m)| Some((e as f64, clip(opt - (*m)?, &y_range, 1.0)?))),
+                .map(|p| p.and_then(|(x, v)| Some((x, clip(v, &y_range, 1.0)?)))),
         );
+        drawn.extend(lines.iter().flatten());
+        labels.push(OPTIMUM.to_string());
         chart
             .draw_series(
                 lines
                     .into_iter()
                     .map(|line| DashedPathElement::new(line, 6, 4, BLACK.stroke_width(1))),
             )?
-            .label("J_opt")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            .label(OPTIMUM)
+            .legend(dashed);
     }
     if let Some(best) = best.filter(|b| b.is_finite()) {
         let at = y(best).unwrap_or(best);
+        drawn.extend((0..=20).map(|i| (x_min + (x_max - x_min) * f64::from(i) / 20.0, at)));
+        let unit = score_unit(summary).map_or(String::new(), |unit| format!(" {unit}"));
+        let label = format!("best policy ({best:.2}{unit})");
+        labels.push(label.clone());
         chart
             .draw_series(DashedLineSeries::new(
                 [(x_min, at), (x_max, at)],
@@ -436,18 +669,72 @@ where
                 4,
                 BLACK.stroke_width(1),
             ))?
-            .label(format!("best policy ({best:.2})"))
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            .label(label)
+            .legend(dashed);
     }
     // A zoomed panel shares the full panel's legend.
     if from == 0.0 {
         chart
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+            .label(SEM)
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], BLACK.mix(0.15).filled()));
+        let font = ("sans-serif", 13).into_font();
+        labels.push(SEM.to_string());
+        let corner = legend_corner(&chart, &labels, &font, &drawn)?;
+        chart
             .configure_series_labels()
+            .label_font(font)
+            .position(corner)
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
             .draw()?;
     }
     Ok(())
+}
+
+/// The corner of `chart`'s plot where a legend of `labels` (in `font`) covers the fewest of
+/// `drawn` (points of the lines), top right first on a tie.
+fn legend_corner<DB: DrawingBackend>(
+    chart: &ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    labels: &[String],
+    font: &FontDesc,
+    drawn: &[(f64, f64)],
+) -> Result<SeriesLabelPosition, Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let mut text = MultiLineText::<_, &str>::new((0, 0), font.clone());
+    for label in labels {
+        text.push_line(label.as_str());
+    }
+    // As plotters lays the legend out: its margin of 10 around the text and 30 for the lines.
+    let (w, h) = text.estimate_dimension()?;
+    let (w, h) = (w + 30 + 20, h + 20);
+    let area = chart.plotting_area();
+    let (width, height) = area.dim_in_pixel();
+    let (width, height) = (width as i32, height as i32);
+    let (left, top) = (area.get_pixel_range().0.start, area.get_pixel_range().1.start);
+    let pixels: Vec<(i32, i32)> = drawn
+        .iter()
+        .map(|p| {
+            let (x, y) = area.map_coordinate(p);
+            (x - left, y - top)
+        })
+        .collect();
+    let covered = |&(x, y): &(i32, i32)| {
+        pixels
+            .iter()
+            .filter(|p| (x..=x + w).contains(&p.0) && (y..=y + h).contains(&p.1))
+            .count()
+    };
+    let corners = [
+        (width - w - 10, 10),
+        (10, 10),
+        (width - w - 10, height - h - 10),
+        (10, height - h - 10),
+    ];
+    let best = corners.iter().min_by_key(|c| covered(c)).copied().unwrap_or(corners[0]);
+    Ok(SeriesLabelPosition::Coordinate(best.0, best.1))
 }
 
 /// The first words of a metric description, for an axis.
@@ -493,13 +780,18 @@ impl Exploration {
             })
             .collect();
         let any = methods.iter().flat_map(|(_, runs)| runs).any(|run| !run.is_empty());
-        any.then(|| Self {
+        any.then(|| Self::of(summary, methods))
+    }
+
+    /// The picture of `methods`' updates.
+    fn of(summary: &Summary, methods: UpdateTraces) -> Self {
+        Self {
             caption: format!(
-                "{}: every C-REPS update of {} runs (thin) and their median (thick)",
+                "{}: exploration (trace Sigma) and effective sample size after each C-REPS update, {} runs (thin) and their median (thick)",
                 summary.experiment, summary.runs
             ),
             methods,
-        })
+        }
     }
 
     /// The median over runs of the k-th update's value, at the k-th update's mean episode.
@@ -526,7 +818,7 @@ impl Picture for Exploration {
     where
         DB::ErrorType: 'static,
     {
-        let root = root.titled(&self.caption, ("sans-serif", 20))?;
+        let root = titled(root, &self.caption, 17.0)?;
         let all = || self.methods.iter().flat_map(|(_, runs)| runs.iter().flatten());
         let x_max = all().map(|u| u.0).fold(1.0, f64::max);
         let trace_range = log_range(all().map(|u| u.1));
@@ -570,7 +862,7 @@ impl Picture for Exploration {
                 runs,
                 |u| u.2,
                 &ess,
-                ("ESS", &|y| format!("{y:.0}")),
+                ("effective sample size", &|y| format!("{y:.0}")),
                 last,
                 color,
             )?;
@@ -663,15 +955,81 @@ where
     Ok(())
 }
 
+/// What the problem calls a training context, for titles.
+fn context_noun(summary: &Summary) -> &'static str {
+    if throws_at_targets(summary) {
+        "target"
+    } else {
+        "context"
+    }
+}
+
+/// The name of an axis of training contexts, labelled with their coordinates.
+fn context_axis(summary: &Summary) -> &'static str {
+    match summary.training_contexts.first().map(Vec::len) {
+        _ if throws_at_targets(summary) => "target (x, y) in m",
+        Some(1) if summary.experiment == "toy" && summary.user_problem.is_none() => "context",
+        Some(1) => "context s",
+        Some(2) => "context (s_1, s_2)",
+        _ => "context (coordinates)",
+    }
+}
+
+/// The training episodes every run of every method has; `None` without runs.
+fn common_episodes(summary: &Summary) -> Option<usize> {
+    summary
+        .run_results
+        .values()
+        .flatten()
+        .map(|run| run.episodes.len())
+        .min()
+}
+
+/// Per method, `shares[context][bin]`: the share of the episodes of each of `bins` equal bins of
+/// the first `episodes` (at least 1) training episodes that went to each training context,
+/// averaged over runs. A context drawn from the continuous space counts for the nearest training
+/// context, as the learner files it.
+fn selection_shares(summary: &Summary, episodes: usize, bins: usize) -> Vec<(String, Vec<Vec<f64>>)> {
+    let contexts = &summary.training_contexts;
+    summary
+        .run_results
+        .iter()
+        .map(|(name, runs)| {
+            let mut shares = vec![vec![0.0; bins]; contexts.len()];
+            for run in runs {
+                for (t, episode) in run.episodes[..episodes].iter().enumerate() {
+                    let arm = episode.arm.unwrap_or_else(|| nearest(contexts, &episode.context));
+                    shares[arm][t * bins / episodes] += 1.0;
+                }
+            }
+            for (bin, width) in (0..bins).map(|b| (b, bin_width(b, bins, episodes))) {
+                for row in &mut shares {
+                    row[bin] /= (width * runs.len()) as f64;
+                }
+            }
+            (name.clone(), shares)
+        })
+        .collect()
+}
+
+/// The height of the colour bar under a picture of shares.
+const BAR_HEIGHT: u32 = 90;
+
+/// Room for a picture's title of up to two lines.
+const TITLE_HEIGHT: u32 = 60;
+
 /// Per method, the share of selections of every training context in bins of episodes,
-/// averaged over runs. A context drawn from the continuous space counts for the nearest
-/// training context, as the learner files it.
+/// averaged over runs, on one colour scale.
 struct SelectionsOverTime {
+    /// What the picture shows.
+    title: String,
+    /// The training contexts' labels, and the name of their axis.
+    contexts: Vec<String>,
+    axis: &'static str,
     /// Per method: its name and `shares[context][bin]`.
     methods: Vec<(String, Vec<Vec<f64>>)>,
     /// Episodes per run.
     episodes: usize,
-    runs: usize,
 }
 
 impl SelectionsOverTime {
@@ -679,45 +1037,56 @@ impl SelectionsOverTime {
 
     fn new(summary: &Summary) -> Option<Self> {
         let contexts = &summary.training_contexts;
-        let episodes = summary
-            .run_results
-            .values()
-            .flatten()
-            .map(|run| run.episodes.len())
-            .min()?;
+        let episodes = common_episodes(summary)?;
         if episodes == 0 || contexts.is_empty() {
             return None;
         }
-        let bins = Self::BINS.min(episodes);
-        let methods = summary
-            .run_results
+        let shares = selection_shares(summary, episodes, Self::BINS.min(episodes));
+        Some(Self::of(summary, episodes, shares))
+    }
+
+    /// The picture of `methods`' shares in bins of the first `episodes` training episodes.
+    fn of(summary: &Summary, episodes: usize, methods: Vec<(String, Vec<Vec<f64>>)>) -> Self {
+        let bins = methods
             .iter()
-            .map(|(name, runs)| {
-                let mut shares = vec![vec![0.0; bins]; contexts.len()];
-                for run in runs {
-                    for (t, episode) in run.episodes[..episodes].iter().enumerate() {
-                        let arm = episode.arm.unwrap_or_else(|| nearest(contexts, &episode.context));
-                        shares[arm][t * bins / episodes] += 1.0;
-                    }
-                }
-                for (bin, width) in (0..bins).map(|b| (b, bin_width(b, bins, episodes))) {
-                    for row in &mut shares {
-                        row[bin] /= (width * runs.len()) as f64;
-                    }
-                }
-                (name.clone(), shares)
-            })
-            .collect();
-        Some(Self {
+            .flat_map(|(_, shares)| shares.first())
+            .map(Vec::len)
+            .max()
+            .unwrap_or(1)
+            .max(1);
+        let (narrow, wide) = (episodes / bins, episodes.div_ceil(bins));
+        let width = if narrow == wide {
+            format!("{narrow}")
+        } else {
+            format!("{narrow}-{wide}")
+        };
+        Self {
+            title: format!(
+                "{}: share of each bin of {width} training episodes that went to each {}, mean over {} runs",
+                summary.experiment,
+                context_noun(summary),
+                summary.runs
+            ),
+            contexts: summary.training_contexts.iter().map(|c| context_label(c)).collect(),
+            axis: context_axis(summary),
             methods,
             episodes,
-            runs: summary.runs,
-        })
+        }
+    }
+
+    /// Panels per row and rows.
+    fn grid(&self) -> (usize, usize) {
+        let columns = if self.methods.len() > 3 { 2 } else { 1 };
+        (columns, self.methods.len().div_ceil(columns).max(1))
+    }
+
+    /// Pixels per context, so that a few contexts get rows a label fits and many still fit.
+    fn row_height(&self) -> u32 {
+        (300 / self.contexts.len().max(1) as u32).clamp(4, 12)
     }
 
     fn panel_height(&self) -> u32 {
-        let contexts = self.methods.first().map_or(0, |(_, shares)| shares.len());
-        (70 + 6 * contexts as u32).max(200)
+        self.row_height() * self.contexts.len() as u32 + 100
     }
 }
 
@@ -737,121 +1106,281 @@ fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
 
 impl Picture for SelectionsOverTime {
     fn size(&self) -> (u32, u32) {
-        (900, self.panel_height() * self.methods.len().max(1) as u32)
+        let (columns, rows) = self.grid();
+        let width = if columns == 1 { 900 } else { 700 * columns as u32 };
+        (width, TITLE_HEIGHT + self.panel_height() * rows as u32 + BAR_HEIGHT)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
     where
         DB::ErrorType: 'static,
     {
-        let episodes = self.episodes as f64;
-        for ((name, shares), area) in self.methods.iter().zip(root.split_evenly((self.methods.len(), 1))) {
-            let bins = shares[0].len();
-            let most = shares.iter().flatten().copied().fold(0.0, f64::max);
-            let caption = format!(
-                "{name}: share of selections per context, bins of {:.0} episodes, {} runs (darkest {most:.2})",
-                episodes / bins as f64,
-                self.runs
-            );
+        let shares = || {
+            self.methods
+                .iter()
+                .flat_map(|(_, shares)| shares.iter().flatten())
+                .copied()
+        };
+        let most = shares().filter(|s| s.is_finite()).fold(0.0, f64::max);
+        let level = |share: f64| if most > 0.0 { share / most } else { 0.0 };
+        let unplaced = shares().filter(|s| !s.is_finite()).count();
+        let (body, bar) = root.split_vertically(root.dim_in_pixel().1 - BAR_HEIGHT);
+        let title = with_notes(
+            self.title.clone(),
+            &[left_out(unplaced, "non-finite share", "not drawn")],
+        );
+        let body = titled(&body, &title, 18.0)?;
+        let contexts = self.contexts.len();
+        // Every k-th context is labelled, so that the labels do not overlap; k is a step plotters
+        // picks for its ticks.
+        let every = [1, 2, 5, 10, 20, 50, 100]
+            .into_iter()
+            .find(|&k| k * self.row_height() >= 12)
+            .unwrap_or(100) as usize;
+        let label = |y: &f64| {
+            let index = y.round();
+            let labelled = (y - index).abs() < 1e-6 && index >= 0.0 && (index as usize).is_multiple_of(every);
+            let text = labelled.then(|| self.contexts.get(index as usize)).flatten();
+            text.cloned().unwrap_or_default()
+        };
+        let font = TextStyle::from(("sans-serif", 12).into_font());
+        let widest = self
+            .contexts
+            .iter()
+            .map(|c| root.estimate_text_size(c, &font).map(|size| size.0))
+            .try_fold(0, |widest, width| width.map(|w| widest.max(w)))?;
+        let (columns, rows) = self.grid();
+        for ((name, shares), area) in self.methods.iter().zip(body.split_evenly((rows, columns))) {
+            let bins = shares.first().map_or(1, Vec::len).max(1);
+            let area = titled(&area, name, 15.0)?;
             let mut chart = ChartBuilder::on(&area)
-                .caption(caption, ("sans-serif", 15))
-                .margin(8)
-                .x_label_area_size(30)
-                .y_label_area_size(40)
-                .build_cartesian_2d(0.0..episodes, -0.5..(shares.len() as f64 - 0.5))?;
+                .margin_left(8)
+                .margin_right(TICK_ROOM)
+                .margin_bottom(6)
+                .x_label_area_size(40)
+                .y_label_area_size(widest + 34)
+                .build_cartesian_2d(0.0..self.episodes as f64, -0.5..(contexts as f64 - 0.5))?;
             chart
                 .configure_mesh()
                 .disable_mesh()
-                .x_desc("episode")
-                .y_desc("context")
+                .x_desc("training episode")
+                .y_desc(self.axis)
                 .x_label_formatter(&|x| format!("{x:.0}"))
-                .y_label_formatter(&|y| format!("{y:.0}"))
+                .y_labels(contexts.div_ceil(every))
+                .y_label_formatter(&label)
                 .draw()?;
             let cells = shares.iter().enumerate().flat_map(|(context, row)| {
-                row.iter().enumerate().map(move |(bin, &share)| {
-                    let level = if most > 0.0 { share / most } else { 0.0 };
-                    let fade = |full: u8| (255.0 - level * (255.0 - f64::from(full))) as u8;
-                    let x = |b: usize| (b * self.episodes).div_ceil(bins) as f64;
-                    Rectangle::new(
-                        [(x(bin), context as f64 - 0.5), (x(bin + 1), context as f64 + 0.5)],
-                        RGBColor(fade(8), fade(48), fade(107)).filled(),
-                    )
-                })
+                row.iter()
+                    .enumerate()
+                    .filter(|(_, share)| share.is_finite())
+                    .map(move |(bin, &share)| {
+                        let x = |b: usize| (b * self.episodes).div_ceil(bins) as f64;
+                        Rectangle::new(
+                            [(x(bin), context as f64 - 0.5), (x(bin + 1), context as f64 + 0.5)],
+                            fade(DARK, level(share)).filled(),
+                        )
+                    })
             });
             chart.draw_series(cells)?;
         }
-        Ok(())
+        let uniform = 1.0 / contexts.max(1) as f64;
+        colour_bar(
+            &bar,
+            0.0..most.max(uniform),
+            &|share| fade(DARK, level(share)),
+            &|share| compact(*share),
+            &format!(
+                "share of a bin's episodes (uniform: 1/{contexts} = {})",
+                compact(uniform)
+            ),
+            None,
+        )
     }
 }
 
-/// The context chosen in every episode of run 0, per method (1-D contexts).
-struct SelectionTraces<'a>(&'a Summary);
+/// The darkest colour of a share.
+const DARK: RGBColor = RGBColor(8, 48, 107);
 
-impl Picture for SelectionTraces<'_> {
+/// The context chosen in every episode of run 0, per method: its coordinate for 1-D contexts
+/// (Fig. 3), its index for 3 or more dimensions.
+struct SelectionTraces {
+    title: String,
+    /// The name of the y axis.
+    axis: &'static str,
+    /// Per method, the chosen context in every training episode of run 0.
+    methods: Vec<(String, Vec<Option<f64>>)>,
+}
+
+impl SelectionTraces {
+    fn new(summary: &Summary) -> Self {
+        let contexts = &summary.training_contexts;
+        let one = contexts.first().is_some_and(|c| c.len() == 1);
+        let chosen = |episode: &acps_learner::learner::Episode| {
+            if one {
+                episode.context.first().copied()
+            } else {
+                Some(episode.arm.unwrap_or_else(|| nearest(contexts, &episode.context)) as f64)
+            }
+        };
+        let methods = summary
+            .run_results
+            .iter()
+            .map(|(name, runs)| {
+                let episodes = runs.first().map_or(&[][..], |run| &run.episodes[..]);
+                (name.clone(), episodes.iter().map(chosen).collect())
+            })
+            .collect();
+        Self::of(summary, methods)
+    }
+
+    /// The picture of `methods`' choices.
+    fn of(summary: &Summary, methods: Vec<(String, Vec<Option<f64>>)>) -> Self {
+        let one = summary.training_contexts.first().is_some_and(|c| c.len() == 1);
+        Self {
+            title: format!(
+                "{}: the context chosen in every training episode of run 0",
+                summary.experiment
+            ),
+            axis: if one {
+                context_axis(summary)
+            } else {
+                "training context (index)"
+            },
+            methods,
+        }
+    }
+}
+
+impl Picture for SelectionTraces {
     fn size(&self) -> (u32, u32) {
         // A PNG of height 0 is an error: a summary without methods still gets an empty picture.
-        (900, 220 * self.0.methods.len().max(1) as u32)
+        (900, TITLE_HEIGHT + 220 * self.methods.len().max(1) as u32)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
     where
         DB::ErrorType: 'static,
     {
-        let summary = self.0;
-        let methods: Vec<_> = summary.methods.iter().collect();
-        let contexts = summary.training_contexts.len();
-        for ((name, m), area) in methods.iter().zip(root.split_evenly((methods.len(), 1))) {
-            let episodes = m.selections_run0.len().max(1) as f64;
+        let chosen = || {
+            self.methods
+                .iter()
+                .flat_map(|(_, chosen)| chosen.iter().flatten().copied())
+        };
+        let y_range = linear_range(chosen(), 0.05);
+        let unplaced = chosen().filter(|c| !c.is_finite()).count();
+        let title = with_notes(
+            self.title.clone(),
+            &[left_out(unplaced, "non-finite context", "not drawn")],
+        );
+        let body = titled(root, &title, 18.0)?;
+        for ((name, chosen), area) in self.methods.iter().zip(body.split_evenly((self.methods.len(), 1))) {
+            let episodes = chosen.len().max(1) as f64;
+            let area = titled(&area, name, 15.0)?;
             let mut chart = ChartBuilder::on(&area)
-                .caption(format!("{name}: selected context, run 0"), ("sans-serif", 16))
-                .margin(8)
-                .x_label_area_size(30)
-                .y_label_area_size(40)
-                .build_cartesian_2d(0.0..episodes, -0.5..(contexts as f64 - 0.5))?;
+                .margin_left(8)
+                .margin_right(TICK_ROOM)
+                .margin_bottom(6)
+                .x_label_area_size(40)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..episodes, y_range.clone())?;
             chart
                 .configure_mesh()
-                .x_desc("episode")
-                .y_desc("context")
+                .x_desc("training episode")
+                .y_desc(self.axis)
                 .x_label_formatter(&|x| format!("{x:.0}"))
-                .y_label_formatter(&|y| format!("{y:.0}"))
+                .y_label_formatter(&|y| compact(*y))
                 .draw()?;
-            let points = m
-                .selections_run0
+            let points = chosen
                 .iter()
                 .enumerate()
-                .filter_map(|(t, arm)| Some((t as f64, (*arm)? as f64)));
+                .filter_map(|(t, c)| Some((t as f64, clip((*c)?, &y_range, 0.0)?)));
             chart.draw_series(points.map(|p| Circle::new(p, 1, COLORS[0].filled())))?;
         }
         Ok(())
     }
 }
 
-/// The log selection ratio of every training context over the first episodes, per method
-/// (2-D contexts).
-struct SelectionMaps<'a>(&'a Summary);
+/// The share of the first episodes that went to every training context, per method (2-D
+/// contexts, Fig. 5), relative to the uniform share on one log colour scale.
+struct SelectionMaps {
+    title: String,
+    /// The names of the contexts' coordinates.
+    axes: [&'static str; 2],
+    contexts: Vec<Vec<f64>>,
+    /// The episodes counted.
+    window: usize,
+    /// Per method, the share of the window's episodes that went to each context.
+    methods: Vec<(String, Vec<f64>)>,
+}
 
-impl SelectionMaps<'_> {
+impl SelectionMaps {
+    /// The side of a method's panel.
+    const PANEL: u32 = 340;
+
+    /// `None` without episodes.
+    fn new(summary: &Summary) -> Option<Self> {
+        let window = common_episodes(summary)?.min(summary.selection_window);
+        if window == 0 {
+            return None;
+        }
+        let methods = selection_shares(summary, window, 1)
+            .into_iter()
+            .map(|(name, shares)| (name, shares.into_iter().map(|row| row[0]).collect()))
+            .collect();
+        Some(Self::of(summary, window, methods))
+    }
+
+    /// The picture of `methods`' shares of the first `window` training episodes.
+    fn of(summary: &Summary, window: usize, methods: Vec<(String, Vec<f64>)>) -> Self {
+        Self {
+            title: format!(
+                "{}: share of the first {window} training episodes that went to each {}, mean over {} runs",
+                summary.experiment,
+                context_noun(summary),
+                summary.runs
+            ),
+            axes: if throws_at_targets(summary) {
+                ["target x (m)", "target y (m)"]
+            } else {
+                ["s_1", "s_2"]
+            },
+            contexts: summary.training_contexts.clone(),
+            window,
+            methods,
+        }
+    }
+
     /// Panels per row and rows.
     fn grid(&self) -> (usize, usize) {
-        let columns = self.0.methods.len().clamp(1, 3);
-        (columns, self.0.methods.len().div_ceil(columns).max(1))
+        let columns = self.methods.len().clamp(1, 3);
+        (columns, self.methods.len().div_ceil(columns).max(1))
     }
 }
 
-impl Picture for SelectionMaps<'_> {
+impl Picture for SelectionMaps {
     fn size(&self) -> (u32, u32) {
         let (columns, rows) = self.grid();
-        (320 * columns as u32, 320 * rows as u32)
+        let width = (Self::PANEL * columns as u32).max(2 * Self::PANEL);
+        (width, TITLE_HEIGHT + Self::PANEL * rows as u32 + BAR_HEIGHT)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
     where
         DB::ErrorType: 'static,
     {
-        let summary = self.0;
-        let methods: Vec<_> = summary.methods.iter().collect();
-        let (columns, rows) = self.grid();
-        let contexts = &summary.training_contexts;
+        let contexts = &self.contexts;
+        let uniform = 1.0 / contexts.len().max(1) as f64;
+        // log2 of the share relative to the uniform one; a share of 0 has its own colour.
+        let relative = |share: f64| (share > 0.0 && share.is_finite()).then(|| (share / uniform).log2());
+        let (low, high) = extent(
+            self.methods
+                .iter()
+                .flat_map(|(_, s)| s.iter().filter_map(|&s| relative(s))),
+        )
+        .unwrap_or((0.0, 0.0));
+        // At least a factor 2 either side, so that a near-uniform share stays near white.
+        let (low, high) = (low.clamp(-60.0, -1.0), high.clamp(1.0, 60.0));
+        let colour = |v: f64| diverging(if v < 0.0 { v / -low } else { v / high });
         let (half_x, half_y) = half_spacing(contexts);
         let half = [half_x, half_y];
         let axis = |d: usize| linear_range(contexts.iter().flat_map(|c| [c[d] - half[d], c[d] + half[d]]), 0.0);
@@ -860,43 +1389,69 @@ impl Picture for SelectionMaps<'_> {
             .iter()
             .filter(|c| !(c[0].is_finite() && c[1].is_finite()))
             .count();
-        for ((name, m), area) in methods.iter().zip(root.split_evenly((rows, columns))) {
-            let title = with_notes(
-                format!(
-                    "{name}: ln(selections / most selected), first {}",
-                    summary.selection_window
-                ),
-                &[left_out(unplaced, "non-finite context", "not drawn")],
-            );
+        let (body, bar) = root.split_vertically(root.dim_in_pixel().1 - BAR_HEIGHT);
+        let title = with_notes(
+            self.title.clone(),
+            &[left_out(unplaced, "non-finite context", "not drawn")],
+        );
+        let body = titled(&body, &title, 18.0)?;
+        let (columns, rows) = self.grid();
+        let side = (body.dim_in_pixel().0 - Self::PANEL * columns as u32) / 2;
+        let body = body.margin(0, 0, side, side);
+        for ((name, shares), area) in self.methods.iter().zip(body.split_evenly((rows, columns))) {
+            let area = titled(&area, name, 14.0)?;
             let mut chart = ChartBuilder::on(&area)
-                .caption(title, ("sans-serif", 12))
-                .margin(8)
-                .x_label_area_size(25)
-                .y_label_area_size(35)
+                .margin_left(6)
+                .margin_right(18)
+                .margin_bottom(6)
+                .x_label_area_size(40)
+                .y_label_area_size(56)
                 .build_cartesian_2d(x_range.clone(), y_range.clone())?;
-            chart.configure_mesh().disable_mesh().draw()?;
-            let most = m.selection_ratio.iter().copied().fold(0.0, f64::max);
-            let squares = contexts.iter().zip(&m.selection_ratio).filter_map(|(c, &ratio)| {
-                // The paper's Fig. 5 colour scale: -3 (white) to 0 (dark).
-                let shade = if most > 0.0 {
-                    ((ratio / most).max(1e-12).ln() + 3.0) / 3.0
-                } else {
-                    0.0
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc(self.axes[0])
+                .y_desc(self.axes[1])
+                .x_label_formatter(&|x| compact(*x))
+                .y_label_formatter(&|y| compact(*y))
+                .x_labels(6)
+                .y_labels(6)
+                .draw()?;
+            let squares = contexts.iter().zip(shares).filter_map(|(c, &share)| {
+                let fill = match relative(share) {
+                    Some(v) => colour(v),
+                    None if share == 0.0 => NEVER,
+                    None => return None,
                 };
-                let level = (255.0 * (1.0 - shade.clamp(0.0, 1.0))) as u8;
                 let x = |v: f64| clip(v, &x_range, 0.0);
                 let y = |v: f64| clip(v, &y_range, 0.0);
-                Some(Rectangle::new(
-                    [
-                        (x(c[0] - half_x)?, y(c[1] - half_y)?),
-                        (x(c[0] + half_x)?, y(c[1] + half_y)?),
-                    ],
-                    RGBColor(level, level, 255).filled(),
-                ))
+                let corners = [
+                    (x(c[0] - half_x)?, y(c[1] - half_y)?),
+                    (x(c[0] + half_x)?, y(c[1] + half_y)?),
+                ];
+                Some((corners, fill))
             });
-            chart.draw_series(squares)?;
+            // An outline shows the cells as white as the background (uniform shares).
+            for (corners, fill) in squares {
+                chart.draw_series([
+                    Rectangle::new(corners, fill.filled()),
+                    Rectangle::new(corners, RGBColor(200, 200, 200)),
+                ])?;
+            }
         }
-        Ok(())
+        colour_bar(
+            &bar,
+            low..high,
+            &colour,
+            &|v| compact(uniform * v.exp2()),
+            &format!(
+                "share of the first {} episodes, log scale (white: uniform, 1/{} = {})",
+                self.window,
+                contexts.len(),
+                compact(uniform)
+            ),
+            Some((NEVER, "none")),
+        )
     }
 }
 
@@ -951,14 +1506,16 @@ impl Picture for Dartboard<'_> {
         let reach = 0.75;
         for ((name, m), row) in methods.iter().zip(root.split_evenly((methods.len(), 1))) {
             let (left, right) = row.split_horizontally(600);
+            let left = titled(
+                &left,
+                &format!("{name}: the field centres (blue) and where run 0's final policy lands (red)"),
+                15.0,
+            )?;
             let mut board = ChartBuilder::on(&left)
-                .caption(
-                    format!("{name}: targets (blue) and landings of run 0 (red)"),
-                    ("sans-serif", 15),
-                )
                 .margin(10)
-                .x_label_area_size(30)
-                .y_label_area_size(45)
+                .margin_right(TICK_ROOM)
+                .x_label_area_size(40)
+                .y_label_area_size(55)
                 .build_cartesian_2d(
                     (bull[0] - reach)..(bull[0] + reach),
                     (bull[1] - reach)..(bull[1] + reach),
@@ -997,16 +1554,26 @@ impl Picture for Dartboard<'_> {
                 .unwrap_or_default();
             let longest = curves.values().map(Vec::len).max().unwrap_or(0);
             let y_range = from_zero(curves.values().flatten().copied().chain([1.0]), 1.05);
+            let right = titled(
+                &right,
+                &format!(
+                    "selections per field of each ring so far, mean over the ring's fields and {} runs",
+                    summary.runs
+                ),
+                15.0,
+            )?;
             let mut chart = ChartBuilder::on(&right)
-                .caption("average selections per field of each ring", ("sans-serif", 15))
                 .margin(10)
-                .x_label_area_size(30)
-                .y_label_area_size(45)
+                .margin_right(TICK_ROOM)
+                .x_label_area_size(40)
+                .y_label_area_size(55)
                 .build_cartesian_2d(0.0..(100.0 * longest.max(1) as f64), y_range.clone())?;
             chart
                 .configure_mesh()
-                .x_desc("episode")
+                .x_desc("training episodes")
                 .y_desc("selections per field")
+                .x_label_formatter(&|x| format!("{x:.0}"))
+                .y_label_formatter(&|y| compact(*y))
                 .draw()?;
             for (index, (category, values)) in curves.iter().enumerate() {
                 let color = COLORS[index % COLORS.len()];
@@ -1054,11 +1621,12 @@ impl Picture for ThrowSideView<'_> {
         let landing = robot.landing(&release, &velocity).ok_or("the ball does not land")?;
         let norm = (landing[0].powi(2) + landing[1].powi(2)).sqrt().max(1e-9);
         let along = |x: f64, y: f64| (x * landing[0] + y * landing[1]) / norm;
-        let mut chart = ChartBuilder::on(root)
-            .caption(self.title, ("sans-serif", 16))
+        let area = titled(root, self.title, 16.0)?;
+        let mut chart = ChartBuilder::on(&area)
             .margin(12)
-            .x_label_area_size(35)
-            .y_label_area_size(45)
+            .margin_right(TICK_ROOM)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
             .build_cartesian_2d(linear_range([-1.0, norm + 0.3], 0.0), 0.0..2.2)?;
         chart
             .configure_mesh()
@@ -1080,7 +1648,11 @@ impl Picture for ThrowSideView<'_> {
                 )
                 .collect();
             let shade = COLORS[0].mix(0.25 + 0.75 * k as f64 / samples.len() as f64);
-            chart.draw_series(std::iter::once(PathElement::new(points, shade.stroke_width(2))))?;
+            let arm = chart.draw_series(std::iter::once(PathElement::new(points, shade.stroke_width(2))))?;
+            if k + 1 == samples.len() {
+                arm.label("the arm every 0.1 s up to the release (paler: earlier)")
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], COLORS[0].stroke_width(2)));
+            }
         }
         let flight_time = ((velocity.z
             + (velocity.z.powi(2) + 2.0 * robot.gravity * (release.z - robot.ball.radius)).sqrt())
@@ -1093,12 +1665,23 @@ impl Picture for ThrowSideView<'_> {
                 (along(p.x, p.y), p.z - 0.5 * robot.gravity * t * t)
             })
             .collect();
-        chart.draw_series(LineSeries::new(ball, COLORS[3].stroke_width(2)))?;
+        chart
+            .draw_series(LineSeries::new(ball, COLORS[3].stroke_width(2)))?
+            .label("the ball after the release, to its landing point")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], COLORS[3].stroke_width(2)));
         chart.draw_series(std::iter::once(Circle::new(
             (norm, robot.ball.radius),
             5,
             COLORS[3].filled(),
         )))?;
+        // Below the ball's arc, right of the arm.
+        chart
+            .configure_series_labels()
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::LowerMiddle)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
         Ok(())
     }
 }
@@ -1108,6 +1691,15 @@ fn ratio_label(row: &crate::bench::Row) -> String {
     match row.ratio_range() {
         Some((lowest, highest)) if lowest < highest => format!("{:.2} ({lowest:.2}-{highest:.2})", row.ratio),
         _ => format!("{:.2}", row.ratio),
+    }
+}
+
+/// A rate for an axis, in thousands (k) or millions (M) of rollouts per second where large.
+fn rate(value: f64) -> String {
+    match value.abs() {
+        v if v >= 1e6 => format!("{} M", compact(value / 1e6)),
+        v if v >= 1e3 => format!("{} k", compact(value / 1e3)),
+        _ => compact(value),
     }
 }
 
@@ -1143,7 +1735,8 @@ impl Picture for BenchBars<'_> {
                 .map(|row| match row.mode {
                     "inprocess-1" => "in-process, 1 thread".to_string(),
                     "inprocess-rayon" => format!("in-process, rayon {}", row.workers),
-                    mode => format!("{mode}, {} worker(s)", row.workers),
+                    mode if row.workers == 1 => format!("{mode}, 1 worker"),
+                    mode => format!("{mode}, {} workers", row.workers),
                 })
                 .collect();
             let y_range = from_zero(bars.iter().map(|row| row.rollouts_per_s).chain([1.0]), 1.2);
@@ -1153,15 +1746,15 @@ impl Picture for BenchBars<'_> {
             let unmeasured = bars.iter().filter(|row| !row.rollouts_per_s.is_finite()).count();
             let caption = with_notes(
                 format!(
-                    "{env}: rollouts/s (median round; ratio to W x one thread and its range over rounds above each bar)"
+                    "{env}: rollouts per second of the median round; above each bar its ratio to W x one thread and the range over rounds"
                 ),
                 &[left_out(unmeasured, "non-finite rate", "not drawn")],
             );
+            let area = titled(&area, &caption, 16.0)?;
             let mut chart = ChartBuilder::on(&area)
-                .caption(caption, ("sans-serif", 16))
                 .margin(8)
                 .x_label_area_size(30)
-                .y_label_area_size(70)
+                .y_label_area_size(75)
                 .build_cartesian_2d((0..bars.len().saturating_sub(1)).into_segmented(), 0.0..top)?;
             chart
                 .configure_mesh()
@@ -1171,7 +1764,8 @@ impl Picture for BenchBars<'_> {
                     SegmentValue::CenterOf(i) => labels.get(*i).cloned().unwrap_or_default(),
                     _ => String::new(),
                 })
-                .y_label_formatter(&|y| format!("{y:.0}"))
+                .y_label_formatter(&|y| rate(*y))
+                .y_desc("rollouts per second")
                 .draw()?;
             chart.draw_series(bars.iter().enumerate().map(|(i, row)| {
                 let color = if row.mode == "fleet" { COLORS[1] } else { COLORS[0] };
@@ -1372,7 +1966,7 @@ mod tests {
         let svg = drawn(&dir, "minus-inf-None");
         assert!(svg.contains("round-robin (2 non-finite means not drawn)"), "{svg}");
         assert!(svg.contains("nan-sem (2 non-finite means not drawn, 2 non-finite SEMs not drawn)"));
-        let svg = drawn(&dir, "only-non-finite-Some(10.0)");
+        let svg = words(&drawn(&dir, "only-non-finite-Some(10.0)"));
         assert!(svg.contains("best policy NaN not drawn"), "{svg}");
     }
 
@@ -1426,25 +2020,48 @@ mod tests {
             ("extremes", vec![vec![-f64::MAX, 0.0], vec![f64::MAX, 1.0]]),
             ("non-finite", vec![vec![NAN, 0.0], vec![INF, 1.0], vec![0.0, 0.0]]),
         ];
+        let maps = |contexts: Vec<Vec<f64>>, methods: Vec<(String, Vec<f64>)>| SelectionMaps {
+            title: "maps".to_string(),
+            axes: ["s_1", "s_2"],
+            contexts,
+            window: 10,
+            methods,
+        };
+        let traces = |methods: Vec<(String, Vec<Option<f64>>)>| SelectionTraces {
+            title: "traces".to_string(),
+            axis: "context",
+            methods,
+        };
         for (case, contexts) in contexts {
             for (values_case, values) in HOSTILE {
                 let stem = format!("{case}-{values_case}");
-                let (summary, dir) = (summary(values, contexts.clone(), None), dir.clone());
+                let zeros = vec![0.0; contexts.len()];
+                let maps = maps(
+                    contexts.clone(),
+                    vec![("a".to_string(), values.to_vec()), ("b".to_string(), zeros)],
+                );
+                let traces = traces(vec![
+                    ("a".to_string(), values.iter().map(|&v| Some(v)).collect()),
+                    ("b".to_string(), vec![None, Some(0.0)]),
+                ]);
+                let dir = dir.clone();
                 within_a_minute(&stem.clone(), move || {
-                    save(&SelectionMaps(&summary), &dir, &format!("{stem}-maps"))?;
-                    save(&SelectionTraces(&summary), &dir, &format!("{stem}-traces"))
+                    save(&maps, &dir, &format!("{stem}-maps"))?;
+                    save(&traces, &dir, &format!("{stem}-traces"))
                 });
             }
         }
-        assert!(drawn(&dir, "non-finite-nan-maps").contains("2 non-finite contexts not drawn"));
+        assert!(words(&drawn(&dir, "non-finite-nan-maps")).contains("2 non-finite contexts not drawn"));
+        assert!(words(&drawn(&dir, "one-nan-traces")).contains("2 non-finite contexts not drawn"));
         drawn(&dir, "one-empty-traces");
         let mut empty = summary(&[], vec![vec![0.0, 0.0]], None);
         empty.methods.clear();
+        let (maps, traces) = (maps(vec![vec![0.0, 0.0]], Vec::new()), traces(Vec::new()));
         let empty_dir = dir.clone();
         within_a_minute("no methods", move || {
             save(&LearningCurves(&empty), &empty_dir, "no-methods-curves")?;
-            save(&SelectionMaps(&empty), &empty_dir, "no-methods-maps")?;
-            save(&SelectionTraces(&empty), &empty_dir, "no-methods-traces")
+            save(&maps, &empty_dir, "no-methods-maps")?;
+            save(&traces, &empty_dir, "no-methods-traces")
         });
         drawn(&dir, "no-methods-traces");
     }
@@ -1458,14 +2075,17 @@ mod tests {
                 .map(|_| values.iter().copied().chain([0.0]).take(bins).collect())
                 .collect();
             let picture = SelectionsOverTime {
+                title: case.to_string(),
+                contexts: vec!["0".to_string(), "1".to_string(), "2".to_string()],
+                axis: "context",
                 methods: vec![("a".to_string(), shares)],
                 episodes: 10 * bins,
-                runs: 2,
             };
             let into = dir.clone();
             within_a_minute(case, move || save(&picture, &into, case));
             drawn(&dir, case);
         }
+        assert!(words(&drawn(&dir, "nan")).contains("6 non-finite shares not drawn"));
     }
 
     #[test]
@@ -1492,8 +2112,397 @@ mod tests {
             let dir = dir.clone();
             within_a_minute(case, move || save(&BenchBars(&rows), &dir, case));
         }
-        assert!(drawn(&dir, "minus-inf").contains("2 non-finite rates not drawn"));
+        assert!(words(&drawn(&dir, "minus-inf")).contains("2 non-finite rates not drawn"));
         drawn(&dir, "empty");
+    }
+
+    /// A text of an SVG picture as plotters wrote it: its anchor point and how it is anchored,
+    /// its font size as the PNG draws it, whether it runs upwards, and what it says.
+    struct Text {
+        x: f64,
+        y: f64,
+        anchor: String,
+        size: f64,
+        upwards: bool,
+        content: String,
+    }
+
+    /// The value of the attribute `name` of an SVG element (`element` starts with a space).
+    fn attribute<'a>(element: &'a str, name: &str) -> Option<&'a str> {
+        element.split(&format!(" {name}=\"")).nth(1)?.split('"').next()
+    }
+
+    /// The picture's size and its texts.
+    fn svg_texts(svg: &str) -> ((f64, f64), Vec<Text>) {
+        let number = |element: &str, name: &str| -> f64 {
+            let value = attribute(element, name).unwrap_or_else(|| panic!("no {name} in {element}"));
+            value.parse().unwrap_or_else(|e| panic!("{name}={value}: {e}"))
+        };
+        let svg_element = format!(" {}", svg.split('>').next().unwrap_or_default());
+        let size = (number(&svg_element, "width"), number(&svg_element, "height"));
+        let texts = svg
+            .split("<text ")
+            .skip(1)
+            .map(|element| {
+                let element = format!(" {element}");
+                let (head, rest) = element.split_once('>').expect("a text element is closed");
+                let content = rest.split("</text>").next().unwrap_or_default().trim();
+                Text {
+                    x: number(head, "x"),
+                    y: number(head, "y"),
+                    anchor: attribute(head, "text-anchor").unwrap_or("start").to_string(),
+                    // plotters' SVG backend writes a font's size divided by 1.24.
+                    size: number(head, "font-size") * 1.24,
+                    upwards: head.contains("rotate(270"),
+                    content: content
+                        .replace("&lt;", "<")
+                        .replace("&gt;", ">")
+                        .replace("&quot;", "\"")
+                        .replace("&apos;", "'")
+                        .replace("&amp;", "&"),
+                }
+            })
+            .collect();
+        (size, texts)
+    }
+
+    /// Every text of `svg`, one after the other: a title broken into lines is whole again.
+    fn words(svg: &str) -> String {
+        let texts: Vec<String> = svg_texts(svg).1.into_iter().map(|t| t.content).collect();
+        texts.join(" ")
+    }
+
+    /// The texts of `svg` that reach outside the picture, measured in the PNG's font.
+    fn outside(svg: &str) -> Vec<String> {
+        let ((width, height), texts) = svg_texts(svg);
+        texts
+            .iter()
+            .filter_map(|text| {
+                let font = ("sans-serif", text.size).into_font();
+                let length = f64::from(font.box_size(&text.content).map_or(0, |size| size.0));
+                // Along the text and across it; a text running upwards starts at its anchor and
+                // ends above it.
+                let (along, limit, across, room) = if text.upwards {
+                    (-text.y, 0.0, text.x, width)
+                } else {
+                    (text.x, width, text.y, height)
+                };
+                let (start, end) = match text.anchor.as_str() {
+                    "middle" => (along - length / 2.0, along + length / 2.0),
+                    "end" => (along - length, along),
+                    _ => (along, along + length),
+                };
+                let (low, high) = if text.upwards { (-height, limit) } else { (0.0, limit) };
+                let inside = start >= low - 1.0 && end <= high + 1.0 && (0.0..=room).contains(&across);
+                (!inside).then(|| {
+                    format!(
+                        "{:?} at ({}, {}) spans {start:.0}..{end:.0}",
+                        text.content, text.x, text.y
+                    )
+                })
+            })
+            .collect()
+    }
+
+    const GRID_METHODS: [&str; 6] = [
+        "best-reward",
+        "diversity",
+        "monotonic-progress",
+        "one-step-progress",
+        "random-continuous",
+        "round-robin",
+    ];
+
+    /// A summary like the paper's Fig. 8 run: 6 methods over 10,000 episodes of 20 runs, the best
+    /// policy, a 5 x 5 grid of targets.
+    fn grid_like() -> Summary {
+        let mut summary = summary(&[], Vec::new(), None);
+        summary.experiment = "grid".to_string();
+        summary.metric = "mean distance to the test targets in cm, exploration off".to_string();
+        summary.user_problem = None;
+        summary.runs = 20;
+        summary.training_episodes = 10_000;
+        summary.selection_window = 250;
+        summary.settings = serde_json::json!({ "sim": "analytic" });
+        summary.training_contexts = [-3.0, -3.5, -4.0, -4.5, -5.0]
+            .iter()
+            .flat_map(|&x| [-3.0, -3.5, -4.0, -4.5, -5.0].map(|y| vec![x, y]))
+            .collect();
+        summary.methods = GRID_METHODS
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                let values: Vec<f64> = (0..=100)
+                    .map(|i| 2.8 + 0.3 * k as f64 + 89.0 * (-f64::from(i) / 10.0).exp())
+                    .collect();
+                (name.to_string(), method(&values, 0.3, Vec::new()))
+            })
+            .collect();
+        summary.best_policy = Some(BestPolicy {
+            score: 2.62,
+            method: "random-continuous".to_string(),
+            run: 4,
+            seed: 4,
+            episode: 9800,
+        });
+        summary
+    }
+
+    /// A summary like Section 4's model without noise: J_opt = 10, round robin the reference,
+    /// and the two progress heuristics identical.
+    fn toy_like() -> Summary {
+        let mut summary = summary(&[], (0..10).map(|s| vec![f64::from(s)]).collect(), Some(10.0));
+        summary.experiment = "toy".to_string();
+        summary.metric = "J = sum over the 10 contexts of the noise-free reward r(s)".to_string();
+        summary.user_problem = None;
+        summary.settings = serde_json::json!({ "model": { "sigma_r": 0.0, "sigma_b": 0.0 } });
+        summary.best_policy = None;
+        let curve = |lead: f64| -> Vec<f64> {
+            (0..=100)
+                .map(|i| 10.0 * (1.0 - (-f64::from(i) / 40.0).exp()) + lead * (f64::from(i) / 20.0).sin())
+                .collect()
+        };
+        summary.methods = [
+            ("best-reward", 2.0),
+            ("diversity", -3.0),
+            ("monotonic-progress", 1.0),
+            ("one-step-progress", 1.0),
+            ("round-robin", 0.0),
+        ]
+        .into_iter()
+        .map(|(name, lead)| (name.to_string(), method(&curve(lead), 0.1, Vec::new())))
+        .collect();
+        summary
+    }
+
+    /// Shares of the grid-like run's methods: `bins` bins, the early bins uneven.
+    fn grid_shares(summary: &Summary, bins: usize) -> Vec<(String, Vec<Vec<f64>>)> {
+        let k = summary.training_contexts.len();
+        GRID_METHODS
+            .iter()
+            .map(|name| {
+                let share = |context: usize, bin: usize| {
+                    let bias = if bin < bins / 5 {
+                        (context % 4) as f64 - 1.5
+                    } else {
+                        0.0
+                    };
+                    (1.0 + 0.5 * bias) / k as f64
+                };
+                let shares = (0..k).map(|c| (0..bins).map(|b| share(c, b)).collect()).collect();
+                (name.to_string(), shares)
+            })
+            .collect()
+    }
+
+    /// Draws one picture into the file it is given.
+    type Draw<'a> = &'a dyn Fn(&Path) -> PlotResult;
+
+    #[test]
+    fn no_text_reaches_outside_a_picture() {
+        let dir = dir("layout");
+        let (grid, toy) = (grid_like(), toy_like());
+        let mut board = grid_like();
+        board.experiment = "dartboard".to_string();
+        board.methods.retain(|name, _| name == "monotonic-progress");
+        let shares = grid_shares(&grid, 50);
+        let maps: Vec<(String, Vec<f64>)> = grid_shares(&grid, 1)
+            .into_iter()
+            .map(|(name, shares)| (name, shares.into_iter().map(|row| row[0]).collect()))
+            .collect();
+        let choices: Vec<(String, Vec<Option<f64>>)> = toy
+            .methods
+            .keys()
+            .map(|name| (name.clone(), (0..1000).map(|t| Some(f64::from(t % 10))).collect()))
+            .collect();
+        let updates: UpdateTraces = GRID_METHODS
+            .iter()
+            .map(|name| {
+                let run = (1..200)
+                    .map(|u| (50.0 * f64::from(u), 0.4 / f64::from(u), 140.0))
+                    .collect();
+                (name.to_string(), vec![run])
+            })
+            .collect();
+        let rows: Vec<crate::bench::Row> = ["trivial", "analytic", "rapier"]
+            .iter()
+            .flat_map(|&env| {
+                [("inprocess-1", 1), ("inprocess-rayon", 2), ("fleet", 1), ("fleet", 2)].map(|(mode, workers)| {
+                    crate::bench::Row {
+                        env,
+                        mode,
+                        workers,
+                        rollouts_per_s: 2.9e6 / f64::from(workers as u32),
+                        ratio: 0.97,
+                        learner_share: None,
+                        startup_seconds: None,
+                        rollouts: 100_000,
+                        seconds: 1.0,
+                        round_rates: vec![2.9e6, 2.8e6, 2.7e6],
+                        round_ratios: vec![0.97, 0.91, 0.99],
+                    }
+                })
+            })
+            .collect();
+        let policy = acps_models::throw::ThrowPolicy::new(acps_models::throw::ThrowDesign::pa10(), 0.01)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let trajectory = policy
+            .trajectory(&[0.0; acps_models::throw::PARAMS])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let fields = acps_models::environment::dartboard_fields();
+        let pictures: [(&str, Draw); 9] = [
+            ("grid-curves", &|path| save_as(&LearningCurves(&grid), path)),
+            ("toy-curves", &|path| save_as(&LearningCurves(&toy), path)),
+            ("selections-time", &|path| {
+                save_as(&SelectionsOverTime::of(&grid, 10_000, shares.clone()), path)
+            }),
+            ("selections", &|path| {
+                save_as(&SelectionMaps::of(&grid, 250, maps.clone()), path)
+            }),
+            ("traces", &|path| {
+                save_as(&SelectionTraces::of(&toy, choices.clone()), path)
+            }),
+            ("updates", &|path| {
+                save_as(&Exploration::of(&grid, updates.clone()), path)
+            }),
+            ("bench", &|path| save_as(&BenchBars(&rows), path)),
+            ("throw", &|path| {
+                let view = ThrowSideView {
+                    robot: &Robot::pa10(),
+                    trajectory: &trajectory,
+                    title: "best-reward run 0: throw at (-3.250, -3.250), arm every 0.1 s, ball after release",
+                };
+                save_as(&view, path)
+            }),
+            ("board", &|path| {
+                save_as(
+                    &Dartboard {
+                        summary: &board,
+                        fields: &fields,
+                    },
+                    path,
+                )
+            }),
+        ];
+        for (stem, draw) in pictures {
+            for extension in ["svg", "png"] {
+                draw(&dir.join(format!("{stem}.{extension}"))).unwrap_or_else(|e| panic!("{stem}: {e}"));
+            }
+            let outside = outside(&drawn(&dir, stem));
+            assert!(outside.is_empty(), "{stem}: {outside:#?}");
+        }
+        // The last tick of 10,000 episodes, whole.
+        let (_, labels) = svg_texts(&drawn(&dir, "selections-time"));
+        assert!(labels.iter().any(|t| t.content == "10000"), "no tick 10000");
+    }
+
+    #[test]
+    fn the_curves_name_the_band_the_unit_and_the_simulator() {
+        let dir = dir("curves-legend");
+        save(&LearningCurves(&grid_like()), &dir, "grid").unwrap_or_else(|e| panic!("{e}"));
+        let (_, texts) = svg_texts(&drawn(&dir, "grid"));
+        let said = |what: &str| texts.iter().any(|t| t.content == what);
+        for what in [
+            "grid, analytic simulator: mean ± SEM of 20 runs per method",
+            "shaded: ± 1 SEM",
+            "best policy (2.62 cm)",
+            "the second half, zoomed (the lines of the left panel)",
+        ] {
+            assert!(
+                said(what),
+                "{what:?} not in {:?}",
+                texts.iter().map(|t| &t.content).collect::<Vec<_>>()
+            );
+        }
+        // A problem file's unit; none where the problem has none.
+        let mut user = grid_like();
+        user.user_problem = Some(UserProblem {
+            unit: "kJ".to_string(),
+            lower_is_better: true,
+        });
+        save(&LearningCurves(&user), &dir, "user").unwrap_or_else(|e| panic!("{e}"));
+        assert!(drawn(&dir, "user").contains("best policy (2.62 kJ)"));
+        user.user_problem = Some(UserProblem {
+            unit: String::new(),
+            lower_is_better: true,
+        });
+        save(&LearningCurves(&user), &dir, "unitless").unwrap_or_else(|e| panic!("{e}"));
+        assert!(drawn(&dir, "unitless").contains("best policy (2.62)"));
+    }
+
+    #[test]
+    fn the_optimum_lies_inside_the_curves_and_identical_curves_say_so() {
+        let dir = dir("curves-toy");
+        save(&LearningCurves(&toy_like()), &dir, "toy").unwrap_or_else(|e| panic!("{e}"));
+        let (_, texts) = svg_texts(&drawn(&dir, "toy"));
+        // J_opt - J_RR is 10 at episode 0, far above every curve: the y axis reaches it.
+        let top = texts
+            .iter()
+            .filter(|t| t.anchor == "end")
+            .filter_map(|t| t.content.parse::<f64>().ok())
+            .fold(f64::MIN, f64::max);
+        assert!(top >= 10.0, "the y axis ends at {top}, below J_opt - J_RR = 10");
+        let legend: Vec<&str> = texts.iter().map(|t| t.content.as_str()).collect();
+        assert!(
+            legend.contains(&"monotonic-progress (= one-step-progress, under it)"),
+            "{legend:?}"
+        );
+        for name in ["best-reward", "diversity", "one-step-progress", "round-robin"] {
+            assert!(legend.contains(&name), "{name} not plain in {legend:?}");
+        }
+    }
+
+    #[test]
+    fn selection_pictures_have_labelled_axes_and_a_colour_bar() {
+        let dir = dir("selections-bars");
+        let grid = grid_like();
+        let shares = grid_shares(&grid, 50);
+        save(&SelectionsOverTime::of(&grid, 10_000, shares), &dir, "time").unwrap_or_else(|e| panic!("{e}"));
+        let (_, texts) = svg_texts(&drawn(&dir, "time"));
+        let said = |what: &str| texts.iter().any(|t| t.content == what);
+        assert!(said(
+            "grid: share of each bin of 200 training episodes that went to each target, mean over 20 runs"
+        ));
+        assert!(said("share of a bin's episodes (uniform: 1/25 = 0.04)"));
+        for context in &grid.training_contexts {
+            let label = context_label(context);
+            assert!(said(&label), "{label} not on the axis");
+        }
+        let maps = grid_shares(&grid, 1)
+            .into_iter()
+            .map(|(name, shares)| (name, shares.into_iter().map(|row| row[0]).collect()))
+            .collect();
+        save(&SelectionMaps::of(&grid, 250, maps), &dir, "maps").unwrap_or_else(|e| panic!("{e}"));
+        let (_, texts) = svg_texts(&drawn(&dir, "maps"));
+        let said = |what: &str| texts.iter().any(|t| t.content == what);
+        for what in [
+            "target x (m)",
+            "target y (m)",
+            "share of the first 250 episodes, log scale (white: uniform, 1/25 = 0.04)",
+            "none",
+        ] {
+            assert!(said(what), "{what:?} not in the maps");
+        }
+    }
+
+    #[test]
+    fn labels_are_short_and_exact() {
+        for (value, label) in [
+            (-3.0, "-3"),
+            (-3.5499269522, "-3.55"),
+            (0.04, "0.04"),
+            (2.2e-16, "0"),
+            (-0.001, "-1.0e-3"),
+            (1e300, "1.0e300"),
+            (12345.0, "12345"),
+        ] {
+            assert_eq!(compact(value), label, "{value}");
+        }
+        assert_eq!(context_label(&[-3.0, -3.5]), "(-3, -3.5)");
+        assert_eq!(context_label(&[7.0]), "7");
+        assert_eq!(rate(2.9e6), "2.9 M");
+        assert_eq!(rate(1200.0), "1.2 k");
+        assert_eq!(rate(350.0), "350");
     }
 
     /// The bins cover every episode exactly once, as the heat map's cells are drawn.

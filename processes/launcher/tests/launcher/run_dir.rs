@@ -154,8 +154,9 @@ fn every_picture_is_written_as_svg_and_png() {
         let svg = std::fs::read_to_string(dir.join(format!("{stem}.svg"))).unwrap();
         assert!(svg.starts_with("<svg"), "{stem}.svg");
     }
+    // 200 episodes in 50 bins, as the title says.
     let heatmap = std::fs::read_to_string(dir.join("selections-time.svg")).unwrap();
-    assert!(heatmap.contains("monotonic-progress: share of selections"));
+    assert!(heatmap.contains("monotonic-progress") && heatmap.contains("each bin of 4 training episodes"));
 }
 
 #[test]
@@ -243,7 +244,7 @@ fn the_grid_summary_names_the_best_policy_of_all_runs() {
     // The curves draw it as Fig. 8's reference line.
     let svg = std::fs::read_to_string(dir.join("curves.svg")).unwrap();
     assert!(
-        svg.contains(&format!("best policy ({score:.2})")),
+        svg.contains(&format!("best policy ({score:.2} cm)")),
         "no reference line in curves.svg"
     );
     // ... and, as the paper's Fig. 8, beside a zoom on the second half of training.
