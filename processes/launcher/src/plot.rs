@@ -2340,6 +2340,7 @@ mod tests {
                         seconds: 1.0,
                         round_rates: vec![2.9e6, 2.8e6, 2.7e6],
                         round_ratios: vec![0.97, 0.91, 0.99],
+                        others_share: Some(0.02),
                     }
                 })
             })
