@@ -59,6 +59,9 @@ impl IpcError {
 /// The environment variable that names the run a started worker process joins.
 pub const RUN_ENV: &str = "ACPS_RUN";
 
+/// The node name of a run's learner; no worker may take it.
+pub const LEARNER_NODE: &str = "learner";
+
 /// The settings every process opens a run's services with: whoever creates a service fixes them,
 /// and iceoryx2 refuses an opener that asks for more (docs/PROTOCOL.md lists them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -248,14 +251,56 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
     })
 }
 
-/// The server of `run`'s task service: its learner. Answers are sized to their tasks, up to
-/// [`MAX_BATCH`].
-pub fn task_server(run: &RunName, tasks: &TaskService) -> Result<TaskServer, IpcError> {
-    tasks
-        .server_builder()
-        .initial_max_slice_len(MAX_BATCH)
-        .create()
-        .map_err(|e| IpcError::new(format!("serving run '{run}' (is another learner serving it?)"), e))
+/// Why a process could not serve a run's tasks.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ServerError {
+    /// Another process serves the run: a learner of the same run name.
+    #[error(
+        "a learner of run '{run}' is already running{}; give this run another name, or wait for that learner to end",
+        pid.map_or(String::new(), |pid| format!(" (PID {pid})"))
+    )]
+    Taken {
+        /// The run.
+        run: String,
+        /// The process of the learner that serves it, when iceoryx2 can tell.
+        pid: Option<i32>,
+    },
+    /// iceoryx2 failed otherwise.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+}
+
+/// The server of `run`'s task service: its learner, the only one. Answers are sized to their
+/// tasks, up to [`MAX_BATCH`]. Refused with [`ServerError::Taken`] while a live process serves
+/// the run; the server of a dead one is cleaned up first.
+pub fn task_server(run: &RunName, tasks: &TaskService) -> Result<TaskServer, ServerError> {
+    use iceoryx2::service::port_factory::server::ServerCreateError;
+    let create = || tasks.server_builder().initial_max_slice_len(MAX_BATCH).create();
+    let mut created = create();
+    if matches!(created, Err(ServerCreateError::ExceedsMaxSupportedServers))
+        && !server_pid(tasks).is_some_and(process_runs)
+    {
+        // The server of a learner that died, which no cleanup has removed yet.
+        tasks.try_cleanup_dead_nodes();
+        created = create();
+    }
+    created.map_err(|e| match e {
+        ServerCreateError::ExceedsMaxSupportedServers => ServerError::Taken {
+            run: run.to_string(),
+            pid: server_pid(tasks),
+        },
+        e => IpcError::new(format!("serving run '{run}'"), e).into(),
+    })
+}
+
+/// The process of the task service's server, if it has one and iceoryx2 can tell.
+fn server_pid(tasks: &TaskService) -> Option<i32> {
+    let mut pid = None;
+    tasks.dynamic_config().list_servers(|server| {
+        pid = server.node_id.pid::<ipc::Service>().ok().map(|pid| pid.value());
+        CallbackProgression::Stop
+    });
+    pid
 }
 
 /// Answer `request` with `tasks` (none for `Stop` and `Refused`), written straight into shared
@@ -505,6 +550,35 @@ mod tests {
             let error = RunName::new(bad).unwrap_err().to_string();
             assert!(error.contains("must be 1 to 40 characters"), "{error}");
         }
+    }
+
+    #[test]
+    fn a_second_server_of_a_run_is_refused_naming_the_first_s_process() {
+        let run = RunName::new(&format!("test-taken-{}", std::process::id())).unwrap();
+        {
+            let node = node(&run, LEARNER_NODE).unwrap();
+            let services = open_services(&node).unwrap();
+            let first = task_server(&run, &services.tasks).unwrap();
+            let error = task_server(&run, &services.tasks).expect_err("refused");
+            assert_eq!(
+                error,
+                ServerError::Taken {
+                    run: run.to_string(),
+                    pid: Some(std::process::id() as i32)
+                }
+            );
+            assert_eq!(
+                error.to_string(),
+                format!(
+                    "a learner of run '{run}' is already running (PID {}); give this run another name, or wait for that learner to end",
+                    std::process::id()
+                )
+            );
+            drop(first);
+            task_server(&run, &services.tasks).expect("the seat is free once its server is gone");
+        }
+        remove_run_files(&run).unwrap();
+        assert!(leftover_files(&run).is_empty());
     }
 
     #[test]

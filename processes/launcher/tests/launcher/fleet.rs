@@ -1273,3 +1273,93 @@ fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serv
     );
     assert_clean(&run);
 }
+
+/// The `acps` process that the watchdog `timeout` process `watchdog` runs.
+fn watched_acps(watchdog: &Child) -> u32 {
+    let mut pid = None;
+    wait_until("the watchdog to start acps", Duration::from_secs(10), || {
+        pid = children_of(watchdog.id()).first().copied();
+        pid.is_some()
+    });
+    pid.expect("waited for it")
+}
+
+#[test]
+fn a_second_learner_of_a_running_run_is_refused_at_once_and_starts_no_worker() {
+    let dir = temp_dir("second-learner");
+    let run = run_name("second-learner");
+    // The first learner waits for workers started by hand, for as long as the test needs.
+    let mut first = watched()
+        .args(["run", "grid", "--runs", "1", "--episodes", "20", "--workers", "0"])
+        .args(["--run", run.as_str()])
+        .arg("--out")
+        .arg(dir.join("first"))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first_pid = watched_acps(&first);
+    let mut first_err = std::io::BufReader::new(first.stderr.take().unwrap());
+    // Printed once it serves the run (or the pipe closes if it dies: then the line is missing).
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut first_err, &mut line).unwrap();
+    assert!(line.contains(&format!("run '{run}' waits for workers")), "{line}");
+    // Another experiment, so that a worker it started would be refused by the first learner,
+    // which says so on stderr. -v shows the info lines too.
+    let second = watched()
+        .args([
+            "-v",
+            "run",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "20",
+            "--workers",
+            "1",
+        ])
+        .args(["--run", run.as_str()])
+        .arg("--out")
+        .arg(dir.join("second"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.ends_with(&format!(
+            "error: --run {run}: a learner of run '{run}' is already running (PID {first_pid}); give this run another name, or wait for that learner to end\n"
+        )),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("still use"), "{stderr}");
+    assert!(!dir.join("second").exists(), "the refused run wrote nothing");
+    let status = Command::new("kill")
+        .args(["-INT", &first_pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut first_err, &mut rest).unwrap();
+    assert_eq!(first.wait().unwrap().code(), Some(130), "{rest}");
+    assert!(
+        !rest.contains("refused a worker"),
+        "the second learner started a worker: {rest}"
+    );
+    assert_clean(&run);
+}
+
+#[test]
+fn a_fleet_is_refused_while_another_serves_its_run_and_may_start_once_it_is_gone() {
+    let run = run_name("seat");
+    let first = Fleet::builder(run.as_str()).start().unwrap();
+    match Fleet::builder(run.as_str()).start() {
+        Err(acps_fleet::FleetStartError::Serve(ipc::ServerError::Taken { run: taken, pid })) => {
+            assert_eq!((taken, pid), (run.to_string(), Some(std::process::id() as i32)))
+        }
+        Err(other) => panic!("expected the run to be taken, got {other}"),
+        Ok(_) => panic!("two fleets serve run {run}"),
+    }
+    drop(first);
+    let second = Fleet::builder(run.as_str()).start().expect("the first is gone");
+    drop(second);
+    assert_clean(&run);
+}
