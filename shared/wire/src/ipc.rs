@@ -197,8 +197,108 @@ fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Ser
         .map_err(|e| IpcError::new(format!("creating node '{name}' of run '{run}'"), e))
 }
 
-/// Why a service hangs in creation: its creator died before finishing it.
-const DIED_CREATING: &str = "a process of this run died while creating it";
+/// Why a process could not open a service of its run, in words: iceoryx2's reasons name its
+/// internals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OpenFailure {
+    /// Still in creation after [`ServiceLimits::creation_timeout`].
+    DiedCreating,
+    /// Gone between creating and opening it, or with files missing.
+    Incomplete,
+    /// Being created or removed by another process at this moment.
+    InFlux,
+    /// Opened by as many processes as it takes.
+    Full,
+    /// Created by another user.
+    Permissions,
+    /// Created with other types or settings.
+    OtherBuild,
+    /// Anything else.
+    Other,
+}
+
+impl OpenFailure {
+    fn words(self) -> String {
+        match self {
+            Self::DiedCreating => "a process of this run died while creating it".into(),
+            Self::Incomplete => {
+                "it was removed while this process opened it, or has files missing: a process of this run died while creating it, or the run was ending".into()
+            }
+            Self::InFlux => "other processes of this run were creating or removing it at the same moment".into(),
+            Self::Full => format!("it already serves the most processes a run has ({})", LIMITS.nodes),
+            Self::Permissions => "another user's process created it".into(),
+            Self::OtherBuild => "a process of another acps build created it with other types or settings".into(),
+            Self::Other => "iceoryx2 failed".into(),
+        }
+    }
+
+    fn of_task_service(error: &iceoryx2::service::builder::request_response::RequestResponseOpenOrCreateError) -> Self {
+        use iceoryx2::service::builder::request_response::{
+            RequestResponseCreateError as Create, RequestResponseOpenError as Open,
+            RequestResponseOpenOrCreateError as Either,
+        };
+        match error {
+            Either::RequestResponseOpenError(Open::HangsInCreation)
+            | Either::RequestResponseCreateError(Create::HangsInCreation) => Self::DiedCreating,
+            Either::RequestResponseOpenError(Open::DoesNotExist | Open::ServiceInCorruptedState)
+            | Either::RequestResponseCreateError(Create::ServiceInCorruptedState) => Self::Incomplete,
+            Either::SystemInFlux
+            | Either::RequestResponseOpenError(Open::IsMarkedForDestruction)
+            | Either::RequestResponseCreateError(Create::IsBeingCreatedByAnotherInstance) => Self::InFlux,
+            Either::RequestResponseOpenError(Open::ExceedsMaxNumberOfNodes) => Self::Full,
+            Either::RequestResponseOpenError(Open::InsufficientPermissions)
+            | Either::RequestResponseCreateError(Create::InsufficientPermissions) => Self::Permissions,
+            Either::RequestResponseOpenError(
+                Open::IncompatibleRequestOrResponseType
+                | Open::IncompatibleAttributes
+                | Open::IncompatibleMessagingPattern
+                | Open::IncompatibleOverflowBehaviorForRequests
+                | Open::IncompatibleOverflowBehaviorForResponses
+                | Open::IncompatibleBehaviorForFireAndForgetRequests
+                | Open::DoesNotSupportRequestedAmountOfClientRequestLoans
+                | Open::DoesNotSupportRequestedAmountOfActiveRequestsPerClient
+                | Open::DoesNotSupportRequestedResponseBufferSize
+                | Open::DoesNotSupportRequestedAmountOfServers
+                | Open::DoesNotSupportRequestedAmountOfClients
+                | Open::DoesNotSupportRequestedAmountOfNodes
+                | Open::DoesNotSupportRequestedAmountOfBorrowedResponsesPerPendingResponse
+                | Open::VersionMismatch,
+            ) => Self::OtherBuild,
+            _ => Self::Other,
+        }
+    }
+
+    fn of_event_service(error: &iceoryx2::service::builder::event::EventOpenOrCreateError) -> Self {
+        use iceoryx2::service::builder::event::{
+            EventCreateError as Create, EventOpenError as Open, EventOpenOrCreateError as Either,
+        };
+        match error {
+            Either::EventOpenError(Open::HangsInCreation) => Self::DiedCreating,
+            Either::EventOpenError(Open::DoesNotExist | Open::ServiceInCorruptedState)
+            | Either::EventCreateError(Create::ServiceInCorruptedState) => Self::Incomplete,
+            Either::SystemInFlux
+            | Either::EventOpenError(Open::IsMarkedForDestruction)
+            | Either::EventCreateError(Create::IsBeingCreatedByAnotherInstance) => Self::InFlux,
+            Either::EventOpenError(Open::ExceedsMaxNumberOfNodes) => Self::Full,
+            Either::EventOpenError(Open::InsufficientPermissions)
+            | Either::EventCreateError(Create::InsufficientPermissions) => Self::Permissions,
+            Either::EventOpenError(
+                Open::IncompatibleMessagingPattern
+                | Open::IncompatibleAttributes
+                | Open::IncompatibleDeadline
+                | Open::IncompatibleNotifierCreatedEvent
+                | Open::IncompatibleNotifierDroppedEvent
+                | Open::IncompatibleNotifierDeadEvent
+                | Open::DoesNotSupportRequestedAmountOfNotifiers
+                | Open::DoesNotSupportRequestedAmountOfListeners
+                | Open::DoesNotSupportRequestedMaxEventId
+                | Open::DoesNotSupportRequestedAmountOfNodes
+                | Open::VersionMismatch,
+            ) => Self::OtherBuild,
+            _ => Self::Other,
+        }
+    }
+}
 
 /// Open (or create) every service of the run on `node`.
 pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
@@ -217,13 +317,7 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         .max_loaned_requests(LIMITS.loaned_requests)
         .open_or_create()
         .map_err(|e| {
-            use iceoryx2::service::builder::request_response::{
-                RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as OpenOrCreate,
-            };
-            let why = match e {
-                OpenOrCreate::RequestResponseOpenError(Open::HangsInCreation) => DIED_CREATING,
-                _ => "a worker of another build has incompatible types",
-            };
+            let why = OpenFailure::of_task_service(&e).words();
             IpcError::new(format!("opening the task service ({why})"), e)
         })?;
     let event = |name: &str| {
@@ -234,14 +328,8 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
             .max_nodes(nodes)
             .open_or_create()
             .map_err(|e| {
-                use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
-                let what = format!("opening the event service '{name}'");
-                match e {
-                    EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation) => {
-                        IpcError::new(format!("{what} ({DIED_CREATING})"), e)
-                    }
-                    _ => IpcError::new(what, e),
-                }
+                let why = OpenFailure::of_event_service(&e).words();
+                IpcError::new(format!("opening the event service '{name}' ({why})"), e)
             })
     };
     Ok(Services {
@@ -550,6 +638,102 @@ mod tests {
             let error = RunName::new(bad).unwrap_err().to_string();
             assert!(error.contains("must be 1 to 40 characters"), "{error}");
         }
+    }
+
+    #[test]
+    fn failures_to_open_a_service_say_what_happened() {
+        use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+        use iceoryx2::service::builder::request_response::{
+            RequestResponseCreateError, RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as Either,
+        };
+        let tasks = [
+            (
+                Either::RequestResponseOpenError(Open::HangsInCreation),
+                OpenFailure::DiedCreating,
+            ),
+            // A worker killed while it created the run's services.
+            (
+                Either::RequestResponseOpenError(Open::DoesNotExist),
+                OpenFailure::Incomplete,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::ServiceInCorruptedState),
+                OpenFailure::Incomplete,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::IsMarkedForDestruction),
+                OpenFailure::InFlux,
+            ),
+            (Either::SystemInFlux, OpenFailure::InFlux),
+            (
+                Either::RequestResponseOpenError(Open::ExceedsMaxNumberOfNodes),
+                OpenFailure::Full,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::InsufficientPermissions),
+                OpenFailure::Permissions,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::IncompatibleRequestOrResponseType),
+                OpenFailure::OtherBuild,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::DoesNotSupportRequestedAmountOfClients),
+                OpenFailure::OtherBuild,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::VersionMismatch),
+                OpenFailure::OtherBuild,
+            ),
+            (
+                Either::RequestResponseCreateError(RequestResponseCreateError::InternalFailure),
+                OpenFailure::Other,
+            ),
+        ];
+        for (error, failure) in tasks {
+            assert_eq!(OpenFailure::of_task_service(&error), failure, "{error:?}");
+        }
+        let events = [
+            (
+                EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation),
+                OpenFailure::DiedCreating,
+            ),
+            (
+                EventOpenOrCreateError::EventOpenError(EventOpenError::DoesNotExist),
+                OpenFailure::Incomplete,
+            ),
+            (EventOpenOrCreateError::SystemInFlux, OpenFailure::InFlux),
+            (
+                EventOpenOrCreateError::EventOpenError(EventOpenError::IncompatibleDeadline),
+                OpenFailure::OtherBuild,
+            ),
+        ];
+        for (error, failure) in events {
+            assert_eq!(OpenFailure::of_event_service(&error), failure, "{error:?}");
+        }
+        assert!(OpenFailure::Full.words().ends_with(&format!("({})", LIMITS.nodes)));
+    }
+
+    #[test]
+    fn a_task_service_of_other_types_is_refused_as_another_build_s() {
+        let run = RunName::new(&format!("test-other-build-{}", std::process::id())).unwrap();
+        {
+            let node = node(&run, "test").unwrap();
+            let _other = node
+                .service_builder(&ServiceName::new("tasks").unwrap())
+                .request_response::<u64, u64>()
+                .open_or_create()
+                .unwrap();
+            let error = open_services(&node).err().expect("refused").to_string();
+            assert!(
+                error.starts_with(
+                    "opening the task service (a process of another acps build created it with other types or settings): "
+                ),
+                "{error}"
+            );
+        }
+        remove_run_files(&run).unwrap();
+        assert!(leftover_files(&run).is_empty());
     }
 
     #[test]

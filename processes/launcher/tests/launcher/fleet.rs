@@ -1363,3 +1363,49 @@ fn a_fleet_is_refused_while_another_serves_its_run_and_may_start_once_it_is_gone
     drop(second);
     assert_clean(&run);
 }
+
+#[test]
+fn killing_the_only_worker_ends_the_run_saying_so() {
+    let dir = temp_dir("only-worker");
+    let run = run_name("only-worker");
+    let learner = watched()
+        .args([
+            "run",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "20000",
+            "--workers",
+            "1",
+        ])
+        .args(["--run", run.as_str(), "--checkpoint-every", "0"])
+        .arg("--out")
+        .arg(&*dir)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let acps = watched_acps(&learner);
+    // At once: a worker killed while it opened the run's services made the learner blame a
+    // worker of another build.
+    let mut worker = Vec::new();
+    wait_until("the learner to start its worker", Duration::from_secs(30), || {
+        worker = children_of(acps);
+        !worker.is_empty()
+    });
+    let status = Command::new("kill")
+        .args(["-KILL", &worker[0].to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let output = learner.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("no worker can go on with run '{run}': none connected for"))
+            && stderr.contains("all 1 started worker processes exited"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("another"), "{stderr}");
+    assert_clean(&run);
+}
