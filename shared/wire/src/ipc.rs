@@ -62,6 +62,47 @@ pub const RUN_ENV: &str = "ACPS_RUN";
 /// The node name of a run's learner; no worker may take it.
 pub const LEARNER_NODE: &str = "learner";
 
+/// The longest node name iceoryx2 takes (its `MAX_NODE_NAME_LENGTH`).
+pub const MAX_NODE_NAME: usize = 128;
+
+/// What a worker's name may be, as messages state it. Stricter than iceoryx2, which takes any
+/// ASCII but NUL: the name appears in log lines and node listings.
+pub const WORKER_NAMES: &str =
+    "1 to 128 characters of ASCII letters, digits, '-', '_' and '.', other than 'learner' (the learner's node)";
+
+/// A worker name that is none of [`WORKER_NAMES`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("must be {WORKER_NAMES}, got {got}")]
+pub struct WorkerNameError {
+    /// The name as the message shows it: quoted, or its length when it is too long to show.
+    pub got: String,
+}
+
+/// Refuse a worker name that is none of [`WORKER_NAMES`].
+pub fn check_worker_name(name: &str) -> Result<(), WorkerNameError> {
+    let valid = (1..=MAX_NODE_NAME).contains(&name.len())
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.'))
+        && name != LEARNER_NODE;
+    if valid {
+        Ok(())
+    } else {
+        Err(WorkerNameError { got: shown(name) })
+    }
+}
+
+/// A node name as a message shows it: quoted (escaped), or only its length when it is longer than
+/// a node name can be.
+fn shown(name: &str) -> String {
+    let characters = name.chars().count();
+    if characters > MAX_NODE_NAME {
+        format!("{characters} characters")
+    } else {
+        format!("{name:?}")
+    }
+}
+
 /// The settings every process opens a run's services with: whoever creates a service fixes them,
 /// and iceoryx2 refuses an opener that asks for more (docs/PROTOCOL.md lists them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -188,7 +229,13 @@ pub fn worker_node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcE
 }
 
 fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Service>, IpcError> {
-    let node_name = NodeName::new(name).map_err(|e| IpcError::new(format!("node name '{name}'"), e))?;
+    let node_name = NodeName::new(name).map_err(|_| IpcError {
+        what: "node name".into(),
+        reason: format!(
+            "must be 1 to {MAX_NODE_NAME} ASCII characters other than NUL, got {}",
+            shown(name)
+        ),
+    })?;
     NodeBuilder::new()
         .name(&node_name)
         .config(config)
@@ -638,6 +685,42 @@ mod tests {
             let error = RunName::new(bad).unwrap_err().to_string();
             assert!(error.contains("must be 1 to 40 characters"), "{error}");
         }
+    }
+
+    #[test]
+    fn worker_names_are_checked_and_a_refusal_says_what_names_may_be() {
+        assert_eq!(MAX_NODE_NAME, NodeName::max_len());
+        let long = "x".repeat(MAX_NODE_NAME);
+        for good in ["w0", "worker-12", "host.thread_1", long.as_str(), "learners"] {
+            assert_eq!(check_worker_name(good), Ok(()), "{good}");
+        }
+        let cases = [
+            ("", "got \"\""),
+            ("a/b", "got \"a/b\""),
+            ("with space", "got \"with space\""),
+            ("é", "got \"é\""),
+            ("tab\t", "got \"tab\\t\""),
+            (LEARNER_NODE, "got \"learner\""),
+            (&"x".repeat(MAX_NODE_NAME + 1), "got 129 characters"),
+            (&"x".repeat(300), "got 300 characters"),
+        ];
+        for (bad, got) in cases {
+            let error = check_worker_name(bad).unwrap_err().to_string();
+            assert_eq!(error, format!("must be {WORKER_NAMES}, {got}"), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn node_names_iceoryx2_refuses_are_refused_in_words() {
+        let run = RunName::new(&format!("test-node-name-{}", std::process::id())).unwrap();
+        for (bad, got) in [("é", "got \"é\""), (&"x".repeat(300), "got 300 characters")] {
+            let error = node(&run, bad).expect_err("refused").to_string();
+            assert_eq!(
+                error,
+                format!("node name: must be 1 to 128 ASCII characters other than NUL, {got}")
+            );
+        }
+        assert!(leftover_files(&run).is_empty());
     }
 
     #[test]

@@ -1409,3 +1409,56 @@ fn killing_the_only_worker_ends_the_run_saying_so() {
     assert!(!stderr.contains("another"), "{stderr}");
     assert_clean(&run);
 }
+
+#[test]
+fn bad_worker_and_run_names_are_refused_naming_the_flag_and_what_names_may_be() {
+    let run = run_name("names");
+    let long = "x".repeat(300);
+    let names = "must be 1 to 128 characters of ASCII letters, digits, '-', '_' and '.', other than 'learner' (the learner's node), got";
+    let cases: [(&[&str], Option<&str>, String); 8] = [
+        (&["--name", ""], None, format!("--name {names} \"\"")),
+        (&["--name", "a/b"], None, format!("--name {names} \"a/b\"")),
+        (&["--name", "é"], None, format!("--name {names} \"é\"")),
+        (&["--name", "learner"], None, format!("--name {names} \"learner\"")),
+        (&["--name", &long], None, format!("--name {names} 300 characters")),
+        (
+            &["--run", "a/b"],
+            None,
+            "--run a/b: run name: 'a/b' must be 1 to 40 characters of letters, digits and '-'".into(),
+        ),
+        (
+            &["--run", &long],
+            None,
+            "must be 1 to 40 characters of letters, digits and '-'".into(),
+        ),
+        (
+            &[],
+            Some("a_b"),
+            "ACPS_RUN: run name: 'a_b' must be 1 to 40 characters of letters, digits and '-'".into(),
+        ),
+    ];
+    for (args, env, message) in cases {
+        let mut command = acps();
+        command.arg("worker").env_remove(acps_fleet::RUN_ENV);
+        if !args.contains(&"--run") && env.is_none() {
+            command.args(["--run", run.as_str()]);
+        }
+        if let Some(env) = env {
+            command.env(acps_fleet::RUN_ENV, env);
+        }
+        let output = command.args(args).args(["--startup-timeout", "0"]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(&message), "{args:?}: {stderr}");
+    }
+    // An embedded worker is refused the same way.
+    let options = WorkerOptions {
+        name: String::new(),
+        ..WorkerOptions::default()
+    };
+    let error = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false))
+        .unwrap_err()
+        .to_string();
+    assert_eq!(error, format!("worker option name {names} \"\""));
+    assert_clean(&run);
+}
