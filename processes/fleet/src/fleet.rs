@@ -212,7 +212,7 @@ impl FleetBuilder {
             ..Liveness::default()
         });
         Ok(Fleet {
-            seat,
+            seat: Some(seat),
             run: OwnedRun(run),
             identity: self.identity,
             spin: self.spin.unwrap_or_else(|| processes::spin(workers)),
@@ -247,8 +247,9 @@ impl FleetBuilder {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub struct Fleet {
+    /// The seat [`start`](FleetBuilder::start) took, until [`serve`](Self::serve) uses it.
     /// Dropped before `run`: the learner's node must be gone before the run's files are removed.
-    seat: Seat,
+    seat: Option<Seat>,
     run: OwnedRun,
     identity: Option<u64>,
     spawn: Option<Spawn>,
@@ -293,9 +294,16 @@ impl Fleet {
 
     /// Serve `jobs` until every one is done: start the worker processes, if any, hand out
     /// tasks, re-issue those of workers that die or hang, and reap the processes. `observer`
-    /// sees the progress every tick and every job's learner after each accepted outcome.
+    /// sees the progress every tick and every job's learner after each accepted outcome. The
+    /// run's learner seat, taken at start, is released when it returns, and taken again by the
+    /// next `serve` ([`FleetError::Seat`] if another learner took it meanwhile).
     pub fn serve(&mut self, jobs: &mut [FleetJob], observer: &mut dyn Observer) -> Result<FleetProgress, FleetError> {
         let identity = self.identity.unwrap_or_else(|| identity_of(jobs));
+        // The seat taken at start, or, for a fleet that served before, the seat again.
+        let seat = match self.seat.take() {
+            Some(seat) => seat,
+            None => Seat::take(&self.run.0)?,
+        };
         let mut children = match &self.spawn {
             Some(spawn) => start_workers(&self.run.0, spawn)?,
             None => Vec::new(),
@@ -305,7 +313,7 @@ impl Fleet {
         let served = server::serve(
             jobs,
             &self.run.0,
-            &self.seat,
+            &seat,
             ServeOptions {
                 identity,
                 spin: self.spin,
@@ -316,6 +324,9 @@ impl Fleet {
             observer,
             &mut || (processes::running(&mut children), launched),
         );
+        // Before the workers are reaped: one that was not told to stop (busy in a rollout when
+        // the run ended) leaves once it finds the learner's node gone.
+        drop(seat);
         processes::reap(&mut children);
         served
     }

@@ -115,6 +115,10 @@ pub enum FleetError {
     /// iceoryx2 failed: creating the run's node, ports or services, or exchanging messages.
     #[error(transparent)]
     Ipc(#[from] IpcError),
+    /// A fleet that served before could not serve its run again: another learner took it
+    /// ([`ServerError::Taken`]), or iceoryx2 failed.
+    #[error(transparent)]
+    Seat(#[from] ServerError),
     /// A task does not fit the wire (a job's checked sizes prevent it).
     #[error(transparent)]
     Capacity(#[from] CapacityError),

@@ -1299,10 +1299,13 @@ fn a_second_learner_of_a_running_run_is_refused_at_once_and_starts_no_worker() {
         .unwrap();
     let first_pid = watched_acps(&first);
     let mut first_err = std::io::BufReader::new(first.stderr.take().unwrap());
-    // Printed once it serves the run (or the pipe closes if it dies: then the line is missing).
-    let mut line = String::new();
-    std::io::BufRead::read_line(&mut first_err, &mut line).unwrap();
-    assert!(line.contains(&format!("run '{run}' waits for workers")), "{line}");
+    // Printed once it serves the run, after any log lines (once, under load, one came first);
+    // the pipe closes if it dies.
+    let mut before = String::new();
+    while !before.contains(&format!("run '{run}' waits for workers")) {
+        let read = std::io::BufRead::read_line(&mut first_err, &mut before).unwrap();
+        assert!(read > 0, "the first learner ended: {before}");
+    }
     // Another experiment, so that a worker it started would be refused by the first learner,
     // which says so on stderr. -v shows the info lines too.
     let second = watched()
@@ -1348,19 +1351,34 @@ fn a_second_learner_of_a_running_run_is_refused_at_once_and_starts_no_worker() {
 }
 
 #[test]
-fn a_fleet_is_refused_while_another_serves_its_run_and_may_start_once_it_is_gone() {
+fn a_fleet_is_refused_while_another_holds_its_run_and_serving_releases_it() {
+    use acps_fleet::{FleetError, FleetStartError};
+    use ipc::ServerError;
     let run = run_name("seat");
-    let first = Fleet::builder(run.as_str()).start().unwrap();
+    let taken = |error: &ServerError| {
+        *error
+            == ServerError::Taken {
+                run: run.to_string(),
+                pid: Some(std::process::id() as i32),
+            }
+    };
+    let serve = |fleet: &mut Fleet| fleet.serve(&mut [], &mut |_: &FleetProgress| {});
+    let mut first = Fleet::builder(run.as_str()).start().unwrap();
     match Fleet::builder(run.as_str()).start() {
-        Err(acps_fleet::FleetStartError::Serve(ipc::ServerError::Taken { run: taken, pid })) => {
-            assert_eq!((taken, pid), (run.to_string(), Some(std::process::id() as i32)))
-        }
+        Err(FleetStartError::Serve(error)) => assert!(taken(&error), "{error}"),
         Err(other) => panic!("expected the run to be taken, got {other}"),
-        Ok(_) => panic!("two fleets serve run {run}"),
+        Ok(_) => panic!("two fleets hold run {run}"),
     }
-    drop(first);
-    let second = Fleet::builder(run.as_str()).start().expect("the first is gone");
+    // Serving ends by releasing the run: a worker left busy in a rollout finds its learner gone.
+    serve(&mut first).unwrap();
+    let second = Fleet::builder(run.as_str()).start().expect("the first serves no more");
+    match serve(&mut first) {
+        Err(FleetError::Seat(error)) => assert!(taken(&error), "{error}"),
+        other => panic!("expected the run to be taken, got {other:?}"),
+    }
     drop(second);
+    serve(&mut first).expect("the run is free again");
+    drop(first);
     assert_clean(&run);
 }
 
