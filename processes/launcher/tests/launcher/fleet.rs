@@ -1129,22 +1129,26 @@ fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_lef
     wait_until("a learning run with both workers", Duration::from_secs(60), || {
         ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&dir.join("checkpoints"))
     });
-    let workers = children_of(learner.id());
     signal_group("-KILL", learner.id());
     learner.wait().unwrap();
-    wait_until("the killed workers to be gone", Duration::from_secs(20), || {
-        workers.iter().all(|pid| {
-            std::fs::read_to_string(format!("/proc/{pid}/stat")).map_or(true, |stat| {
-                stat.rsplit_once(')')
-                    .is_some_and(|(_, rest)| rest.trim_start().starts_with('Z'))
-            })
-        })
-    });
-    assert!(!ipc::leftover_files(&run).is_empty(), "a kill -9 leaves files");
-    // The next fleet, of another name, removes them when it starts.
+    // Not merely until the workers show as zombies: a killed process's main thread does so
+    // before its other threads have exited, and until the last of them has, the lock on its
+    // node's files stays held and iceoryx2 reports the node alive, so that the start below left
+    // the run alone (this test failed about one time in four beside the other fleet tests).
+    wait_until(
+        "every node of the killed run to be dead",
+        Duration::from_secs(20),
+        || ipc::live_nodes(&run).is_ok_and(|alive| alive == 0),
+    );
+    // The next fleet, of another name, removes what the run left when it starts. Fleets that
+    // other tests start meanwhile may have removed it already, or be midway (seen once in some
+    // 200 runs beside the other fleet tests: one of the three nodes' files gone, the rest left
+    // to the other cleaner), so the test waits for the files to go.
     let other = run_name("kill-all-next");
     let fleet = Fleet::builder(other.as_str()).start().unwrap();
-    assert!(ipc::leftover_files(&run).is_empty(), "{:?}", ipc::leftover_files(&run));
+    wait_until("the killed run's files to be removed", Duration::from_secs(20), || {
+        ipc::leftover_files(&run).is_empty()
+    });
     drop(fleet);
     assert_clean(&other);
 }
