@@ -8,8 +8,8 @@
 //! removes the run's shared memory.
 
 use crate::processes;
-use crate::server::{self, FleetError, FleetJob, FleetProgress, Liveness, Observer, ServeOptions};
-use acps_wire::ipc::{self, IpcError, RunName};
+use crate::server::{self, FleetError, FleetJob, FleetProgress, Liveness, Observer, Seat, ServeOptions};
+use acps_wire::ipc::{self, IpcError, RunName, ServerError};
 use std::os::unix::process::CommandExt as _;
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -71,6 +71,10 @@ pub enum FleetStartError {
     /// The run name is not valid.
     #[error(transparent)]
     Name(IpcError),
+    /// The run could not be served: another learner of the same name is running
+    /// ([`ServerError::Taken`]), or iceoryx2 failed.
+    #[error(transparent)]
+    Serve(#[from] ServerError),
     /// The Ctrl-C handler could not be installed: the program installed its own. Leave
     /// [`FleetBuilder::ctrl_c`] off and set [`Fleet::stop_flag`] from your handler instead.
     #[error("installing the Ctrl-C handler: {0}")]
@@ -142,9 +146,10 @@ impl FleetBuilder {
         self
     }
 
-    /// Start the fleet: validate the name, install the Ctrl-C handler if asked, and remove what
-    /// dead runs left in shared memory: those of any name whose every node is dead, and the dead
-    /// nodes of this run (workers started by hand may already wait for it).
+    /// Start the fleet: validate the name, install the Ctrl-C handler if asked, remove what
+    /// dead runs left in shared memory (those of any name whose every node is dead, and the dead
+    /// nodes of this run: workers started by hand may already wait for it), and take the run's
+    /// learner seat, which is refused at once while another learner of the same run name lives.
     pub fn start(self) -> Result<Fleet, FleetStartError> {
         let run = RunName::new(&self.name).map_err(FleetStartError::Name)?;
         let setting = |ok: bool, field, accepted, got: String| {
@@ -199,13 +204,16 @@ impl FleetBuilder {
         // Listing nodes can fail while one is being created or removed; the next start looks
         // again.
         let _ = ipc::clean_stale(&run);
+        // Before any worker starts: those of a refused fleet would join the other learner.
+        let seat = Seat::take(&run)?;
         let workers = self.spawn.as_ref().map_or(0, |(count, _)| *count);
         let liveness = self.liveness.unwrap_or(Liveness {
             no_workers: (workers > 0).then_some(Liveness::default().no_workers).flatten(),
             ..Liveness::default()
         });
         Ok(Fleet {
-            run,
+            seat: Some(seat),
+            run: OwnedRun(run),
             identity: self.identity,
             spin: self.spin.unwrap_or_else(|| processes::spin(workers)),
             spawn: self.spawn.map(|(count, command)| Spawn {
@@ -239,7 +247,10 @@ impl FleetBuilder {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub struct Fleet {
-    run: RunName,
+    /// The seat [`start`](FleetBuilder::start) took, until [`serve`](Self::serve) uses it.
+    /// Dropped before `run`: the learner's node must be gone before the run's files are removed.
+    seat: Option<Seat>,
+    run: OwnedRun,
     identity: Option<u64>,
     spawn: Option<Spawn>,
     liveness: Liveness,
@@ -267,7 +278,7 @@ impl Fleet {
 
     /// The run's name.
     pub fn run(&self) -> &RunName {
-        &self.run
+        &self.run.0
     }
 
     /// A flag that stops [`serve`](Self::serve) with [`FleetError::Interrupted`] when set, from
@@ -283,18 +294,26 @@ impl Fleet {
 
     /// Serve `jobs` until every one is done: start the worker processes, if any, hand out
     /// tasks, re-issue those of workers that die or hang, and reap the processes. `observer`
-    /// sees the progress every tick and every job's learner after each accepted outcome.
+    /// sees the progress every tick and every job's learner after each accepted outcome. The
+    /// run's learner seat, taken at start, is released when it returns, and taken again by the
+    /// next `serve` ([`FleetError::Seat`] if another learner took it meanwhile).
     pub fn serve(&mut self, jobs: &mut [FleetJob], observer: &mut dyn Observer) -> Result<FleetProgress, FleetError> {
         let identity = self.identity.unwrap_or_else(|| identity_of(jobs));
+        // The seat taken at start, or, for a fleet that served before, the seat again.
+        let seat = match self.seat.take() {
+            Some(seat) => seat,
+            None => Seat::take(&self.run.0)?,
+        };
         let mut children = match &self.spawn {
-            Some(spawn) => start_workers(&self.run, spawn)?,
+            Some(spawn) => start_workers(&self.run.0, spawn)?,
             None => Vec::new(),
         };
         let launched = children.len();
         let stop = || self.stop.load(Ordering::Relaxed) || (self.ctrl_c && INTERRUPTED.load(Ordering::Relaxed));
         let served = server::serve(
             jobs,
-            &self.run,
+            &self.run.0,
+            &seat,
             ServeOptions {
                 identity,
                 spin: self.spin,
@@ -305,24 +324,32 @@ impl Fleet {
             observer,
             &mut || (processes::running(&mut children), launched),
         );
+        // Before the workers are reaped: one that was not told to stop (busy in a rollout when
+        // the run ended) leaves once it finds the learner's node gone.
+        drop(seat);
         processes::reap(&mut children);
         served
     }
 }
 
-impl Drop for Fleet {
-    /// Remove the run's shared memory, or, while nodes started elsewhere (workers started by
-    /// hand) are alive, only what dead nodes left: the last one out, or the next fleet to start,
-    /// removes the rest.
+/// A fleet's run, whose shared memory goes when the fleet is dropped (after its learner's node).
+struct OwnedRun(RunName);
+
+impl Drop for OwnedRun {
+    /// Remove the run's shared memory, or, while processes the fleet did not start (workers
+    /// started by hand) still use it, only what dead nodes left: the next fleet to start removes
+    /// the rest once they are gone.
     fn drop(&mut self) {
-        let _ = ipc::clean_stale(&self.run);
-        if ipc::live_nodes(&self.run).is_ok_and(|alive| alive == 0) {
-            let _ = ipc::remove_run_files(&self.run);
-        } else {
-            tracing::info!(
-                "run '{}': nodes started elsewhere are still alive; their shared memory stays until they exit",
-                self.run
-            );
+        let run = &self.0;
+        let _ = ipc::clean_stale(run);
+        match ipc::live_nodes(run) {
+            Ok(0) => {
+                let _ = ipc::remove_run_files(run);
+            }
+            alive => tracing::info!(
+                "run '{run}': {} processes this fleet did not start (workers started by hand) still use its shared memory; the next fleet to start removes it once they are gone",
+                alive.map_or("some".to_string(), |n| n.to_string())
+            ),
         }
     }
 }

@@ -17,6 +17,6 @@ pub mod processes;
 pub mod server;
 mod wake;
 
-pub use acps_wire::ipc::RunName;
+pub use acps_wire::ipc::{RunName, ServerError};
 pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};
 pub use server::{FleetError, FleetJob, FleetJobBuildError, FleetProgress, Liveness, Observer, ServeOptions};

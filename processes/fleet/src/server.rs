@@ -24,7 +24,7 @@
 use crate::wake::Waker;
 use acps_learner::{Learner, LearnerTellError, LearningProgress};
 use acps_shared::{EnvironmentSpec, Serves, SpecBuildError};
-use acps_wire::ipc::{self, IpcError, RunName, TICK, TaskRequest, TaskService};
+use acps_wire::ipc::{self, IpcError, RunName, ServerError, TICK, TaskRequest, TaskServer, TaskService};
 use acps_wire::wire::{
     Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, WireTask, WorkerMessage, check_task_sizes,
 };
@@ -115,9 +115,10 @@ pub enum FleetError {
     /// iceoryx2 failed: creating the run's node, ports or services, or exchanging messages.
     #[error(transparent)]
     Ipc(#[from] IpcError),
-    /// Another learner already serves this run name.
-    #[error("another learner already serves run '{0}'; choose another run name")]
-    RunTaken(String),
+    /// A fleet that served before could not serve its run again: another learner took it
+    /// ([`ServerError::Taken`]), or iceoryx2 failed.
+    #[error(transparent)]
+    Seat(#[from] ServerError),
     /// A task does not fit the wire (a job's checked sizes prevent it).
     #[error(transparent)]
     Capacity(#[from] CapacityError),
@@ -217,29 +218,47 @@ impl<F: FnMut(&FleetProgress)> Observer for F {
     }
 }
 
-/// Serve `jobs` to the workers of `run` until every job is done. `started` says how many worker
-/// processes the caller started are still running (they count as workers on their way).
+/// The learner's place in a run: its node, the run's services and the task server, which only
+/// one live process of a run can hold. Fields drop in this order: ports before their node.
+pub(crate) struct Seat {
+    server: TaskServer,
+    services: ipc::Services,
+    _node: iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>,
+}
+
+impl Seat {
+    /// Take the seat of `run`, refused while another learner holds it.
+    pub(crate) fn take(run: &RunName) -> Result<Self, ServerError> {
+        let node = ipc::node(run, ipc::LEARNER_NODE)?;
+        let services = ipc::open_services(&node)?;
+        Ok(Self {
+            server: ipc::task_server(run, &services.tasks)?,
+            services,
+            _node: node,
+        })
+    }
+}
+
+/// Serve `jobs` from `seat` to the workers of `run` until every job is done. `started` says how
+/// many worker processes the caller started are still running (they count as workers on their
+/// way).
 pub(crate) fn serve(
     jobs: &mut [FleetJob],
     run: &RunName,
+    seat: &Seat,
     options: ServeOptions,
     stop: &dyn Fn() -> bool,
     observer: &mut dyn Observer,
     started: &mut dyn FnMut() -> (usize, usize),
 ) -> Result<FleetProgress, FleetError> {
     let identity = options.identity;
-    let node = ipc::node(run, "learner")?;
-    let services = ipc::open_services(&node)?;
-    if services.tasks.dynamic_config().number_of_servers() > 0 {
-        return Err(FleetError::RunTaken(run.to_string()));
-    }
-    let server = ipc::task_server(run, &services.tasks)?;
+    let Seat { server, services, .. } = seat;
     let listener = services
         .to_learner
         .listener_builder()
         .create()
         .map_err(|e| IpcError::new("creating the learner's listener", e))?;
-    let mut waker = Waker::new(&services)?;
+    let mut waker = Waker::new(services)?;
 
     let mut progress = FleetProgress::default();
     let mut parked = VecDeque::new();

@@ -219,7 +219,8 @@ pub(crate) struct WorkerArgs {
     /// of rollouts slower than a batch's 800 us, which travel alone, are in flight.
     #[arg(long, default_value_t = 4, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
     pub(crate) in_flight: usize,
-    /// The worker's name in iceoryx2's node list (default: worker-PID).
+    /// The worker's name in iceoryx2's node list: 1 to 128 ASCII letters, digits, '-', '_' and
+    /// '.', not 'learner' (default: worker-PID).
     #[arg(long)]
     pub(crate) name: Option<String>,
     /// Seconds to wait for the run's learner to appear (0..=86400, a day).

@@ -383,20 +383,22 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     // Before the Ctrl-C handler's thread exists: Linux sets a niceness per thread.
     acps_fleet::processes::lower_priority(args.nice)?;
     let run = match args.run {
-        Some(name) => RunName::new(&name)?,
-        None => RunName::from_env()?.with_context(|| {
+        Some(name) => RunName::new(&name).with_context(|| format!("--run {name}"))?,
+        None => RunName::from_env().context(ipc::RUN_ENV)?.with_context(|| {
             format!(
                 "--run is missing: name the run to join (the learner's --run), or set {}",
                 ipc::RUN_ENV
             )
         })?,
     };
+    let name = args.name.unwrap_or_else(|| format!("worker-{}", std::process::id()));
+    ipc::check_worker_name(&name).map_err(|e| anyhow::anyhow!("--name {e}"))?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     let options = WorkerOptions {
         in_flight: args.in_flight,
-        name: args.name.unwrap_or_else(|| format!("worker-{}", std::process::id())),
+        name,
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
         spin: Duration::from_micros(args.spin_us),
     };

@@ -63,7 +63,7 @@ pub struct WorkerOptions {
     /// at most 8 requests ask for tasks at once, so rollouts that travel alone (slower than a
     /// batch's 800 us) keep at most 8 in flight.
     pub in_flight: usize,
-    /// The worker's node name (shown by iceoryx2's tools).
+    /// The worker's node name (shown by iceoryx2's tools): [`ipc::WORKER_NAMES`].
     pub name: String,
     /// How long to wait for the run's learner to appear before giving up.
     pub startup_timeout: Duration,
@@ -223,6 +223,11 @@ pub fn serve(
             got: options.in_flight.to_string(),
         });
     }
+    ipc::check_worker_name(&options.name).map_err(|e| WorkerError::Option {
+        field: "name",
+        accepted: ipc::WORKER_NAMES,
+        got: e.got,
+    })?;
     let node = ipc::worker_node(run, &options.name)?;
     let services = ipc::open_services(&node)?;
     let started = Instant::now();

@@ -59,6 +59,50 @@ impl IpcError {
 /// The environment variable that names the run a started worker process joins.
 pub const RUN_ENV: &str = "ACPS_RUN";
 
+/// The node name of a run's learner; no worker may take it.
+pub const LEARNER_NODE: &str = "learner";
+
+/// The longest node name iceoryx2 takes (its `MAX_NODE_NAME_LENGTH`).
+pub const MAX_NODE_NAME: usize = 128;
+
+/// What a worker's name may be, as messages state it. Stricter than iceoryx2, which takes any
+/// ASCII but NUL: the name appears in log lines and node listings.
+pub const WORKER_NAMES: &str =
+    "1 to 128 characters of ASCII letters, digits, '-', '_' and '.', other than 'learner' (the learner's node)";
+
+/// A worker name that is none of [`WORKER_NAMES`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("must be {WORKER_NAMES}, got {got}")]
+pub struct WorkerNameError {
+    /// The name as the message shows it: quoted, or its length when it is too long to show.
+    pub got: String,
+}
+
+/// Refuse a worker name that is none of [`WORKER_NAMES`].
+pub fn check_worker_name(name: &str) -> Result<(), WorkerNameError> {
+    let valid = (1..=MAX_NODE_NAME).contains(&name.len())
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.'))
+        && name != LEARNER_NODE;
+    if valid {
+        Ok(())
+    } else {
+        Err(WorkerNameError { got: shown(name) })
+    }
+}
+
+/// A node name as a message shows it: quoted (escaped), or only its length when it is longer than
+/// a node name can be.
+fn shown(name: &str) -> String {
+    let characters = name.chars().count();
+    if characters > MAX_NODE_NAME {
+        format!("{characters} characters")
+    } else {
+        format!("{name:?}")
+    }
+}
+
 /// The settings every process opens a run's services with: whoever creates a service fixes them,
 /// and iceoryx2 refuses an opener that asks for more (docs/PROTOCOL.md lists them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -185,7 +229,13 @@ pub fn worker_node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcE
 }
 
 fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Service>, IpcError> {
-    let node_name = NodeName::new(name).map_err(|e| IpcError::new(format!("node name '{name}'"), e))?;
+    let node_name = NodeName::new(name).map_err(|_| IpcError {
+        what: "node name".into(),
+        reason: format!(
+            "must be 1 to {MAX_NODE_NAME} ASCII characters other than NUL, got {}",
+            shown(name)
+        ),
+    })?;
     NodeBuilder::new()
         .name(&node_name)
         .config(config)
@@ -194,8 +244,108 @@ fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Ser
         .map_err(|e| IpcError::new(format!("creating node '{name}' of run '{run}'"), e))
 }
 
-/// Why a service hangs in creation: its creator died before finishing it.
-const DIED_CREATING: &str = "a process of this run died while creating it";
+/// Why a process could not open a service of its run, in words: iceoryx2's reasons name its
+/// internals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OpenFailure {
+    /// Still in creation after [`ServiceLimits::creation_timeout`].
+    DiedCreating,
+    /// Gone between creating and opening it, or with files missing.
+    Incomplete,
+    /// Being created or removed by another process at this moment.
+    InFlux,
+    /// Opened by as many processes as it takes.
+    Full,
+    /// Created by another user.
+    Permissions,
+    /// Created with other types or settings.
+    OtherBuild,
+    /// Anything else.
+    Other,
+}
+
+impl OpenFailure {
+    fn words(self) -> String {
+        match self {
+            Self::DiedCreating => "a process of this run died while creating it".into(),
+            Self::Incomplete => {
+                "it was removed while this process opened it, or has files missing: a process of this run died while creating it, or the run was ending".into()
+            }
+            Self::InFlux => "other processes of this run were creating or removing it at the same moment".into(),
+            Self::Full => format!("it already serves the most processes a run has ({})", LIMITS.nodes),
+            Self::Permissions => "another user's process created it".into(),
+            Self::OtherBuild => "a process of another acps build created it with other types or settings".into(),
+            Self::Other => "iceoryx2 failed".into(),
+        }
+    }
+
+    fn of_task_service(error: &iceoryx2::service::builder::request_response::RequestResponseOpenOrCreateError) -> Self {
+        use iceoryx2::service::builder::request_response::{
+            RequestResponseCreateError as Create, RequestResponseOpenError as Open,
+            RequestResponseOpenOrCreateError as Either,
+        };
+        match error {
+            Either::RequestResponseOpenError(Open::HangsInCreation)
+            | Either::RequestResponseCreateError(Create::HangsInCreation) => Self::DiedCreating,
+            Either::RequestResponseOpenError(Open::DoesNotExist | Open::ServiceInCorruptedState)
+            | Either::RequestResponseCreateError(Create::ServiceInCorruptedState) => Self::Incomplete,
+            Either::SystemInFlux
+            | Either::RequestResponseOpenError(Open::IsMarkedForDestruction)
+            | Either::RequestResponseCreateError(Create::IsBeingCreatedByAnotherInstance) => Self::InFlux,
+            Either::RequestResponseOpenError(Open::ExceedsMaxNumberOfNodes) => Self::Full,
+            Either::RequestResponseOpenError(Open::InsufficientPermissions)
+            | Either::RequestResponseCreateError(Create::InsufficientPermissions) => Self::Permissions,
+            Either::RequestResponseOpenError(
+                Open::IncompatibleRequestOrResponseType
+                | Open::IncompatibleAttributes
+                | Open::IncompatibleMessagingPattern
+                | Open::IncompatibleOverflowBehaviorForRequests
+                | Open::IncompatibleOverflowBehaviorForResponses
+                | Open::IncompatibleBehaviorForFireAndForgetRequests
+                | Open::DoesNotSupportRequestedAmountOfClientRequestLoans
+                | Open::DoesNotSupportRequestedAmountOfActiveRequestsPerClient
+                | Open::DoesNotSupportRequestedResponseBufferSize
+                | Open::DoesNotSupportRequestedAmountOfServers
+                | Open::DoesNotSupportRequestedAmountOfClients
+                | Open::DoesNotSupportRequestedAmountOfNodes
+                | Open::DoesNotSupportRequestedAmountOfBorrowedResponsesPerPendingResponse
+                | Open::VersionMismatch,
+            ) => Self::OtherBuild,
+            _ => Self::Other,
+        }
+    }
+
+    fn of_event_service(error: &iceoryx2::service::builder::event::EventOpenOrCreateError) -> Self {
+        use iceoryx2::service::builder::event::{
+            EventCreateError as Create, EventOpenError as Open, EventOpenOrCreateError as Either,
+        };
+        match error {
+            Either::EventOpenError(Open::HangsInCreation) => Self::DiedCreating,
+            Either::EventOpenError(Open::DoesNotExist | Open::ServiceInCorruptedState)
+            | Either::EventCreateError(Create::ServiceInCorruptedState) => Self::Incomplete,
+            Either::SystemInFlux
+            | Either::EventOpenError(Open::IsMarkedForDestruction)
+            | Either::EventCreateError(Create::IsBeingCreatedByAnotherInstance) => Self::InFlux,
+            Either::EventOpenError(Open::ExceedsMaxNumberOfNodes) => Self::Full,
+            Either::EventOpenError(Open::InsufficientPermissions)
+            | Either::EventCreateError(Create::InsufficientPermissions) => Self::Permissions,
+            Either::EventOpenError(
+                Open::IncompatibleMessagingPattern
+                | Open::IncompatibleAttributes
+                | Open::IncompatibleDeadline
+                | Open::IncompatibleNotifierCreatedEvent
+                | Open::IncompatibleNotifierDroppedEvent
+                | Open::IncompatibleNotifierDeadEvent
+                | Open::DoesNotSupportRequestedAmountOfNotifiers
+                | Open::DoesNotSupportRequestedAmountOfListeners
+                | Open::DoesNotSupportRequestedMaxEventId
+                | Open::DoesNotSupportRequestedAmountOfNodes
+                | Open::VersionMismatch,
+            ) => Self::OtherBuild,
+            _ => Self::Other,
+        }
+    }
+}
 
 /// Open (or create) every service of the run on `node`.
 pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
@@ -214,13 +364,7 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         .max_loaned_requests(LIMITS.loaned_requests)
         .open_or_create()
         .map_err(|e| {
-            use iceoryx2::service::builder::request_response::{
-                RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as OpenOrCreate,
-            };
-            let why = match e {
-                OpenOrCreate::RequestResponseOpenError(Open::HangsInCreation) => DIED_CREATING,
-                _ => "a worker of another build has incompatible types",
-            };
+            let why = OpenFailure::of_task_service(&e).words();
             IpcError::new(format!("opening the task service ({why})"), e)
         })?;
     let event = |name: &str| {
@@ -231,14 +375,8 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
             .max_nodes(nodes)
             .open_or_create()
             .map_err(|e| {
-                use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
-                let what = format!("opening the event service '{name}'");
-                match e {
-                    EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation) => {
-                        IpcError::new(format!("{what} ({DIED_CREATING})"), e)
-                    }
-                    _ => IpcError::new(what, e),
-                }
+                let why = OpenFailure::of_event_service(&e).words();
+                IpcError::new(format!("opening the event service '{name}' ({why})"), e)
             })
     };
     Ok(Services {
@@ -248,14 +386,56 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
     })
 }
 
-/// The server of `run`'s task service: its learner. Answers are sized to their tasks, up to
-/// [`MAX_BATCH`].
-pub fn task_server(run: &RunName, tasks: &TaskService) -> Result<TaskServer, IpcError> {
-    tasks
-        .server_builder()
-        .initial_max_slice_len(MAX_BATCH)
-        .create()
-        .map_err(|e| IpcError::new(format!("serving run '{run}' (is another learner serving it?)"), e))
+/// Why a process could not serve a run's tasks.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ServerError {
+    /// Another process serves the run: a learner of the same run name.
+    #[error(
+        "a learner of run '{run}' is already running{}; give this run another name, or wait for that learner to end",
+        pid.map_or(String::new(), |pid| format!(" (PID {pid})"))
+    )]
+    Taken {
+        /// The run.
+        run: String,
+        /// The process of the learner that serves it, when iceoryx2 can tell.
+        pid: Option<i32>,
+    },
+    /// iceoryx2 failed otherwise.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+}
+
+/// The server of `run`'s task service: its learner, the only one. Answers are sized to their
+/// tasks, up to [`MAX_BATCH`]. Refused with [`ServerError::Taken`] while a live process serves
+/// the run; the server of a dead one is cleaned up first.
+pub fn task_server(run: &RunName, tasks: &TaskService) -> Result<TaskServer, ServerError> {
+    use iceoryx2::service::port_factory::server::ServerCreateError;
+    let create = || tasks.server_builder().initial_max_slice_len(MAX_BATCH).create();
+    let mut created = create();
+    if matches!(created, Err(ServerCreateError::ExceedsMaxSupportedServers))
+        && !server_pid(tasks).is_some_and(process_runs)
+    {
+        // The server of a learner that died, which no cleanup has removed yet.
+        tasks.try_cleanup_dead_nodes();
+        created = create();
+    }
+    created.map_err(|e| match e {
+        ServerCreateError::ExceedsMaxSupportedServers => ServerError::Taken {
+            run: run.to_string(),
+            pid: server_pid(tasks),
+        },
+        e => IpcError::new(format!("serving run '{run}'"), e).into(),
+    })
+}
+
+/// The process of the task service's server, if it has one and iceoryx2 can tell.
+fn server_pid(tasks: &TaskService) -> Option<i32> {
+    let mut pid = None;
+    tasks.dynamic_config().list_servers(|server| {
+        pid = server.node_id.pid::<ipc::Service>().ok().map(|pid| pid.value());
+        CallbackProgression::Stop
+    });
+    pid
 }
 
 /// Answer `request` with `tasks` (none for `Stop` and `Refused`), written straight into shared
@@ -505,6 +685,167 @@ mod tests {
             let error = RunName::new(bad).unwrap_err().to_string();
             assert!(error.contains("must be 1 to 40 characters"), "{error}");
         }
+    }
+
+    #[test]
+    fn worker_names_are_checked_and_a_refusal_says_what_names_may_be() {
+        assert_eq!(MAX_NODE_NAME, NodeName::max_len());
+        let long = "x".repeat(MAX_NODE_NAME);
+        for good in ["w0", "worker-12", "host.thread_1", long.as_str(), "learners"] {
+            assert_eq!(check_worker_name(good), Ok(()), "{good}");
+        }
+        let cases = [
+            ("", "got \"\""),
+            ("a/b", "got \"a/b\""),
+            ("with space", "got \"with space\""),
+            ("é", "got \"é\""),
+            ("tab\t", "got \"tab\\t\""),
+            (LEARNER_NODE, "got \"learner\""),
+            (&"x".repeat(MAX_NODE_NAME + 1), "got 129 characters"),
+            (&"x".repeat(300), "got 300 characters"),
+        ];
+        for (bad, got) in cases {
+            let error = check_worker_name(bad).unwrap_err().to_string();
+            assert_eq!(error, format!("must be {WORKER_NAMES}, {got}"), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn node_names_iceoryx2_refuses_are_refused_in_words() {
+        let run = RunName::new(&format!("test-node-name-{}", std::process::id())).unwrap();
+        for (bad, got) in [("é", "got \"é\""), (&"x".repeat(300), "got 300 characters")] {
+            let error = node(&run, bad).expect_err("refused").to_string();
+            assert_eq!(
+                error,
+                format!("node name: must be 1 to 128 ASCII characters other than NUL, {got}")
+            );
+        }
+        assert!(leftover_files(&run).is_empty());
+    }
+
+    #[test]
+    fn failures_to_open_a_service_say_what_happened() {
+        use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+        use iceoryx2::service::builder::request_response::{
+            RequestResponseCreateError, RequestResponseOpenError as Open, RequestResponseOpenOrCreateError as Either,
+        };
+        let tasks = [
+            (
+                Either::RequestResponseOpenError(Open::HangsInCreation),
+                OpenFailure::DiedCreating,
+            ),
+            // A worker killed while it created the run's services.
+            (
+                Either::RequestResponseOpenError(Open::DoesNotExist),
+                OpenFailure::Incomplete,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::ServiceInCorruptedState),
+                OpenFailure::Incomplete,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::IsMarkedForDestruction),
+                OpenFailure::InFlux,
+            ),
+            (Either::SystemInFlux, OpenFailure::InFlux),
+            (
+                Either::RequestResponseOpenError(Open::ExceedsMaxNumberOfNodes),
+                OpenFailure::Full,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::InsufficientPermissions),
+                OpenFailure::Permissions,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::IncompatibleRequestOrResponseType),
+                OpenFailure::OtherBuild,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::DoesNotSupportRequestedAmountOfClients),
+                OpenFailure::OtherBuild,
+            ),
+            (
+                Either::RequestResponseOpenError(Open::VersionMismatch),
+                OpenFailure::OtherBuild,
+            ),
+            (
+                Either::RequestResponseCreateError(RequestResponseCreateError::InternalFailure),
+                OpenFailure::Other,
+            ),
+        ];
+        for (error, failure) in tasks {
+            assert_eq!(OpenFailure::of_task_service(&error), failure, "{error:?}");
+        }
+        let events = [
+            (
+                EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation),
+                OpenFailure::DiedCreating,
+            ),
+            (
+                EventOpenOrCreateError::EventOpenError(EventOpenError::DoesNotExist),
+                OpenFailure::Incomplete,
+            ),
+            (EventOpenOrCreateError::SystemInFlux, OpenFailure::InFlux),
+            (
+                EventOpenOrCreateError::EventOpenError(EventOpenError::IncompatibleDeadline),
+                OpenFailure::OtherBuild,
+            ),
+        ];
+        for (error, failure) in events {
+            assert_eq!(OpenFailure::of_event_service(&error), failure, "{error:?}");
+        }
+        assert!(OpenFailure::Full.words().ends_with(&format!("({})", LIMITS.nodes)));
+    }
+
+    #[test]
+    fn a_task_service_of_other_types_is_refused_as_another_build_s() {
+        let run = RunName::new(&format!("test-other-build-{}", std::process::id())).unwrap();
+        {
+            let node = node(&run, "test").unwrap();
+            let _other = node
+                .service_builder(&ServiceName::new("tasks").unwrap())
+                .request_response::<u64, u64>()
+                .open_or_create()
+                .unwrap();
+            let error = open_services(&node).err().expect("refused").to_string();
+            assert!(
+                error.starts_with(
+                    "opening the task service (a process of another acps build created it with other types or settings): "
+                ),
+                "{error}"
+            );
+        }
+        remove_run_files(&run).unwrap();
+        assert!(leftover_files(&run).is_empty());
+    }
+
+    #[test]
+    fn a_second_server_of_a_run_is_refused_naming_the_first_s_process() {
+        let run = RunName::new(&format!("test-taken-{}", std::process::id())).unwrap();
+        {
+            let node = node(&run, LEARNER_NODE).unwrap();
+            let services = open_services(&node).unwrap();
+            let first = task_server(&run, &services.tasks).unwrap();
+            let error = task_server(&run, &services.tasks).expect_err("refused");
+            assert_eq!(
+                error,
+                ServerError::Taken {
+                    run: run.to_string(),
+                    pid: Some(std::process::id() as i32)
+                }
+            );
+            assert_eq!(
+                error.to_string(),
+                format!(
+                    "a learner of run '{run}' is already running (PID {}); give this run another name, or wait for that learner to end",
+                    std::process::id()
+                )
+            );
+            drop(first);
+            task_server(&run, &services.tasks).expect("the seat is free once its server is gone");
+        }
+        remove_run_files(&run).unwrap();
+        assert!(leftover_files(&run).is_empty());
     }
 
     #[test]

@@ -1186,22 +1186,26 @@ fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_lef
     wait_until("a learning run with both workers", Duration::from_secs(60), || {
         ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&dir.join("checkpoints"))
     });
-    let workers = children_of(learner.id());
     signal_group("-KILL", learner.id());
     learner.wait().unwrap();
-    wait_until("the killed workers to be gone", Duration::from_secs(20), || {
-        workers.iter().all(|pid| {
-            std::fs::read_to_string(format!("/proc/{pid}/stat")).map_or(true, |stat| {
-                stat.rsplit_once(')')
-                    .is_some_and(|(_, rest)| rest.trim_start().starts_with('Z'))
-            })
-        })
-    });
-    assert!(!ipc::leftover_files(&run).is_empty(), "a kill -9 leaves files");
-    // The next fleet, of another name, removes them when it starts.
+    // Not merely until the workers show as zombies: a killed process's main thread does so
+    // before its other threads have exited, and until the last of them has, the lock on its
+    // node's files stays held and iceoryx2 reports the node alive, so that the start below left
+    // the run alone (this test failed about one time in four beside the other fleet tests).
+    wait_until(
+        "every node of the killed run to be dead",
+        Duration::from_secs(20),
+        || ipc::live_nodes(&run).is_ok_and(|alive| alive == 0),
+    );
+    // The next fleet, of another name, removes what the run left when it starts. Fleets that
+    // other tests start meanwhile may have removed it already, or be midway (seen once in some
+    // 200 runs beside the other fleet tests: one of the three nodes' files gone, the rest left
+    // to the other cleaner), so the test waits for the files to go.
     let other = run_name("kill-all-next");
     let fleet = Fleet::builder(other.as_str()).start().unwrap();
-    assert!(ipc::leftover_files(&run).is_empty(), "{:?}", ipc::leftover_files(&run));
+    wait_until("the killed run's files to be removed", Duration::from_secs(20), || {
+        ipc::leftover_files(&run).is_empty()
+    });
     drop(fleet);
     assert_clean(&other);
 }
@@ -1328,5 +1332,212 @@ fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serv
         error.to_string(),
         "problem 'dims-9' cannot be served to workers: a task's context has 9 values, the wire carries at most 8 (MAX_CONTEXT)"
     );
+    assert_clean(&run);
+}
+
+/// The `acps` process that the watchdog `timeout` process `watchdog` runs.
+fn watched_acps(watchdog: &Child) -> u32 {
+    let mut pid = None;
+    wait_until("the watchdog to start acps", Duration::from_secs(10), || {
+        pid = children_of(watchdog.id()).first().copied();
+        pid.is_some()
+    });
+    pid.expect("waited for it")
+}
+
+#[test]
+fn a_second_learner_of_a_running_run_is_refused_at_once_and_starts_no_worker() {
+    let dir = temp_dir("second-learner");
+    let run = run_name("second-learner");
+    // The first learner waits for workers started by hand, for as long as the test needs.
+    let mut first = watched()
+        .args(["run", "grid", "--runs", "1", "--episodes", "20", "--workers", "0"])
+        .args(["--run", run.as_str()])
+        .arg("--out")
+        .arg(dir.join("first"))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first_pid = watched_acps(&first);
+    let mut first_err = std::io::BufReader::new(first.stderr.take().unwrap());
+    // Printed once it serves the run, after any log lines (once, under load, one came first);
+    // the pipe closes if it dies.
+    let mut before = String::new();
+    while !before.contains(&format!("run '{run}' waits for workers")) {
+        let read = std::io::BufRead::read_line(&mut first_err, &mut before).unwrap();
+        assert!(read > 0, "the first learner ended: {before}");
+    }
+    // Another experiment, so that a worker it started would be refused by the first learner,
+    // which says so on stderr. -v shows the info lines too.
+    let second = watched()
+        .args([
+            "-v",
+            "run",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "20",
+            "--workers",
+            "1",
+        ])
+        .args(["--run", run.as_str()])
+        .arg("--out")
+        .arg(dir.join("second"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.ends_with(&format!(
+            "error: --run {run}: a learner of run '{run}' is already running (PID {first_pid}); give this run another name, or wait for that learner to end\n"
+        )),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("still use"), "{stderr}");
+    assert!(!dir.join("second").exists(), "the refused run wrote nothing");
+    let status = Command::new("kill")
+        .args(["-INT", &first_pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut first_err, &mut rest).unwrap();
+    assert_eq!(first.wait().unwrap().code(), Some(130), "{rest}");
+    assert!(
+        !rest.contains("refused a worker"),
+        "the second learner started a worker: {rest}"
+    );
+    assert_clean(&run);
+}
+
+#[test]
+fn a_fleet_is_refused_while_another_holds_its_run_and_serving_releases_it() {
+    use acps_fleet::{FleetError, FleetStartError};
+    use ipc::ServerError;
+    let run = run_name("seat");
+    let taken = |error: &ServerError| {
+        *error
+            == ServerError::Taken {
+                run: run.to_string(),
+                pid: Some(std::process::id() as i32),
+            }
+    };
+    let serve = |fleet: &mut Fleet| fleet.serve(&mut [], &mut |_: &FleetProgress| {});
+    let mut first = Fleet::builder(run.as_str()).start().unwrap();
+    match Fleet::builder(run.as_str()).start() {
+        Err(FleetStartError::Serve(error)) => assert!(taken(&error), "{error}"),
+        Err(other) => panic!("expected the run to be taken, got {other}"),
+        Ok(_) => panic!("two fleets hold run {run}"),
+    }
+    // Serving ends by releasing the run: a worker left busy in a rollout finds its learner gone.
+    serve(&mut first).unwrap();
+    let second = Fleet::builder(run.as_str()).start().expect("the first serves no more");
+    match serve(&mut first) {
+        Err(FleetError::Seat(error)) => assert!(taken(&error), "{error}"),
+        other => panic!("expected the run to be taken, got {other:?}"),
+    }
+    drop(second);
+    serve(&mut first).expect("the run is free again");
+    drop(first);
+    assert_clean(&run);
+}
+
+#[test]
+fn killing_the_only_worker_ends_the_run_saying_so() {
+    let dir = temp_dir("only-worker");
+    let run = run_name("only-worker");
+    let learner = watched()
+        .args([
+            "run",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "20000",
+            "--workers",
+            "1",
+        ])
+        .args(["--run", run.as_str(), "--checkpoint-every", "0"])
+        .arg("--out")
+        .arg(&*dir)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let acps = watched_acps(&learner);
+    // At once: a worker killed while it opened the run's services made the learner blame a
+    // worker of another build.
+    let mut worker = Vec::new();
+    wait_until("the learner to start its worker", Duration::from_secs(30), || {
+        worker = children_of(acps);
+        !worker.is_empty()
+    });
+    let status = Command::new("kill")
+        .args(["-KILL", &worker[0].to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let output = learner.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("no worker can go on with run '{run}': none connected for"))
+            && stderr.contains("all 1 started worker processes exited"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("another"), "{stderr}");
+    assert_clean(&run);
+}
+
+#[test]
+fn bad_worker_and_run_names_are_refused_naming_the_flag_and_what_names_may_be() {
+    let run = run_name("names");
+    let long = "x".repeat(300);
+    let names = "must be 1 to 128 characters of ASCII letters, digits, '-', '_' and '.', other than 'learner' (the learner's node), got";
+    let cases: [(&[&str], Option<&str>, String); 8] = [
+        (&["--name", ""], None, format!("--name {names} \"\"")),
+        (&["--name", "a/b"], None, format!("--name {names} \"a/b\"")),
+        (&["--name", "é"], None, format!("--name {names} \"é\"")),
+        (&["--name", "learner"], None, format!("--name {names} \"learner\"")),
+        (&["--name", &long], None, format!("--name {names} 300 characters")),
+        (
+            &["--run", "a/b"],
+            None,
+            "--run a/b: run name: 'a/b' must be 1 to 40 characters of letters, digits and '-'".into(),
+        ),
+        (
+            &["--run", &long],
+            None,
+            "must be 1 to 40 characters of letters, digits and '-'".into(),
+        ),
+        (
+            &[],
+            Some("a_b"),
+            "ACPS_RUN: run name: 'a_b' must be 1 to 40 characters of letters, digits and '-'".into(),
+        ),
+    ];
+    for (args, env, message) in cases {
+        let mut command = acps();
+        command.arg("worker").env_remove(acps_fleet::RUN_ENV);
+        if !args.contains(&"--run") && env.is_none() {
+            command.args(["--run", run.as_str()]);
+        }
+        if let Some(env) = env {
+            command.env(acps_fleet::RUN_ENV, env);
+        }
+        let output = command.args(args).args(["--startup-timeout", "0"]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(&message), "{args:?}: {stderr}");
+    }
+    // An embedded worker is refused the same way.
+    let options = WorkerOptions {
+        name: String::new(),
+        ..WorkerOptions::default()
+    };
+    let error = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false))
+        .unwrap_err()
+        .to_string();
+    assert_eq!(error, format!("worker option name {names} \"\""));
     assert_clean(&run);
 }
