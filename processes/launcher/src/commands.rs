@@ -182,13 +182,22 @@ fn check_resumable(args: &ExperimentArgs, jobs: &[Job]) -> anyhow::Result<()> {
 }
 
 /// Make every job's output directory before anything is computed or started, and write its
-/// resolved experiment file there: an output that cannot be written fails now, not after the run.
-fn prepare_outputs(jobs: &[Job]) -> anyhow::Result<()> {
+/// resolved experiment file there: an output that cannot be written fails now, not after the
+/// run. Returns the directories it created, the outermost of each path, for a run refused
+/// before it started to take back.
+fn prepare_outputs(jobs: &[Job]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut created = Vec::new();
     for job in jobs {
+        let outermost = job
+            .dir
+            .ancestors()
+            .take_while(|d| !d.as_os_str().is_empty() && !d.exists())
+            .last();
+        created.extend(outermost.map(Path::to_path_buf));
         output_dir(&job.dir)?;
         job.config.write_resolved(&job.dir)?;
     }
-    Ok(())
+    Ok(created)
 }
 
 /// Create the output directory `dir` and make sure files can be written into it.
@@ -269,7 +278,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         job.experiment.check_methods()?;
     }
     check_resumable(&args.experiment, &jobs)?;
-    prepare_outputs(&jobs)?;
+    let created = prepare_outputs(&jobs)?;
     let name = args.run.clone().unwrap_or_else(|| {
         // Run names take letters, digits and '-' only; problem names also '_' and '.'.
         let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
@@ -280,7 +289,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             .map_or(1, |n| n.get())
             .min(ipc::MAX_WORKERS)
     });
-    for Job { experiment, dir, .. } in &jobs {
+    for (index, Job { experiment, dir, .. }) in jobs.iter().enumerate() {
         let mut builder = Fleet::builder(name.as_str())
             .identity(experiment.identity())
             .ctrl_c(true);
@@ -293,7 +302,18 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
                 builder = builder.worker_niceness(nice);
             }
         }
-        let mut fleet = builder.start().with_context(|| format!("--run {name}"))?;
+        let mut fleet = match builder.start() {
+            Ok(fleet) => fleet,
+            Err(error) => {
+                // Refused before anything ran (the run is taken, say): leave no empty directory.
+                if index == 0 {
+                    for dir in &created {
+                        let _ = std::fs::remove_dir_all(dir);
+                    }
+                }
+                return Err(anyhow::Error::new(error).context(format!("--run {name}")));
+            }
+        };
         let run = fleet.run().clone();
         if workers == 0 {
             match &experiment.user_problem {
