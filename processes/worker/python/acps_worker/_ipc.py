@@ -19,6 +19,34 @@ from .errors import AcpsWorkerError
 
 log = logging.getLogger("acps_worker")
 _RUN_NAME = re.compile(r"[A-Za-z0-9-]{1,40}")
+_WORKER_NAME = re.compile(r"[A-Za-z0-9._-]{1,128}")
+#: What a worker's name may be (``ipc::WORKER_NAMES``).
+WORKER_NAMES = (
+    "1 to 128 characters of ASCII letters, digits, '-', '_' and '.', "
+    f"other than '{_wire.LEARNER_NODE}' (the learner's node)"
+)
+#: iceoryx2's reasons for failing to open a service, in words (``ipc::OpenFailure``), by the
+#: part of the reason's name that tells them apart.
+_OPEN_FAILURES = (
+    (("HangsInCreation",), "a process of this run died while creating it"),
+    (
+        ("DoesNotExist", "CorruptedState"),
+        (
+            "it was removed while this process opened it, or has files missing: a process of "
+            "this run died while creating it, or the run was ending"
+        ),
+    ),
+    (
+        ("InFlux", "MarkedForDestruction", "BeingCreatedByAnotherInstance"),
+        "other processes of this run were creating or removing it at the same moment",
+    ),
+    (("ExceedsMaxNumberOfNodes",), "it already serves the most processes a run has"),
+    (("InsufficientPermissions",), "another user's process created it"),
+    (
+        ("Incompatible", "DoesNotSupport", "VersionMismatch"),
+        "a process of another acps build created it with other types or settings",
+    ),
+)
 #: Where iceoryx2 keeps a directory per node.
 NODES_DIR = Path("/tmp/iceoryx2/nodes")
 #: The directories iceoryx2 keeps a run's files in.
@@ -50,6 +78,23 @@ def run_config(run: str, worker: bool = True) -> Any:
         config.global_cfg.node.cleanup_dead_nodes_on_destruction = False
         config.global_cfg.service.cleanup_dead_nodes_on_open = False
     return config
+
+
+def check_worker_name(name: str) -> str:
+    """``name`` if a worker may take it, else ValueError saying what names may be."""
+    if not (_WORKER_NAME.fullmatch(name) and name != _wire.LEARNER_NODE):
+        shown = f"{len(name)} characters" if len(name) > 128 else repr(name)
+        raise ValueError(f"a worker's name must be {WORKER_NAMES}, got {shown}")
+    return name
+
+
+def open_error(what: str, error: BaseException) -> AcpsWorkerError:
+    """An error for opening the service ``what``, with iceoryx2's reason in words."""
+    reason = str(error)
+    for parts, words in _OPEN_FAILURES:
+        if any(part in reason for part in parts):
+            return AcpsWorkerError(f"{what}: {words} ({reason})")
+    return ipc_error(what, error)
 
 
 def ipc_error(what: str, error: BaseException) -> AcpsWorkerError:

@@ -64,7 +64,7 @@ EVENT_SERVICE = {"max_listeners": MAX_NODES, "max_notifiers": MAX_NODES, "max_no
 TASKS = "tasks"
 TO_LEARNER = "to-learner"
 TO_WORKERS = "to-workers"
-#: The node name of a run's learner (``processes/fleet/src/server.rs``).
+#: The node name of a run's learner (``shared/wire/src/ipc.rs``, ``LEARNER_NODE``).
 LEARNER_NODE = "learner"
 
 

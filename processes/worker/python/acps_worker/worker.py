@@ -300,9 +300,7 @@ def serve(
             f"worker option in_flight must be in 1..={_wire.MAX_IN_FLIGHT_PER_WORKER}, "
             f"got {in_flight}"
         )
-    name = name if name is not None else f"worker-{os.getpid()}"
-    if name == _wire.LEARNER_NODE:
-        raise ValueError(f"a worker's node may not be named '{_wire.LEARNER_NODE}' (the learner's)")
+    name = _ipc.check_worker_name(name if name is not None else f"worker-{os.getpid()}")
     if not startup_timeout >= 0:
         raise ValueError(f"startup_timeout must be >= 0 seconds, got {startup_timeout}")
     session = _Session(
@@ -399,11 +397,7 @@ class _Session:
                 .open_or_create()
             )
         except Exception as error:
-            raise _ipc.ipc_error(
-                "opening the task service (a learner of another build has incompatible types, "
-                "or a process of this run died while creating it)",
-                error,
-            ) from error
+            raise _ipc.open_error("opening the task service", error) from error
 
         def event(service: str) -> Any:
             limits = _wire.EVENT_SERVICE
@@ -417,7 +411,7 @@ class _Session:
                     .open_or_create()
                 )
             except Exception as error:
-                raise _ipc.ipc_error(f"opening the event service '{service}'", error) from error
+                raise _ipc.open_error(f"opening the event service '{service}'", error) from error
 
         ports.to_learner = event(_wire.TO_LEARNER)
         ports.to_workers = event(_wire.TO_WORKERS)

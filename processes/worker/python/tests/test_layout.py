@@ -8,7 +8,7 @@ import json
 import unittest
 from typing import Any
 
-from acps_worker import _wire
+from acps_worker import _ipc, _wire
 
 from .support import acps
 
@@ -116,6 +116,23 @@ class LayoutTest(unittest.TestCase):
         self.assertEqual(services[_wire.TO_LEARNER], _wire.EVENT_SERVICE)
         self.assertEqual(services[_wire.TO_WORKERS], _wire.EVENT_SERVICE)
         self.assertEqual(importlib.metadata.version("iceoryx2"), self.layout["iceoryx2"])
+
+    def test_failures_to_open_a_service_say_what_happened(self) -> None:
+        """iceoryx2's reasons in the words the Rust worker uses; an unknown one stays as it is."""
+        cases = [
+            ("HangsInCreation", "died while creating it"),
+            ("DoesNotExist", "removed while this process opened it"),
+            ("IsMarkedForDestruction", "creating or removing it at the same moment"),
+            ("ExceedsMaxNumberOfNodes", "the most processes a run has"),
+            ("IncompatibleRequestOrResponseType", "another acps build"),
+            ("VersionMismatch", "another acps build"),
+            ("SomethingNew", "RuntimeError: SomethingNew"),
+        ]
+        for reason, words in cases:
+            with self.subTest(reason=reason):
+                error = _ipc.open_error("opening the task service", RuntimeError(reason))
+                self.assertIn(words, str(error))
+                self.assertTrue(str(error).startswith("opening the task service: "))
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -151,6 +152,21 @@ class ServeTest(unittest.TestCase):
             acps_worker.serve(bowl, "x", in_flight=0)
         with self.assertRaisesRegex(ValueError, "must be 1 to 40 characters"):
             acps_worker.serve(bowl, "a_b")
+        # Worker names as the Rust worker takes them.
+        for name, shown in [
+            ("", "''"),
+            ("a/b", "'a/b'"),
+            ("learner", "'learner'"),
+            ("w" * 129, "129 characters"),
+        ]:
+            with (
+                self.subTest(name=name[:10]),
+                self.assertRaisesRegex(
+                    ValueError,
+                    f"name must be 1 to 128 characters of ASCII .*, got {re.escape(shown)}$",
+                ),
+            ):
+                acps_worker.serve(bowl, "x", name=name)
         environ = dict(os.environ)
         os.environ.pop("ACPS_RUN", None)
         try:
