@@ -31,7 +31,9 @@ pub(crate) enum Command {
     /// targets (paper Section 5.2.3) through a fleet of simulator workers (rapier3d physics),
     /// choosing targets with D-UCB and monotonic progress. Shows the test error falling and
     /// writes DIR (default runs/learn). The same as `acps run grid --sim rapier --method
-    /// monotonic-progress --runs 4 --episodes 10000 --in-flight 8 --out runs/learn`.
+    /// monotonic-progress --runs 4 --episodes 10000 --in-flight 8 --out runs/learn`. Takes 40 s
+    /// on 2 idle cores, 70-140 s when other programs compete; Ctrl-C prints the command that
+    /// continues it (`acps learn --resume`).
     Learn(LearnArgs),
     /// Run one of the paper's experiments in this process, for several methods x seeds in
     /// parallel, and write DIR/summary.json, the plots and DIR/config.toml. Name the experiment
@@ -158,7 +160,8 @@ pub(crate) struct BenchArgs {
     #[arg(long, default_value_t = 128, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
     pub(crate) worker_in_flight: usize,
     /// Multiplies the work per measurement, in (0, 100] (1: a few seconds per row and round; the
-    /// default bench takes about a minute on 2 cores).
+    /// default bench takes 62 s on 2 idle cores, up to 2.5 minutes on a busy machine, and warns
+    /// when other programs took CPU time from it).
     #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = number("a number in (0, 100]", |x| x > 0.0 && x <= 100.0))]
     pub(crate) scale: f64,
     /// Times every mode is measured, interleaved (1..=100): rows report the median round, and

@@ -81,7 +81,7 @@ impl ExperimentName {
 pub enum SimName {
     /// Forward kinematics at release and closed-form flight (exact for perfect tracking).
     Analytic,
-    /// The rapier3d multibody arm tracking the throw with joint motors (1.5 ms per throw on one
+    /// The rapier3d multibody arm tracking the throw with joint motors (1.5-2 ms per throw on one
     /// idle core of a 2-core machine, up to 3 ms on a busy one; `acps bench` measures yours).
     Rapier,
 }
