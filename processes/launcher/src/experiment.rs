@@ -424,15 +424,7 @@ impl Experiment {
         checkpoints: Option<&Checkpoints>,
         stop: &AtomicBool,
     ) -> Result<Summary, RunError> {
-        let jobs = match checkpoints {
-            Some(checkpoints) => self
-                .resumed_jobs(checkpoints)?
-                .into_iter()
-                .map(|(job, writer)| (job, Some(writer)))
-                .collect(),
-            None => self.jobs()?.into_iter().map(|job| (job, None)).collect(),
-        };
-        self.run_jobs(jobs, progress, stop)
+        self.run_jobs(self.jobs_writing(checkpoints)?, progress, stop)
     }
 
     fn run_jobs(
@@ -548,6 +540,19 @@ impl Experiment {
         })
     }
 
+    /// Every job, each with its checkpoint writer and continued from its checkpoint when
+    /// `checkpoints` resume; without checkpoints, fresh jobs without writers.
+    fn jobs_writing(&self, checkpoints: Option<&Checkpoints>) -> Result<Vec<(Job, Option<Writer>)>, RunError> {
+        Ok(match checkpoints {
+            Some(checkpoints) => self
+                .resumed_jobs(checkpoints)?
+                .into_iter()
+                .map(|(job, writer)| (job, Some(writer)))
+                .collect(),
+            None => self.jobs()?.into_iter().map(|job| (job, None)).collect(),
+        })
+    }
+
     /// The checkpoint stamp of job `index`.
     fn stamp(&self, index: usize) -> Stamp {
         Stamp {
@@ -601,14 +606,7 @@ impl Experiment {
         checkpoints: Option<&Checkpoints>,
         observe: impl FnMut(&FleetProgress),
     ) -> Result<(Summary, FleetProgress), RunError> {
-        let (jobs, writers): (Vec<Job>, Vec<Option<Writer>>) = match checkpoints {
-            Some(checkpoints) => self
-                .resumed_jobs(checkpoints)?
-                .into_iter()
-                .map(|(job, writer)| (job, Some(writer)))
-                .unzip(),
-            None => self.jobs()?.into_iter().map(|job| (job, None)).unzip(),
-        };
+        let (jobs, writers): (Vec<Job>, Vec<Option<Writer>>) = self.jobs_writing(checkpoints)?.into_iter().unzip();
         let mut fleet_jobs = Vec::with_capacity(jobs.len());
         let mut optimal = Vec::with_capacity(jobs.len());
         for job in jobs {
