@@ -424,7 +424,10 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     };
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop)
         .with_context(|| format!("joining run '{run}' (its learner: `acps run ... --run {run}`)"))?;
-    if !args.quiet || report.exit == WorkerExit::LearnerGone {
+    // A quiet worker speaks up when its learner vanished, unless Ctrl-C (which a shell sends
+    // to the learner and its workers alike) stopped it too: the learner says what happened.
+    let gone = report.exit == WorkerExit::LearnerGone && !stop.load(Ordering::Relaxed);
+    if !args.quiet || gone {
         eprintln!(
             "worker {}: {:?} after {} rollouts",
             options.name, report.exit, report.rollouts
