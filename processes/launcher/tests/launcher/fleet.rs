@@ -384,6 +384,8 @@ fn interrupt_and_continue(command: &[&str], out: &Path) -> Vec<u8> {
     let output = started.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(130), "{command:?}: {stderr}");
+    // Workers stopped by the same Ctrl-C leave the explaining to the learner.
+    assert!(!stderr.contains("LearnerGone"), "{stderr}");
     assert!(
         !out.join("summary.json").exists(),
         "an interrupted run writes no summary"
