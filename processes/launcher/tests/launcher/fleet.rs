@@ -436,7 +436,9 @@ fn ctrl_c_stops_an_in_process_experiment_and_the_command_it_prints_finishes_it()
 #[test]
 fn ctrl_c_stops_acps_learn_and_learn_resume_finishes_it() {
     let dir = temp_dir("learn-resume");
-    let size = ["--runs", "2", "--episodes", "400"];
+    // acps learn checkpoints every 10 C-REPS updates: long enough a run that Ctrl-C after the
+    // first checkpoint comes well before the end.
+    let size = ["--runs", "2", "--episodes", "2000"];
     let mut same = vec![
         "grid",
         "--sim",
