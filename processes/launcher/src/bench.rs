@@ -45,7 +45,8 @@ pub struct Row {
     /// Every round's ratio, in order.
     pub round_ratios: Vec<f64>,
     /// The largest share of the machine's CPU time that other processes used during a round of
-    /// this row (`None` where the system does not say: Linux's /proc only).
+    /// this row (`None` where the system does not say, Linux's /proc only, or where every round
+    /// was shorter than its counters' tick of 10 ms).
     pub others_share: Option<f64>,
 }
 

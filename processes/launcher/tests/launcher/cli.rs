@@ -284,15 +284,17 @@ fn bench_writes_its_table_and_json() {
             assert_eq!(row["ratio"].as_f64().unwrap(), lower_median(&ratios), "{row}");
         }
     }
+    assert!(rows.iter().any(|row| row["others_share"].is_f64()), "{bench}");
     for row in rows {
         assert!(["trivial", "analytic", "rapier"].contains(&row["env"].as_str().unwrap()));
         let mode = row["mode"].as_str().unwrap();
         assert!(["inprocess-1", "inprocess-rayon", "fleet"].contains(&mode));
         let rate = row["rollouts_per_s"].as_f64().unwrap();
         assert!(rate > 0.0 && row["ratio"].as_f64().unwrap() > 0.0);
-        // Linux says how much of the CPU other processes took.
-        let others = row["others_share"].as_f64().unwrap();
-        assert!((0.0..=1.0).contains(&others), "{row}");
+        // Linux says how much of the CPU other processes took, unless a measurement was
+        // shorter than the counters' tick.
+        let others = row["others_share"].as_f64();
+        assert!(others.is_none_or(|share| (0.0..=1.0).contains(&share)), "{row}");
         let (rollouts, seconds) = (row["rollouts"].as_f64().unwrap(), row["seconds"].as_f64().unwrap());
         assert!((rate - rollouts / seconds).abs() <= 1e-9 * rate, "{row}");
         // A fleet's rate leaves out the workers' start-up, which its row reports instead.
