@@ -33,7 +33,7 @@ fn bounded(values: &[f64]) -> bool {
 /// episodes (or once at the end of shorter runs), as in the paper's Section 5.1.2.
 const EVAL_EVERY: u64 = 50;
 
-/// A `[problem]` table as written; [`ProblemFile::check`] says which keys must be set.
+/// A `[problem]` table as written; checking it (in `Plan::new`) says which keys must be set.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProblemFile {
