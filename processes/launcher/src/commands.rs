@@ -130,9 +130,9 @@ fn interrupted(error: &anyhow::Error) -> bool {
     })
 }
 
-/// The run's output directory and the experiments `args` ask for, checked, with their own
-/// directories (the run's, or one per panel in it) and resolved files; `None` when
-/// `--save-config` wrote the resolved file instead.
+/// The run's output directory and the experiments `args` ask for, checked (their methods,
+/// memory and what they resume from), with their own directories (the run's, or one per panel
+/// in it) and resolved files; `None` when `--save-config` wrote the resolved file instead.
 fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<(PathBuf, Vec<Job>)>> {
     let file = args.config.as_deref().map(LoadedFile::read).transpose()?;
     let plan = Plan::new(file.as_ref(), &args.settings)?;
@@ -154,6 +154,10 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<(PathBuf, Vec<Job>)>> {
     };
     let jobs = plan.jobs(&out);
     config::check_memory(&jobs)?;
+    for job in &jobs {
+        job.experiment.check_methods()?;
+    }
+    check_resumable(args, &jobs)?;
     Ok(Some((out, jobs)))
 }
 
@@ -224,10 +228,8 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
         return Ok(());
     };
     for job in &jobs {
-        job.experiment.check_methods()?;
         job.experiment.check_in_process()?;
     }
-    check_resumable(&args, &jobs)?;
     prepare_outputs(&jobs)?;
     ctrlc::set_handler(|| STOP.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     for Job { experiment, dir, .. } in jobs {
@@ -274,10 +276,6 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             job.experiment.name
         );
     }
-    for job in &jobs {
-        job.experiment.check_methods()?;
-    }
-    check_resumable(&args.experiment, &jobs)?;
     let created = prepare_outputs(&jobs)?;
     let name = args.run.clone().unwrap_or_else(|| {
         // Run names take letters, digits and '-' only; problem names also '_' and '.'.
