@@ -48,25 +48,45 @@ pub enum ContextSpaceCreateError {
 impl ContextSpace {
     /// A validated box.
     pub fn new_box(low: Vec<f64>, high: Vec<f64>) -> Result<Self, ContextSpaceCreateError> {
-        let valid = !low.is_empty()
-            && low.len() == high.len()
-            && low
-                .iter()
-                .zip(&high)
-                .all(|(l, h)| l.is_finite() && h.is_finite() && l < h);
-        if valid {
-            Ok(Self::Box { low, high })
-        } else {
-            Err(ContextSpaceCreateError::InvalidBox { low, high })
-        }
+        let space = Self::Box { low, high };
+        space.validate()?;
+        Ok(space)
     }
 
     /// A validated ball around the origin.
     pub fn new_ball(dim: usize, radius: f64) -> Result<Self, ContextSpaceCreateError> {
-        if dim >= 1 && radius.is_finite() && radius > 0.0 {
-            Ok(Self::Ball { dim, radius })
-        } else {
-            Err(ContextSpaceCreateError::InvalidBall { dim, radius })
+        let space = Self::Ball { dim, radius };
+        space.validate()?;
+        Ok(space)
+    }
+
+    /// Refuse a space [`new_box`](Self::new_box) or [`new_ball`](Self::new_ball) would refuse:
+    /// a deserialised one (a file's, say) is not checked on the way in.
+    pub fn validate(&self) -> Result<(), ContextSpaceCreateError> {
+        match self {
+            Self::Box { low, high } => {
+                let valid = !low.is_empty()
+                    && low.len() == high.len()
+                    && low
+                        .iter()
+                        .zip(high)
+                        .all(|(l, h)| l.is_finite() && h.is_finite() && l < h);
+                if valid {
+                    Ok(())
+                } else {
+                    Err(ContextSpaceCreateError::InvalidBox {
+                        low: low.clone(),
+                        high: high.clone(),
+                    })
+                }
+            }
+            &Self::Ball { dim, radius } => {
+                if dim >= 1 && radius.is_finite() && radius > 0.0 {
+                    Ok(())
+                } else {
+                    Err(ContextSpaceCreateError::InvalidBall { dim, radius })
+                }
+            }
         }
     }
 

@@ -17,7 +17,7 @@
 
 use crate::experiment::{RunResult, Summary, UserProblem};
 use acps_learner::creps::{PolicySnapshot, Rejection, RestoredPolicy};
-use acps_shared::{ContextSpace, Problem};
+use acps_shared::Problem;
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -120,11 +120,10 @@ impl SavedPolicy {
 /// training and one test context, each finite with the space's dimension, and a finite theta_0
 /// of at least one parameter. The error is the field and what it accepts.
 fn check_problem(problem: &Problem) -> Result<(), (&'static str, String)> {
-    let space = match problem.space.clone() {
-        ContextSpace::Box { low, high } => ContextSpace::new_box(low, high).map(drop),
-        ContextSpace::Ball { dim, radius } => ContextSpace::new_ball(dim, radius).map(drop),
-    };
-    space.map_err(|e| ("problem.space", format!("is not a context space: {e}")))?;
+    problem
+        .space
+        .validate()
+        .map_err(|e| ("problem.space", format!("is not a context space: {e}")))?;
     let dim = problem.context_dim();
     for (field, contexts) in [
         ("problem.training_contexts", &problem.training_contexts),
