@@ -1493,6 +1493,52 @@ fn killing_the_only_worker_ends_the_run_saying_so() {
     assert_clean(&run);
 }
 
+/// A fleet run that fails half-way (its only worker killed after learning began) says which
+/// command continues it from its checkpoints, and that command finishes the run.
+#[test]
+fn a_fleet_run_that_fails_half_way_prints_the_command_that_continues_it() {
+    let SlowRun {
+        dir: _dir,
+        reference,
+        run,
+        out,
+    } = slow_run("fails-half-way");
+    let learner = watched()
+        .arg("run")
+        .args(SLOW)
+        .args(["--workers", "1", "--run", run.as_str(), "--checkpoint-every", "1"])
+        .arg("--out")
+        .arg(&out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let acps = watched_acps(&learner);
+    wait_until("a first checkpoint", Duration::from_secs(60), || {
+        has_files(&out.join("checkpoints"))
+    });
+    let worker = children_of(acps);
+    assert_eq!(worker.len(), 1, "one started worker");
+    let status = Command::new("kill")
+        .args(["-KILL", &worker[0].to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let output = learner.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no worker can go on"), "{stderr}");
+    let printed = stderr
+        .split("the checkpoints written so far continue the run with\n")
+        .nth(1)
+        .and_then(|rest| rest.lines().next())
+        .unwrap_or_else(|| panic!("no command that continues the run: {stderr}"))
+        .trim();
+    assert!(printed.ends_with(&format!("--resume {}", out.display())), "{printed}");
+    succeeded(&Command::new("sh").args(["-c", printed]).output().unwrap());
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+}
+
 #[test]
 fn bad_worker_and_run_names_are_refused_naming_the_flag_and_what_names_may_be() {
     let run = run_name("names");
