@@ -8,7 +8,9 @@
 //! removes the run's shared memory.
 
 use crate::processes;
-use crate::server::{self, FleetError, FleetJob, FleetProgress, Liveness, Observer, Seat, ServeOptions};
+use crate::server::{
+    self, FleetError, FleetJob, FleetProgress, Learners, Liveness, Observer, Remote, Seat, ServeOptions, TaskSource,
+};
 use acps_wire::ipc::{self, IpcError, RunName, ServerError};
 use std::os::unix::process::CommandExt as _;
 use std::process::{Child, Command, Stdio};
@@ -287,6 +289,12 @@ impl Fleet {
         self.stop.clone()
     }
 
+    /// Whether the stop flag is set, or Ctrl-C was pressed (with [`FleetBuilder::ctrl_c`]): for
+    /// a program that waits for something else between serves.
+    pub fn interrupted(&self) -> bool {
+        self.stop.load(Ordering::Relaxed) || (self.ctrl_c && INTERRUPTED.load(Ordering::Relaxed))
+    }
+
     /// When workers are given up on.
     pub fn liveness(&self) -> Liveness {
         self.liveness
@@ -298,7 +306,18 @@ impl Fleet {
     /// run's learner seat, taken at start, is released when it returns, and taken again by the
     /// next `serve` ([`FleetError::Seat`] if another learner took it meanwhile).
     pub fn serve(&mut self, jobs: &mut [FleetJob], observer: &mut dyn Observer) -> Result<FleetProgress, FleetError> {
-        let identity = self.identity.unwrap_or_else(|| identity_of(jobs));
+        self.serve_with(&mut Learners(jobs), observer, None)
+    }
+
+    /// [`serve`](Self::serve) any [`TaskSource`], and, with a [`Remote`], its peers on other
+    /// hosts beside the local workers: what `acps run --listen` and `acps relay` do.
+    pub fn serve_with(
+        &mut self,
+        source: &mut dyn TaskSource,
+        observer: &mut dyn Observer,
+        remote: Option<&mut dyn Remote>,
+    ) -> Result<FleetProgress, FleetError> {
+        let identity = self.identity.unwrap_or_else(|| source.identity());
         // The seat taken at start, or, for a fleet that served before, the seat again.
         let seat = match self.seat.take() {
             Some(seat) => seat,
@@ -309,9 +328,9 @@ impl Fleet {
             None => Vec::new(),
         };
         let launched = children.len();
-        let stop = || self.stop.load(Ordering::Relaxed) || (self.ctrl_c && INTERRUPTED.load(Ordering::Relaxed));
+        let stop = || self.interrupted();
         let served = server::serve(
-            jobs,
+            source,
             &self.run.0,
             &seat,
             ServeOptions {
@@ -323,6 +342,7 @@ impl Fleet {
             &stop,
             observer,
             &mut || (processes::running(&mut children), launched),
+            remote,
         );
         // Before the workers are reaped: one that was not told to stop (busy in a rollout when
         // the run ended) leaves once it finds the learner's node gone.
@@ -381,14 +401,6 @@ fn start_workers(run: &RunName, spawn: &Spawn) -> Result<Vec<Child>, FleetError>
         }
     }
     Ok(children)
-}
-
-/// A hash of the jobs' problems (their environments included) and seeds, stable across builds.
-fn identity_of(jobs: &[FleetJob]) -> u64 {
-    jobs.iter().fold(acps_shared::FNV_OFFSET, |hash, job| {
-        let learner = job.learner();
-        acps_shared::fnv1a(hash, format!("{:?} {}", learner.problem(), learner.seed()).as_bytes())
-    })
 }
 
 #[cfg(test)]

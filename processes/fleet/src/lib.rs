@@ -19,4 +19,7 @@ mod wake;
 
 pub use acps_wire::ipc::{RunName, ServerError};
 pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};
-pub use server::{FleetError, FleetJob, FleetJobBuildError, FleetProgress, Liveness, Observer, ServeOptions};
+pub use server::{
+    FleetError, FleetJob, FleetJobBuildError, FleetProgress, Learners, Liveness, Observer, PeerId, Remote, RemoteEvent,
+    ServeOptions, SourceError, TaskSource,
+};

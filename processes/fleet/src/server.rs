@@ -16,14 +16,20 @@
 //! - No worker at all: with no connected worker and no started one on its way for
 //!   [`Liveness::no_workers`], the run stops with [`FleetError::NoWorkers`].
 //!
-//! A late outcome of a re-issued task is recognised as a duplicate and dropped (or, arriving
-//! first, accepted: the rollout is seeded, so both copies carry the same bits). Workers of
+//! - A remote peer (a relay serving another host's workers, [`Remote`]) that is gone, silent for
+//!   its deadline, or cut off: its tasks are re-issued and it is evicted; a relay that comes back
+//!   joins again as a new peer.
+//!
+//! What the server hands out is a [`TaskSource`]: the run's learner cores (`[FleetJob]`), or, in
+//! a relay, the tasks a remote learner sent. A late outcome of a re-issued task is recognised as
+//! a duplicate and dropped (or, arriving first, accepted: the rollout is seeded, so both copies
+//! carry the same bits). Workers of
 //! another build or run, and workers serving an environment no job needs, are refused; a worker
 //! that serves one environment is handed only tasks of jobs that need it.
 
 use crate::wake::Waker;
-use acps_learner::{Learner, LearnerTellError, LearningProgress};
-use acps_shared::{EnvironmentSpec, Serves, SpecBuildError};
+use acps_learner::{Learner, LearningProgress};
+use acps_shared::{EnvironmentSpec, Outcome, Serves, SpecBuildError, Task};
 use acps_wire::ipc::{self, IpcError, RunName, ServerError, TICK, TaskRequest, TaskServer, TaskService};
 use acps_wire::wire::{
     Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, WireTask, WorkerMessage, check_task_sizes,
@@ -81,6 +87,169 @@ impl FleetJob {
     }
 }
 
+/// An error of a [`TaskSource`] or a [`Remote`], which ends the run.
+pub type SourceError = Box<dyn std::error::Error + Send + Sync>;
+
+/// What a server hands out to workers: jobs (numbered from 0), each of one environment, whose
+/// ready tasks go to workers that serve it and whose outcomes come back.
+///
+/// [`Learners`], the run's learner cores, is the source of every learner; a relay's source is the
+/// tasks its remote learner sent (`acps-relay`).
+pub trait TaskSource {
+    /// How many jobs.
+    fn jobs(&self) -> usize;
+
+    /// The environment job `job`'s tasks need.
+    fn environment(&self, job: usize) -> EnvironmentSpec;
+
+    /// The identity workers must name (or 0) in their requests.
+    fn identity(&self) -> u64;
+
+    /// Job `job`'s next ready task, if any.
+    fn ask(&mut self, job: usize) -> Option<Task>;
+
+    /// Job `job`'s outcome; `false` when it was dropped: a duplicate, or of a task that is no
+    /// longer waiting for one.
+    fn tell(&mut self, job: usize, outcome: Outcome) -> bool;
+
+    /// Hand task `task_id` of job `job` out again (its worker is gone); `false` when it is no
+    /// longer waiting for an outcome.
+    fn reissue(&mut self, job: usize, task_id: u64) -> bool;
+
+    /// How many jobs are done; the server serves until all are.
+    fn jobs_done(&self) -> usize;
+
+    /// Training episodes and latest test scores of all jobs together.
+    fn learning(&self) -> LearningProgress {
+        LearningProgress::default()
+    }
+
+    /// Tell `observer` of job `job` after it accepted an outcome.
+    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), SourceError> {
+        let _ = (job, observer);
+        Ok(())
+    }
+
+    /// A request of a worker that serves `serves` found no ready task for `want`: a source that
+    /// fetches its tasks from elsewhere asks for more.
+    fn starved(&mut self, serves: &Serves, want: usize) {
+        let _ = (serves, want);
+    }
+
+    /// The server refused a worker, for `reason`: a relay tells its learner.
+    fn refused(&mut self, reason: &str) {
+        let _ = reason;
+    }
+
+    /// Called once per pass of the server's loop, `idle` when it is about to wait for workers: a
+    /// source that forwards outcomes sends what it holds, and one that receives tasks takes them
+    /// in. Returns whether anything arrived (the server then looks again before it waits).
+    fn pass(&mut self, idle: bool) -> Result<bool, SourceError> {
+        let _ = idle;
+        Ok(false)
+    }
+}
+
+/// The run's learner cores: the [`TaskSource`] of a learner's fleet.
+pub struct Learners<'a>(pub &'a mut [FleetJob]);
+
+impl TaskSource for Learners<'_> {
+    fn jobs(&self) -> usize {
+        self.0.len()
+    }
+
+    fn environment(&self, job: usize) -> EnvironmentSpec {
+        *self.0[job].environment()
+    }
+
+    /// A hash of the jobs' problems (their environments included) and seeds, stable across builds.
+    fn identity(&self) -> u64 {
+        self.0.iter().fold(acps_shared::FNV_OFFSET, |hash, job| {
+            let learner = job.learner();
+            acps_shared::fnv1a(hash, format!("{:?} {}", learner.problem(), learner.seed()).as_bytes())
+        })
+    }
+
+    fn ask(&mut self, job: usize) -> Option<Task> {
+        self.0[job].learner.ask()
+    }
+
+    fn tell(&mut self, job: usize, outcome: Outcome) -> bool {
+        // Both errors (an unknown task, a second outcome) are a re-issued task answered twice.
+        self.0.get_mut(job).is_some_and(|j| j.learner.tell(outcome).is_ok())
+    }
+
+    fn reissue(&mut self, job: usize, task_id: u64) -> bool {
+        self.0[job].learner.reissue(task_id)
+    }
+
+    fn jobs_done(&self) -> usize {
+        self.0.iter().filter(|j| j.learner.is_done()).count()
+    }
+
+    fn learning(&self) -> LearningProgress {
+        LearningProgress::combine(self.0.iter().map(|j| j.learner.progress()))
+    }
+
+    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), SourceError> {
+        observer.told(job, &self.0[job].learner)
+    }
+}
+
+/// A remote peer's number, given by the [`Remote`] that admitted it.
+pub type PeerId = u32;
+
+/// What happened on a [`Remote`] since the server last looked.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RemoteEvent {
+    /// An admitted peer's message: outcomes of tasks it held, and, if `want` > 0, a request for
+    /// up to `want` tasks of the environments it `serves`, to be answered once by
+    /// [`Remote::send`] with request number `request`.
+    Request {
+        /// The peer.
+        peer: PeerId,
+        /// The request's number, for the answer.
+        request: u64,
+        /// Tasks asked for (0: outcomes only, not answered).
+        want: usize,
+        /// Which tasks may go to it.
+        serves: Serves,
+        /// The workers behind the peer.
+        workers: usize,
+        /// The slowest rollout any of them reported.
+        slowest_rollout: Duration,
+        /// Outcomes, by job.
+        outcomes: Vec<(u32, Outcome)>,
+    },
+    /// The peer is gone (its process or its link): its tasks go to others.
+    Gone {
+        /// The peer.
+        peer: PeerId,
+    },
+}
+
+/// Peers served over a network (relays of other hosts, `acps-relay`): the server hands them tasks
+/// as it does local workers, and wakes when they speak through the run's own wake-up event (a
+/// remote notifies the run's `to-learner` event service after every message it queues).
+pub trait Remote {
+    /// Serving of `run` starts: admit peers for a source of this `identity` whose jobs need
+    /// these `environments` (by job).
+    fn start(&mut self, run: &RunName, identity: u64, environments: &[EnvironmentSpec]) -> Result<(), SourceError>;
+
+    /// Append what happened since the last call to `events`, without blocking.
+    fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), SourceError>;
+
+    /// Answer `peer`'s request `request` with `tasks` (job, task): at least one.
+    fn send(&mut self, peer: PeerId, request: u64, tasks: &[(u32, Task)]) -> Result<(), SourceError>;
+
+    /// `peer` is given up on (silent for `silent`): its later messages are refused, and it is
+    /// told so, to join again.
+    fn evict(&mut self, peer: PeerId, silent: Duration);
+
+    /// Serving ends (done, or stopped): tell every peer.
+    fn finish(&mut self, done: bool);
+}
+
 /// Progress of a fleet run, reported every tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct FleetProgress {
@@ -88,8 +257,12 @@ pub struct FleetProgress {
     pub jobs_done: usize,
     /// Outcomes consumed (all kinds).
     pub outcomes: u64,
-    /// Connected workers.
+    /// Connected workers, those behind remote peers included.
     pub workers: usize,
+    /// Connected remote peers (relays of other hosts).
+    pub relays: usize,
+    /// The slowest rollout any worker reported.
+    pub slowest_rollout: Duration,
     /// Worker processes the fleet started that are still running (connected or not).
     pub started_running: usize,
     /// Tasks re-issued because their worker died.
@@ -149,7 +322,13 @@ pub enum FleetError {
     },
     /// The observer's [`Observer::told`] failed (for example writing a checkpoint).
     #[error(transparent)]
-    Observer(Box<dyn std::error::Error + Send + Sync>),
+    Observer(SourceError),
+    /// The [`TaskSource`] failed (a relay's link to its learner).
+    #[error(transparent)]
+    Source(SourceError),
+    /// The [`Remote`] failed (the network side of a learner that serves relays).
+    #[error("remote peers: {0}")]
+    Remote(SourceError),
 }
 
 /// When the server gives up on workers. The defaults suit rollouts of up to a second or so:
@@ -205,7 +384,7 @@ pub trait Observer {
 
     /// Job `job`'s learner after every outcome it accepted: the place to write checkpoints. An
     /// error ends the run with [`FleetError::Observer`].
-    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), SourceError> {
         let _ = (job, learner);
         Ok(())
     }
@@ -239,17 +418,55 @@ impl Seat {
     }
 }
 
-/// Serve `jobs` from `seat` to the workers of `run` until every job is done. `started` says how
-/// many worker processes the caller started are still running (they count as workers on their
-/// way).
-pub(crate) fn serve(
-    jobs: &mut [FleetJob],
+/// Who holds tasks or asks for them: a local worker's task client, or a remote peer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Client {
+    Local(UniqueClientId),
+    Remote(PeerId),
+}
+
+/// Where a parked request came from, to answer it.
+enum Requester {
+    Local(TaskRequest),
+    Remote { peer: PeerId, request: u64 },
+}
+
+/// A request waiting for tasks.
+struct Parked {
+    from: Requester,
+    want: usize,
+    serves: Serves,
+}
+
+impl Parked {
+    fn client(&self) -> Client {
+        match &self.from {
+            Requester::Local(request) => Client::Local(request.origin()),
+            Requester::Remote { peer, .. } => Client::Remote(*peer),
+        }
+    }
+}
+
+/// What the server knows of the remote peers it serves.
+#[derive(Default)]
+struct Peers {
+    /// Workers behind each peer, as it last said.
+    workers: HashMap<PeerId, usize>,
+}
+
+/// Serve `source` from `seat` to the workers of `run`, and to `remote`'s peers, until every job
+/// is done. `started` says how many worker processes the caller started are still running (they
+/// count as workers on their way).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn serve<'r>(
+    source: &mut dyn TaskSource,
     run: &RunName,
     seat: &Seat,
     options: ServeOptions,
     stop: &dyn Fn() -> bool,
     observer: &mut dyn Observer,
     started: &mut dyn FnMut() -> (usize, usize),
+    mut remote: Option<&mut (dyn Remote + 'r)>,
 ) -> Result<FleetProgress, FleetError> {
     let identity = options.identity;
     let Seat { server, services, .. } = seat;
@@ -259,10 +476,47 @@ pub(crate) fn serve(
         .create()
         .map_err(|e| IpcError::new("creating the learner's listener", e))?;
     let mut waker = Waker::new(services)?;
+    if let Some(remote) = remote.as_deref_mut() {
+        let environments: Vec<_> = (0..source.jobs()).map(|job| source.environment(job)).collect();
+        remote.start(run, identity, &environments).map_err(FleetError::Remote)?;
+    }
+    let served = serve_loop(
+        source,
+        run,
+        server,
+        services,
+        &listener,
+        &mut waker,
+        options,
+        stop,
+        observer,
+        started,
+        remote.as_deref_mut(),
+    );
+    if let Some(remote) = remote {
+        remote.finish(served.is_ok());
+    }
+    served
+}
 
+#[allow(clippy::too_many_arguments)]
+fn serve_loop<'r>(
+    source: &mut dyn TaskSource,
+    run: &RunName,
+    server: &TaskServer,
+    services: &ipc::Services,
+    listener: &iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>,
+    waker: &mut Waker,
+    options: ServeOptions,
+    stop: &dyn Fn() -> bool,
+    observer: &mut dyn Observer,
+    started: &mut dyn FnMut() -> (usize, usize),
+    mut remote: Option<&mut (dyn Remote + 'r)>,
+) -> Result<FleetProgress, FleetError> {
+    let identity = options.identity;
     let mut progress = FleetProgress::default();
-    let mut parked = VecDeque::new();
-    let mut holders: HashMap<(u32, u64), UniqueClientId> = HashMap::new();
+    let mut parked: VecDeque<Parked> = VecDeque::new();
+    let mut holders: HashMap<(u32, u64), Client> = HashMap::new();
     let mut next_job = 0;
     let mut last_tick = Instant::now();
     let mut refused_clients = HashSet::new();
@@ -276,37 +530,41 @@ pub(crate) fn serve(
     let mut waiting_for = HashSet::new();
     let mut serving_since = None;
     // When each worker's last request arrived.
-    let mut last_heard: HashMap<UniqueClientId, Instant> = HashMap::new();
+    let mut last_heard: HashMap<Client, Instant> = HashMap::new();
     // Workers found hung: they get no tasks until they speak again.
-    let mut hung: HashSet<UniqueClientId> = HashSet::new();
+    let mut hung: HashSet<Client> = HashSet::new();
     let mut slowest_rollout = Duration::ZERO;
     let mut without_workers: Option<Instant> = None;
     let mut last_running = 0;
+    let mut peers = Peers::default();
+    let mut events = Vec::new();
     loop {
         let mut active_now = false;
         while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
             active_now = true;
-            heard.insert(request.origin());
-            last_heard.insert(request.origin(), Instant::now());
-            if hung.remove(&request.origin()) {
+            let client = Client::Local(request.origin());
+            heard.insert(client);
+            last_heard.insert(client, Instant::now());
+            if hung.remove(&client) {
                 tracing::info!("run '{run}': a worker found hung speaks again");
             }
             let message = request.payload();
             slowest_rollout = slowest_rollout.max(message.slowest_rollout());
-            let serves = match admit(message, identity, jobs) {
+            let serves = match admit(message, identity, source) {
                 Ok(serves) => serves,
                 Err(mismatch) => {
                     progress.refused += 1;
-                    let (answer, reason) = refusal(&mismatch, identity, jobs);
+                    let (answer, reason) = refusal(&mismatch, identity, source);
                     if refused_clients.insert(request.origin()) {
                         tracing::warn!("refused a worker of run '{run}': {reason}");
+                        source.refused(&reason);
                     }
                     let _ = ipc::reply(&request, answer, &[]);
                     continue;
                 }
             };
             if serving_since.is_none() {
-                waiting_for.insert(request.origin());
+                waiting_for.insert(client);
                 if waiting_for.len() >= options.start_with {
                     serving_since = Some(Instant::now());
                 }
@@ -324,7 +582,58 @@ pub(crate) fn serve(
                     waker.answered(request.origin());
                     wake_now = true;
                 }
-                want => parked.push_back((request, want, serves)),
+                want => parked.push_back(Parked {
+                    from: Requester::Local(request),
+                    want,
+                    serves,
+                }),
+            }
+        }
+        if let Some(remote) = remote.as_deref_mut() {
+            remote.poll(&mut events).map_err(FleetError::Remote)?;
+            for event in events.drain(..) {
+                active_now = true;
+                match event {
+                    RemoteEvent::Request {
+                        peer,
+                        request,
+                        want,
+                        serves,
+                        workers,
+                        slowest_rollout: slowest,
+                        outcomes: delivered,
+                    } => {
+                        let client = Client::Remote(peer);
+                        heard.insert(client);
+                        last_heard.insert(client, Instant::now());
+                        peers.workers.insert(peer, workers);
+                        slowest_rollout = slowest_rollout.max(slowest);
+                        for (job, outcome) in delivered {
+                            holders.remove(&(job, outcome.task_id));
+                            outcomes.push_back((job, outcome));
+                        }
+                        if serving_since.is_none() {
+                            waiting_for.insert(client);
+                            if waiting_for.len() >= options.start_with {
+                                serving_since = Some(Instant::now());
+                            }
+                        }
+                        if want > 0 {
+                            parked.push_back(Parked {
+                                from: Requester::Remote { peer, request },
+                                want,
+                                serves,
+                            });
+                        }
+                    }
+                    RemoteEvent::Gone { peer } => {
+                        let reissued = forget_peer(source, peer, &mut holders, &mut parked, &mut peers);
+                        last_heard.remove(&Client::Remote(peer));
+                        hung.remove(&Client::Remote(peer));
+                        progress.reissued += reissued;
+                        tracing::info!("run '{run}': remote peer {peer} is gone; re-issued its {reissued} tasks");
+                    }
+                }
             }
         }
         // Answer before telling: tasks are created eagerly, so ready ones wait in the cores, and
@@ -332,16 +641,19 @@ pub(crate) fn serve(
         // outcomes queued before theirs.
         let answered = if serving_since.is_some() {
             let (answered, asking) = answer(
-                jobs,
+                source,
                 &mut parked,
                 &hung,
                 &mut holders,
                 &mut next_job,
                 identity,
+                remote.as_deref_mut(),
                 // An answered worker is woken, and until the next tick counts as heard: it has
                 // had no time yet to send anything for the tasks it now holds.
                 |client| {
-                    waker.answered(client);
+                    if let Client::Local(client) = client {
+                        waker.answered(client);
+                    }
                     heard.insert(client);
                 },
             )?;
@@ -370,34 +682,34 @@ pub(crate) fn serve(
         while let Some((job, outcome)) = outcomes.pop_front() {
             told_any = true;
             let started = Instant::now();
-            let told = jobs.get_mut(job as usize).map(|j| j.learner.tell(outcome));
+            let job = job as usize;
+            let told = job < source.jobs() && source.tell(job, outcome);
             let finished = Instant::now();
             progress.learner_seconds += (finished - started).as_secs_f64();
-            match told {
-                Some(Ok(())) => {
-                    progress.outcomes += 1;
-                    observer
-                        .told(job as usize, &jobs[job as usize].learner)
-                        .map_err(FleetError::Observer)?;
-                }
-                Some(Err(LearnerTellError::UnknownTask { .. } | LearnerTellError::Duplicate { .. })) | None => {
-                    progress.duplicates += 1
-                }
+            if told {
+                progress.outcomes += 1;
+                source.told(job, observer).map_err(FleetError::Observer)?;
+            } else {
+                progress.duplicates += 1;
             }
             if finished - telling >= TELL_BUDGET {
                 break;
             }
         }
-        progress.jobs_done = jobs.iter().filter(|j| j.learner.is_done()).count();
+        let mut busy = active_now || answered > 0 || told_any;
+        busy |= source.pass(!busy).map_err(FleetError::Source)?;
+        progress.jobs_done = source.jobs_done();
         let serving = || serving_since.map_or(0.0, |since: Instant| since.elapsed().as_secs_f64());
-        if progress.jobs_done == jobs.len() {
+        if progress.jobs_done == source.jobs() {
             progress.serving_seconds = serving();
-            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
+            progress.learning = source.learning();
             // Before the workers are told to stop: a host that watches whether its workers are
             // still there (`acps run` ends a run whose workers all left) must still find them.
             observer.progress(&progress);
-            for (request, ..) in parked.drain(..) {
-                let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
+            for parked in parked.drain(..) {
+                if let Requester::Local(request) = parked.from {
+                    let _ = ipc::reply(&request, Answer::new(Response::Stop, identity), &[]);
+                }
             }
             let _ = waker.wake_all();
             return Ok(progress);
@@ -406,11 +718,12 @@ pub(crate) fn serve(
             last_tick = Instant::now();
             let (running, launched) = started();
             progress.started_running = running;
+            progress.slowest_rollout = slowest_rollout;
             progress.serving_seconds = serving();
-            progress.learning = LearningProgress::combine(jobs.iter().map(|j| j.learner.progress()));
+            progress.learning = source.learning();
             let mut connected = HashSet::new();
             services.tasks.dynamic_config().list_clients(|client| {
-                connected.insert(client.client_id);
+                connected.insert(Client::Local(client.client_id));
                 CallbackProgression::Continue
             });
             // A started worker that exited may have held nothing: it is looked for at once, so
@@ -418,26 +731,41 @@ pub(crate) fn serve(
             let look = look_is_due(&holders, &heard, &connected) || running < last_running;
             last_running = running;
             heard.clear();
-            if look {
+            let local = if look {
                 let Some(live) =
-                    reissue_tasks_of_dead_workers(run, &services.tasks, jobs, &mut holders, &mut progress.reissued)
+                    reissue_tasks_of_dead_workers(run, &services.tasks, source, &mut holders, &mut progress.reissued)
                 else {
                     observer.progress(&progress);
                     continue;
                 };
-                progress.workers = live;
+                live
             } else {
-                progress.workers = connected.len();
-            }
+                connected.len()
+            };
+            progress.relays = peers.workers.len();
+            progress.workers = local + peers.workers.values().sum::<usize>();
             let deadline = options
                 .liveness
                 .silence
                 .max(slowest_rollout * options.liveness.rollout_factor);
-            progress.reissued +=
-                reissue_tasks_of_silent_workers(run, jobs, &mut holders, &last_heard, &mut hung, deadline);
-            last_heard.retain(|client, _| connected.contains(client));
-            hung.retain(|client| connected.contains(client));
-            if progress.workers > 0 || progress.started_running > 0 {
+            let silent = reissue_tasks_of_silent_workers(run, source, &mut holders, &last_heard, &mut hung, deadline);
+            progress.reissued += silent.reissued;
+            // A silent peer is evicted: it joins again as a new one if it lives.
+            for peer in silent.peers {
+                progress.reissued += forget_peer(source, peer, &mut holders, &mut parked, &mut peers);
+                last_heard.remove(&Client::Remote(peer));
+                hung.remove(&Client::Remote(peer));
+                if let Some(remote) = remote.as_deref_mut() {
+                    remote.evict(peer, deadline);
+                }
+            }
+            let known = |client: &Client| match client {
+                Client::Local(_) => connected.contains(client),
+                Client::Remote(peer) => peers.workers.contains_key(peer),
+            };
+            last_heard.retain(|client, _| known(client));
+            hung.retain(known);
+            if progress.workers > 0 || progress.relays > 0 || progress.started_running > 0 {
                 without_workers = None;
             } else if let Some(grace) = options.liveness.no_workers {
                 let since = *without_workers.get_or_insert_with(Instant::now);
@@ -454,7 +782,7 @@ pub(crate) fn serve(
         if stop() {
             return Err(FleetError::Interrupted);
         }
-        if active_now || answered > 0 || told_any {
+        if busy {
             idle_since = None;
         } else if idle_since.get_or_insert_with(Instant::now).elapsed() < options.spin {
             std::thread::yield_now();
@@ -471,6 +799,29 @@ pub(crate) fn serve(
     }
 }
 
+/// Forget remote `peer`: re-issue the tasks it holds and drop its parked requests. Returns how
+/// many tasks were re-issued.
+fn forget_peer(
+    source: &mut dyn TaskSource,
+    peer: PeerId,
+    holders: &mut HashMap<(u32, u64), Client>,
+    parked: &mut VecDeque<Parked>,
+    peers: &mut Peers,
+) -> u64 {
+    let gone = Client::Remote(peer);
+    let mut reissued = 0;
+    holders.retain(|&(job, task_id), client| {
+        if *client != gone {
+            return true;
+        }
+        reissued += u64::from(source.reissue(job as usize, task_id));
+        false
+    });
+    parked.retain(|request| request.client() != gone);
+    peers.workers.remove(&peer);
+    reissued
+}
+
 /// Whether the tick looks for dead workers. The look lists the run's nodes, twice, reading each
 /// node's files: 0.3 ms with 3 nodes, 11 ms with 129. A worker that sent a request since the last
 /// tick is alive (as is one answered since: `heard` has those too), and only the tasks of a dead
@@ -480,14 +831,10 @@ pub(crate) fn serve(
 /// once it is answered. With more workers than ready tasks most of them hold none and send
 /// nothing: looking for every silent one took 2/3 of the learner's CPU time at W = 128
 /// (docs/FLEET.md#oversubscription).
-fn look_is_due(
-    holders: &HashMap<(u32, u64), UniqueClientId>,
-    heard: &HashSet<UniqueClientId>,
-    connected: &HashSet<UniqueClientId>,
-) -> bool {
+fn look_is_due(holders: &HashMap<(u32, u64), Client>, heard: &HashSet<Client>, connected: &HashSet<Client>) -> bool {
     holders
         .values()
-        .any(|client| !heard.contains(client) || !connected.contains(client))
+        .any(|client| matches!(client, Client::Local(_)) && (!heard.contains(client) || !connected.contains(client)))
 }
 
 /// Give the tasks held by workers that are gone back to their learners. Returns how many workers
@@ -496,8 +843,8 @@ fn look_is_due(
 fn reissue_tasks_of_dead_workers(
     run: &RunName,
     tasks: &TaskService,
-    jobs: &mut [FleetJob],
-    holders: &mut HashMap<(u32, u64), UniqueClientId>,
+    source: &mut dyn TaskSource,
+    holders: &mut HashMap<(u32, u64), Client>,
     reissued: &mut u64,
 ) -> Option<usize> {
     tasks.try_cleanup_dead_nodes();
@@ -505,14 +852,15 @@ fn reissue_tasks_of_dead_workers(
     let mut live = HashSet::new();
     tasks.dynamic_config().list_clients(|client| {
         if alive_nodes.contains(&client.node_id) {
-            live.insert(client.client_id);
+            live.insert(Client::Local(client.client_id));
         }
         CallbackProgression::Continue
     });
     let before = *reissued;
     holders.retain(|&(job, task_id), client| {
-        let alive = live.contains(client);
-        if !alive && jobs[job as usize].learner.reissue(task_id) {
+        // Remote peers are looked after by their remote.
+        let alive = matches!(client, Client::Remote(_)) || live.contains(client);
+        if !alive && source.reissue(job as usize, task_id) {
             *reissued += 1;
         }
         alive
@@ -526,31 +874,50 @@ fn reissue_tasks_of_dead_workers(
     Some(live.len())
 }
 
-/// Give the tasks held by workers silent for longer than `deadline` back to their learners, and
-/// mark those workers hung. Returns how many tasks were re-issued.
+/// Workers found silent by [`reissue_tasks_of_silent_workers`].
+struct Silent {
+    /// Tasks re-issued.
+    reissued: u64,
+    /// Remote peers among them, to be evicted (their other tasks are re-issued then).
+    peers: Vec<PeerId>,
+}
+
+/// Give the tasks held by workers silent for longer than `deadline` back to their source, and
+/// mark those workers hung.
 fn reissue_tasks_of_silent_workers(
     run: &RunName,
-    jobs: &mut [FleetJob],
-    holders: &mut HashMap<(u32, u64), UniqueClientId>,
-    last_heard: &HashMap<UniqueClientId, Instant>,
-    hung: &mut HashSet<UniqueClientId>,
+    source: &mut dyn TaskSource,
+    holders: &mut HashMap<(u32, u64), Client>,
+    last_heard: &HashMap<Client, Instant>,
+    hung: &mut HashSet<Client>,
     deadline: Duration,
-) -> u64 {
-    let silent = |client: &UniqueClientId| last_heard.get(client).is_some_and(|heard| heard.elapsed() > deadline);
-    let mut reissued = 0;
+) -> Silent {
+    let silent = |client: &Client| last_heard.get(client).is_some_and(|heard| heard.elapsed() > deadline);
+    let mut found = Silent {
+        reissued: 0,
+        peers: Vec::new(),
+    };
     holders.retain(|&(job, task_id), client| {
         if !silent(client) {
             return true;
         }
         if hung.insert(*client) {
-            tracing::warn!(
-                "run '{run}': a worker holding tasks has sent nothing for {deadline:?}; its tasks go to other workers (raise the fleet's liveness deadline if rollouts take longer)"
-            );
+            match client {
+                Client::Local(_) => tracing::warn!(
+                    "run '{run}': a worker holding tasks has sent nothing for {deadline:?}; its tasks go to other workers (raise the fleet's liveness deadline if rollouts take longer)"
+                ),
+                Client::Remote(peer) => {
+                    tracing::warn!(
+                        "run '{run}': remote peer {peer} holds tasks and has sent nothing for {deadline:?}; its tasks go to other workers and it is evicted"
+                    );
+                    found.peers.push(*peer);
+                }
+            }
         }
-        reissued += u64::from(jobs[job as usize].learner.reissue(task_id));
+        found.reissued += u64::from(source.reissue(job as usize, task_id));
         false
     });
-    reissued
+    found
 }
 
 /// Why the learner refuses a worker's request.
@@ -567,7 +934,7 @@ enum Mismatch {
 
 /// What a request's worker serves, if the learner accepts it: this build's protocol, this run
 /// (or any), and an environment some job needs (or any).
-fn admit(message: &WorkerMessage, identity: u64, jobs: &[FleetJob]) -> Result<Serves, Mismatch> {
+fn admit(message: &WorkerMessage, identity: u64, source: &dyn TaskSource) -> Result<Serves, Mismatch> {
     if message.protocol != PROTOCOL_VERSION {
         return Err(Mismatch::Protocol(message.protocol));
     }
@@ -576,7 +943,9 @@ fn admit(message: &WorkerMessage, identity: u64, jobs: &[FleetJob]) -> Result<Se
     }
     let serves = message.serves().map_err(Mismatch::Unreadable)?;
     match serves {
-        Serves::One(spec) if !jobs.iter().any(|job| *job.environment() == spec) => Err(Mismatch::Environment(spec)),
+        Serves::One(spec) if !(0..source.jobs()).any(|job| source.environment(job) == spec) => {
+            Err(Mismatch::Environment(spec))
+        }
         serves => Ok(serves),
     }
 }
@@ -584,11 +953,12 @@ fn admit(message: &WorkerMessage, identity: u64, jobs: &[FleetJob]) -> Result<Se
 /// The answer refusing a worker for `mismatch`, and the reason in words, naming the worker's
 /// and the learner's environments. The answer names one environment the jobs need, preferably
 /// one of the worker's environment's name: the closest description of what it should be.
-fn refusal(mismatch: &Mismatch, identity: u64, jobs: &[FleetJob]) -> (Answer, String) {
+fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answer, String) {
     let mut needed: Vec<EnvironmentSpec> = Vec::new();
-    for job in jobs {
-        if !needed.contains(job.environment()) {
-            needed.push(*job.environment());
+    for job in 0..source.jobs() {
+        let environment = source.environment(job);
+        if !needed.contains(&environment) {
+            needed.push(environment);
         }
     }
     let closest = match mismatch {
@@ -618,72 +988,93 @@ fn refusal(mismatch: &Mismatch, identity: u64, jobs: &[FleetJob]) -> (Answer, St
 /// Answer parked requests, each with as many ready tasks as it asks for of the environments its
 /// worker serves (round robin over the jobs), as soon as at least one is ready; tells
 /// `answered_to` of every worker answered; returns how many tasks went out and the time the
-/// learners took to hand them out. Requests of hung workers stay parked.
-fn answer(
-    jobs: &mut [FleetJob],
-    parked: &mut VecDeque<(TaskRequest, usize, Serves)>,
-    hung: &HashSet<UniqueClientId>,
-    holders: &mut HashMap<(u32, u64), UniqueClientId>,
+/// source took to hand them out. Requests of hung workers stay parked.
+#[allow(clippy::too_many_arguments)]
+fn answer<'r>(
+    source: &mut dyn TaskSource,
+    parked: &mut VecDeque<Parked>,
+    hung: &HashSet<Client>,
+    holders: &mut HashMap<(u32, u64), Client>,
     next_job: &mut usize,
     identity: u64,
-    mut answered_to: impl FnMut(UniqueClientId),
+    mut remote: Option<&mut (dyn Remote + 'r)>,
+    mut answered_to: impl FnMut(Client),
 ) -> Result<(usize, Duration), FleetError> {
     let mut answered = 0;
     let mut asking = Duration::ZERO;
     // Allocated only when a request is waiting: most passes have none.
+    let mut wire = Vec::new();
     let mut tasks = Vec::new();
     // What workers serve whose requests found nothing ready in this pass: the next request of
     // the same kind would find nothing either.
     let mut dry: Vec<Serves> = Vec::new();
     for _ in 0..parked.len() {
-        let Some((request, want, serves)) = parked.pop_front() else {
+        let Some(request) = parked.pop_front() else {
             break;
         };
-        if !request.is_connected() {
+        if let Requester::Local(local) = &request.from
+            && !local.is_connected()
+        {
             continue;
         }
+        let client = request.client();
         // Hung workers get nothing until they speak again.
-        if hung.contains(&request.origin()) || dry.contains(&serves) {
-            parked.push_back((request, want, serves));
+        if hung.contains(&client) || dry.contains(&request.serves) {
+            parked.push_back(request);
             continue;
         }
         tasks.clear();
-        tasks.reserve(want);
+        tasks.reserve(request.want);
         let started = Instant::now();
-        while tasks.len() < want {
-            let Some((job, task)) = next_task(jobs, next_job, &serves) else {
+        while tasks.len() < request.want {
+            let Some((job, task)) = next_task(source, next_job, &request.serves) else {
                 break;
             };
-            tasks.push(WireTask::new(job as u32, &task, *jobs[job].environment())?);
-            holders.insert((job as u32, task.id), request.origin());
+            holders.insert((job as u32, task.id), client);
+            tasks.push((job as u32, task));
         }
         asking += started.elapsed();
         if tasks.is_empty() {
-            if serves == Serves::Any {
+            source.starved(&request.serves, request.want);
+            let any = request.serves == Serves::Any;
+            if any {
                 // Nothing is ready for anyone: the request keeps its place.
-                parked.push_front((request, want, serves));
+                parked.push_front(request);
                 break;
             }
-            dry.push(serves);
-            parked.push_back((request, want, serves));
+            dry.push(request.serves);
+            parked.push_back(request);
             continue;
         }
-        ipc::reply(&request, Answer::new(Response::Task, identity), &tasks)?;
-        answered_to(request.origin());
+        match &request.from {
+            Requester::Local(local) => {
+                wire.clear();
+                for (job, task) in &tasks {
+                    wire.push(WireTask::new(*job, task, source.environment(*job as usize))?);
+                }
+                ipc::reply(local, Answer::new(Response::Task, identity), &wire)?;
+            }
+            Requester::Remote { peer, request } => {
+                if let Some(remote) = remote.as_deref_mut() {
+                    remote.send(*peer, *request, &tasks).map_err(FleetError::Remote)?;
+                }
+            }
+        }
+        answered_to(client);
         answered += tasks.len();
     }
     Ok((answered, asking))
 }
 
 /// The next ready task of an environment the worker `serves`, round robin over the jobs.
-fn next_task(jobs: &mut [FleetJob], next_job: &mut usize, serves: &Serves) -> Option<(usize, acps_shared::Task)> {
-    let n = jobs.len();
+fn next_task(source: &mut dyn TaskSource, next_job: &mut usize, serves: &Serves) -> Option<(usize, Task)> {
+    let n = source.jobs();
     for offset in 0..n {
         let job = (*next_job + offset) % n;
-        if !serves.includes(jobs[job].environment()) {
+        if !serves.includes(&source.environment(job)) {
             continue;
         }
-        if let Some(task) = jobs[job].learner.ask() {
+        if let Some(task) = source.ask(job) {
             *next_job = (job + 1) % n;
             return Some((job, task));
         }

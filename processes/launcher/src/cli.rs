@@ -48,6 +48,12 @@ pub(crate) enum Command {
     Run(RunArgs),
     /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.
     Worker(WorkerArgs),
+    /// Serve this host's workers from a learner on another host (`acps run ... --listen
+    /// ENDPOINT` there), over Zenoh: to the workers this is their learner, to the learner one
+    /// peer that asks for their tasks in batches. Starts --workers W workers (default: the
+    /// cores) for every experiment of the run, and exits when the learner's run is over
+    /// (docs/HOSTS.md).
+    Relay(RelayArgs),
     /// Measure rollouts per second in-process and through fleets of 1 ..= cores workers, for a
     /// trivial environment (the transport's cost) and the analytic and rapier PA-10, in
     /// interleaved rounds; print a table and write DIR/bench.json, bench.svg and bench.png.
@@ -137,11 +143,15 @@ impl LearnArgs {
                 checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
                 quiet: self.quiet,
             },
-            workers: self.workers,
-            worker_in_flight: DEFAULT_WORKER_IN_FLIGHT,
-            worker_nice: WorkerNiceArg { worker_nice: None },
-            worker_command: None,
+            started: StartedWorkers {
+                workers: self.workers,
+                worker_in_flight: DEFAULT_WORKER_IN_FLIGHT,
+                worker_nice: WorkerNiceArg { worker_nice: None },
+                worker_command: None,
+            },
             run: self.run,
+            listen: Vec::new(),
+            net: NetArgs::default(),
         }
     }
 }
@@ -189,6 +199,38 @@ pub(crate) struct WorkerNiceArg {
 pub(crate) struct RunArgs {
     #[command(flatten)]
     pub(crate) experiment: ExperimentArgs,
+    #[command(flatten)]
+    pub(crate) started: StartedWorkers,
+    /// The run's name (letters, digits and '-'): its shared-memory prefix, how workers
+    /// started by hand join it, and how relays of other hosts name it (default: EXPERIMENT-PID).
+    #[arg(long)]
+    pub(crate) run: Option<String>,
+    /// Also serve relays of other hosts (`acps relay --connect ENDPOINT` there) at ENDPOINT:
+    /// tcp/ADDRESS:PORT or tls/ADDRESS:PORT, e.g. tcp/127.0.0.1:7447. Listening on an address
+    /// other hosts reach is your choice: on networks that are not private, use tls/ with
+    /// --zenoh-config (docs/HOSTS.md). Repeat for several addresses.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub(crate) listen: Vec<String>,
+    #[command(flatten)]
+    pub(crate) net: NetArgs,
+}
+
+/// How a learner or relay joins the network of hosts.
+#[derive(clap::Args, Default)]
+pub(crate) struct NetArgs {
+    /// A Zenoh configuration file (JSON5) for TLS certificates or user/password authentication;
+    /// acps sets the mode, endpoints, scouting (off) and lease on top of it (docs/HOSTS.md).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) zenoh_config: Option<PathBuf>,
+    /// Seconds without a word after which a frozen or cut-off host is given up on (0.1..=3600;
+    /// a host that crashes is noticed at once) [default: 3].
+    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true, value_parser = number("a number of seconds in 0.1..=3600", |x| (0.1..=3600.0).contains(&x)))]
+    pub(crate) lease: Option<f64>,
+}
+
+/// The worker processes a learner or relay starts.
+#[derive(clap::Args)]
+pub(crate) struct StartedWorkers {
     /// Worker processes to start (0..=128, the most a fleet serves; 0: start them yourself)
     /// [default: the number of cores, at most 128].
     #[arg(long, allow_hyphen_values = true, value_parser = integer::<usize>(0, MAX_WORKERS as u64))]
@@ -205,10 +247,38 @@ pub(crate) struct RunArgs {
     /// ACPS_WORKER_INDEX (0..W-1) set; --worker-in-flight does not apply.
     #[arg(long, value_name = "CMD")]
     pub(crate) worker_command: Option<String>,
-    /// The run's name (letters, digits and '-'): its shared-memory prefix, and how workers
-    /// started by hand join it (default: EXPERIMENT-PID).
+}
+
+#[derive(clap::Args)]
+pub(crate) struct RelayArgs {
+    /// Where the learner listens (its --listen): tcp/HOST:PORT or tls/HOST:PORT.
+    #[arg(long, value_name = "ENDPOINT", required = true)]
+    pub(crate) connect: Vec<String>,
+    /// The run to join [default: the one the learner serves].
     #[arg(long)]
     pub(crate) run: Option<String>,
+    #[command(flatten)]
+    pub(crate) started: StartedWorkers,
+    /// This host's own run name, which its workers started by hand join (`acps worker --run
+    /// NAME`) [default: relay-PID].
+    #[arg(long, value_name = "NAME")]
+    pub(crate) local_run: Option<String>,
+    /// Seconds to wait for the learner when starting (0..=86400).
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true, value_parser = number("a number of seconds in 0..=86400", |x| (0.0..=86400.0).contains(&x)))]
+    pub(crate) startup_timeout: f64,
+    /// Seconds to wait for a learner that vanished mid-run to come back (resumed with --resume)
+    /// before the relay exits (0..=86400).
+    #[arg(long, default_value_t = 60.0, allow_hyphen_values = true, value_parser = number("a number of seconds in 0..=86400", |x| (0.0..=86400.0).contains(&x)))]
+    pub(crate) wait_for_learner: f64,
+    /// Most tasks kept asked for or queued beyond what the workers hold (1..=4096): the relay
+    /// keeps twice what its workers hold and 16 more, up to this.
+    #[arg(long, default_value_t = 1024, allow_hyphen_values = true, value_parser = integer::<usize>(1, 4096))]
+    pub(crate) queue: usize,
+    #[command(flatten)]
+    pub(crate) net: NetArgs,
+    /// Print nothing unless something goes wrong.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
 }
 
 #[derive(clap::Args)]
@@ -318,6 +388,7 @@ impl Cli {
             Command::Learn(args) => commands::fleet(args.run_args()),
             Command::Run(args) => commands::fleet(args),
             Command::Worker(args) => commands::worker(args),
+            Command::Relay(args) => commands::relay(args),
             Command::Bench(args) => commands::bench(args),
             Command::Evaluate(args) => commands::evaluate(args),
             Command::Protocol => {

@@ -2,12 +2,13 @@
 
 use crate::bench::BenchEvent;
 use crate::checkpoints::Checkpoints;
-use crate::cli::{BenchArgs, EvaluateArgs, ExperimentArgs, RunArgs, WorkerArgs};
+use crate::cli::{BenchArgs, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs};
 use crate::config::{self, Job, LoadedFile, Plan};
 use crate::experiment::{Experiment, Summary};
 use crate::progress::{Progress, ScoreFormat};
 use crate::workers::ModelFactory;
-use acps_fleet::Fleet;
+use acps_fleet::{Fleet, FleetBuilder, FleetProgress};
+use acps_relay::{Listener, NetOptions, RelayOptions};
 use acps_wire::ipc::{self, RunName};
 use acps_worker::{WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
@@ -33,6 +34,11 @@ pub enum Stopped {
         /// Whether the run served a fleet.
         fleet: bool,
     },
+    /// Ctrl-C of a relay: its workers were stopped; the learner hands their tasks to others.
+    #[error(
+        "interrupted; this host's workers were stopped and its shared memory removed; the learner hands their tasks to other hosts"
+    )]
+    RelayInterrupted,
     /// Any other error, after which the checkpoints written so far continue the run.
     #[error("{error:#}\n{}", continue_hint(Some(resume)))]
     Failed {
@@ -256,20 +262,14 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         // Before the output directory is made: the fleet would refuse the name only then.
         RunName::new(name).with_context(|| format!("--run {name}"))?;
     }
+    let net = net_options(&args.net, &args.listen, &[])?;
     let Some((out, jobs)) = jobs(&args.experiment)? else {
         return Ok(());
     };
-    if let Some(command) = &args.worker_command {
-        if command.trim().is_empty() {
-            bail!("--worker-command must be a command that starts your worker, got {command:?}");
-        }
-        if args.workers == Some(0) {
-            bail!("--worker-command starts --workers W >= 1 copies of CMD; with --workers 0 it would start none");
-        }
-    }
+    args.started.check()?;
     if let Some(job) = jobs.iter().find(|job| job.experiment.user_problem.is_some())
-        && args.worker_command.is_none()
-        && args.workers != Some(0)
+        && args.started.worker_command.is_none()
+        && args.started.workers != Some(0)
     {
         bail!(
             "problem '{}' needs your workers: --worker-command CMD or --workers 0",
@@ -282,25 +282,31 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
         format!("{experiment}-{}", std::process::id())
     });
-    let workers = args.workers.unwrap_or_else(|| {
-        std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .min(ipc::MAX_WORKERS)
-    });
+    let workers = args.started.count();
+    // Once, for every experiment of the run: relays stay connected from one to the next.
+    let mut listener = match &net {
+        Some(net) => match Listener::open(&name, net) {
+            Ok(listener) => Some(listener),
+            Err(error) => {
+                for dir in &created {
+                    let _ = std::fs::remove_dir_all(dir);
+                }
+                return Err(anyhow::Error::new(error).context(format!("--listen {}", args.listen.join(" --listen "))));
+            }
+        },
+        None => None,
+    };
+    if listener.is_some() && !args.experiment.quiet {
+        eprintln!(
+            "run '{name}' serves relays at {}: on each other host, `acps relay --connect ENDPOINT` with this host's address",
+            args.listen.join(", ")
+        );
+    }
     for (index, Job { experiment, dir, .. }) in jobs.iter().enumerate() {
-        let mut builder = Fleet::builder(name.as_str())
+        let builder = Fleet::builder(name.as_str())
             .identity(experiment.identity())
             .ctrl_c(true);
-        if workers > 0 {
-            builder = match &args.worker_command {
-                Some(command) => builder.spawn_workers(workers, crate::workers::user_command(command.clone())),
-                None => builder.spawn_workers(workers, crate::workers::command(args.worker_in_flight, workers)),
-            };
-            if let Some(nice) = args.worker_nice.worker_nice {
-                builder = builder.worker_niceness(nice);
-            }
-        }
-        let mut fleet = match builder.start() {
+        let mut fleet = match args.started.spawn(builder).start() {
             Ok(fleet) => fleet,
             Err(error) => {
                 // Refused before anything ran (the run is taken, say): leave no empty directory.
@@ -313,7 +319,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             }
         };
         let run = fleet.run().clone();
-        if workers == 0 {
+        if workers == 0 && listener.is_none() {
             match &experiment.user_problem {
                 None => eprintln!("run '{run}' waits for workers: start them with `acps worker --run {run}`"),
                 Some(_) => {
@@ -328,7 +334,8 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         }
         let progress = Progress::of(experiment, args.experiment.quiet);
         let checkpoints = checkpoints(&args.experiment, dir);
-        let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), |p| {
+        let remote = listener.as_mut().map(|l| l as &mut dyn acps_fleet::Remote);
+        let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), remote, |p| {
             progress.show(&p.learning, p.outcomes, Some(p.workers));
         });
         match &outcome {
@@ -339,8 +346,13 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
             .map_err(|e| stopped(e, checkpoints.as_ref(), &out, true))?;
         if !args.experiment.quiet {
+            let relays = if listener.is_some() {
+                " and relays of other hosts"
+            } else {
+                ""
+            };
             println!(
-                "{} on {workers} workers: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
+                "{} on {workers} workers{relays}: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
                 experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
             );
         }
@@ -432,6 +444,146 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Serve this host's workers from a learner on another host.
+pub(crate) fn relay(args: RelayArgs) -> anyhow::Result<()> {
+    let Some(net) = net_options(&args.net, &[], &args.connect)? else {
+        bail!("--connect ENDPOINT is missing: where the learner listens (its --listen)");
+    };
+    if let Some(run) = &args.run {
+        RunName::new(run).with_context(|| format!("--run {run}"))?;
+    }
+    args.started.check()?;
+    let local = args
+        .local_run
+        .clone()
+        .unwrap_or_else(|| format!("relay-{}", std::process::id()));
+    let builder = Fleet::builder(local.as_str()).ctrl_c(true);
+    let mut fleet = args
+        .started
+        .spawn(builder)
+        .start()
+        .with_context(|| format!("--local-run {local}"))?;
+    if !args.quiet {
+        eprintln!(
+            "relay: this host's run is '{local}' (workers started by hand: `acps worker --run {local}`); asking {} for tasks",
+            args.connect.join(", ")
+        );
+    }
+    let options = RelayOptions {
+        net,
+        run: args.run.clone(),
+        identity: 0,
+        startup_timeout: Duration::from_secs_f64(args.startup_timeout),
+        wait_for_learner: Duration::from_secs_f64(args.wait_for_learner),
+        queue: args.queue,
+    };
+    let bar = (!args.quiet).then(|| {
+        ProgressBar::new_spinner()
+            .with_style(ProgressStyle::with_template("{spinner} relay: {msg}, {elapsed}").expect("a valid template"))
+    });
+    let mut observer = |progress: &FleetProgress| {
+        if let Some(bar) = &bar {
+            bar.set_message(format!(
+                "{} outcomes from {} workers",
+                progress.outcomes, progress.workers
+            ));
+            bar.tick();
+        }
+    };
+    let served = acps_relay::relay::serve(&mut fleet, &options, &mut observer);
+    if let Some(bar) = &bar {
+        bar.finish_and_clear();
+    }
+    match served {
+        Ok(report) => {
+            if !args.quiet {
+                eprintln!(
+                    "relay: run '{}' is over: {} outcomes forwarded in {} serves",
+                    report.run, report.outcomes, report.serves
+                );
+            }
+            Ok(())
+        }
+        Err(acps_relay::RelayError::Fleet(acps_fleet::FleetError::Interrupted)) => {
+            Err(Stopped::RelayInterrupted.into())
+        }
+        Err(error) => Err(anyhow::Error::new(error).context(format!("relay to {}", args.connect.join(", ")))),
+    }
+}
+
+/// The network settings of a learner that listens on `listen` or a relay that connects to
+/// `connect`; `None` when there is neither.
+fn net_options(args: &NetArgs, listen: &[String], connect: &[String]) -> anyhow::Result<Option<NetOptions>> {
+    if listen.is_empty() && connect.is_empty() {
+        if args.zenoh_config.is_some() || args.lease.is_some() {
+            bail!(
+                "--zenoh-config and --lease set up the network of hosts, which only --listen (acps run) or --connect (acps relay) opens"
+            );
+        }
+        return Ok(None);
+    }
+    let (flag, endpoints) = if listen.is_empty() {
+        ("--connect", connect)
+    } else {
+        ("--listen", listen)
+    };
+    for endpoint in endpoints {
+        acps_relay::net::check_endpoint(endpoint).with_context(|| format!("{flag} {endpoint}"))?;
+    }
+    if let Some(path) = &args.zenoh_config
+        && !path.is_file()
+    {
+        bail!("--zenoh-config {}: not a readable file", path.display());
+    }
+    Ok(Some(NetOptions {
+        listen: listen.to_vec(),
+        connect: connect.to_vec(),
+        lease: args
+            .lease
+            .map_or(acps_relay::net::DEFAULT_LEASE, Duration::from_secs_f64),
+        config_file: args.zenoh_config.clone(),
+    }))
+}
+
+impl StartedWorkers {
+    /// Refuse a --worker-command that starts nothing.
+    fn check(&self) -> anyhow::Result<()> {
+        if let Some(command) = &self.worker_command {
+            if command.trim().is_empty() {
+                bail!("--worker-command must be a command that starts your worker, got {command:?}");
+            }
+            if self.workers == Some(0) {
+                bail!("--worker-command starts --workers W >= 1 copies of CMD; with --workers 0 it would start none");
+            }
+        }
+        Ok(())
+    }
+
+    /// How many workers to start: --workers, or the cores (at most a fleet's most).
+    fn count(&self) -> usize {
+        self.workers.unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map_or(1, |n| n.get())
+                .min(ipc::MAX_WORKERS)
+        })
+    }
+
+    /// `builder`, starting these workers.
+    fn spawn(&self, mut builder: FleetBuilder) -> FleetBuilder {
+        let workers = self.count();
+        if workers > 0 {
+            builder = match &self.worker_command {
+                Some(command) => builder.spawn_workers(workers, crate::workers::user_command(command.clone())),
+                None => builder.spawn_workers(workers, crate::workers::command(self.worker_in_flight, workers)),
+            };
+            if let Some(nice) = self.worker_nice.worker_nice {
+                builder = builder.worker_niceness(nice);
+            }
+        }
+        builder
+    }
 }
 
 pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {

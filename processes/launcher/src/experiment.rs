@@ -6,7 +6,7 @@
 
 use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::Progress;
-use acps_fleet::{Fleet, FleetError, FleetJob, FleetJobBuildError, FleetProgress, Observer};
+use acps_fleet::{Fleet, FleetError, FleetJob, FleetJobBuildError, FleetProgress, Learners, Observer, Remote};
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::PolicySnapshot;
 use acps_learner::{
@@ -604,6 +604,7 @@ impl Experiment {
         &self,
         fleet: &mut Fleet,
         checkpoints: Option<&Checkpoints>,
+        remote: Option<&mut dyn Remote>,
         observe: impl FnMut(&FleetProgress),
     ) -> Result<(Summary, FleetProgress), RunError> {
         let (jobs, writers): (Vec<Job>, Vec<Option<Writer>>) = self.jobs_writing(checkpoints)?.into_iter().unzip();
@@ -622,7 +623,7 @@ impl Experiment {
             environments,
             observe,
         };
-        let served = fleet.serve(&mut learners, &mut observer);
+        let served = fleet.serve_with(&mut Learners(&mut learners), &mut observer, remote);
         let Checkpointing {
             writers, environments, ..
         } = observer;

@@ -14,8 +14,20 @@ fn init_logging(verbose: u8) {
         2 => "debug",
         _ => "trace",
     };
+    // Zenoh's own notes (its settings, reconnections) say nothing an acps user acts on: acps
+    // reports what matters in its words.
+    let zenoh = [
+        "zenoh",
+        "zenoh_transport",
+        "zenoh_link_commons",
+        "zenoh_link_tcp",
+        "zenoh_link_tls",
+        "zenoh_config",
+    ]
+    .map(|target| format!(",{target}=error"))
+    .concat();
     let filter = tracing_subscriber::EnvFilter::try_from_env("ACPS_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{level}{zenoh}")));
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
@@ -30,7 +42,9 @@ fn main() -> ExitCode {
     match cli.run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => match error.downcast_ref::<acps::commands::Stopped>() {
-            Some(stopped @ acps::commands::Stopped::Interrupted { .. }) => {
+            Some(
+                stopped @ (acps::commands::Stopped::Interrupted { .. } | acps::commands::Stopped::RelayInterrupted),
+            ) => {
                 eprintln!("{stopped}");
                 ExitCode::from(130)
             }

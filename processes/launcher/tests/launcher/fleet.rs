@@ -1328,7 +1328,7 @@ fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serv
     let run = run_name("too-large");
     let mut fleet = test_fleet(&run, 0);
     let error = experiment
-        .run_fleet(&mut fleet, None, |_| panic!("nothing is served"))
+        .run_fleet(&mut fleet, None, None, |_| panic!("nothing is served"))
         .err()
         .unwrap();
     drop(fleet);

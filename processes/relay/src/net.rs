@@ -1,0 +1,416 @@
+//! What crosses the network between a learner and its relays: Zenoh sessions, key expressions and
+//! messages.
+//!
+//! Keys (all carry the run, so runs sharing a network never mix):
+//! - `acps/hello/<run>`: the handshake, a query, on a key without the protocol version, so that
+//!   a relay of another version gets a refusal in words rather than silence;
+//! - `acps/v<N>/<run>/learner`: the learner's liveliness token;
+//! - `acps/v<N>/<run>/relay/<peer>`: a relay's liveliness token;
+//! - `acps/v<N>/<run>/up/<peer>`: a relay's requests and outcomes;
+//! - `acps/v<N>/<run>/down/<peer>`: the learner's tasks and notices to one relay.
+
+use acps_shared::{EnvironmentSpec, Outcome, Task};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Version of these messages and keys; bump on any change.
+pub const NET_PROTOCOL: u32 = 1;
+/// This build's version, which a relay and its learner must share.
+pub const BUILD: &str = env!("CARGO_PKG_VERSION");
+/// Most tasks one message carries: a message stays inside Zenoh's 64 KiB batch (a task of 64
+/// parameters is about 600 bytes).
+pub const MAX_NET_BATCH: usize = 64;
+/// The lease when none is given: a frozen or cut-off peer is noticed after this long.
+pub const DEFAULT_LEASE: Duration = Duration::from_secs(3);
+/// The accepted leases.
+pub const LEASES: std::ops::RangeInclusive<f64> = 0.1..=3600.0;
+
+/// The key of the handshake of `run`.
+pub fn hello_key(run: &str) -> String {
+    format!("acps/hello/{run}")
+}
+
+/// The key of `what` in run `run`.
+pub fn key(run: &str, what: &str) -> String {
+    format!("acps/v{NET_PROTOCOL}/{run}/{what}")
+}
+
+/// A relay's greeting: who it is and what it was built as.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Hello {
+    /// [`NET_PROTOCOL`].
+    pub net_protocol: u32,
+    /// The task wire's protocol (`acps_wire::wire::PROTOCOL_VERSION`) of the relay's workers.
+    pub wire_protocol: u32,
+    /// [`BUILD`].
+    pub build: String,
+    /// The run the relay means to join ("" for whichever the learner serves).
+    pub run: String,
+    /// The run identity it means to join (0: any).
+    pub identity: u64,
+    /// The relay's host name, for messages.
+    pub host: String,
+    /// The relay's process id, for messages.
+    pub pid: u32,
+}
+
+/// The learner's answer to a [`Hello`].
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum Welcome {
+    /// Joined as `peer`.
+    Accepted {
+        /// The run's name.
+        run: String,
+        /// The relay's number in this learner.
+        peer: u32,
+        /// The learner process's random instance, which the relay's messages carry.
+        instance: u64,
+        /// The run's identity.
+        identity: u64,
+        /// The environment of each job.
+        environments: Vec<EnvironmentSpec>,
+        /// The learner's host, for messages.
+        host: String,
+    },
+    /// The learner is between two serves (one experiment ended, the next not begun): ask again.
+    NotServing {
+        /// The run's name.
+        run: String,
+    },
+    /// Refused, and why, naming both sides.
+    Refused {
+        /// The learner's run.
+        run: String,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// An outcome as it crosses the network.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct NetOutcome {
+    /// The job.
+    pub job: u32,
+    /// The task.
+    pub task_id: u64,
+    /// Whether the rollout succeeded.
+    pub ok: bool,
+    /// The return.
+    pub reward: f64,
+    /// The score.
+    pub score: f64,
+    /// The diagnostics.
+    pub diagnostics: Vec<f64>,
+}
+
+impl NetOutcome {
+    /// `job`'s outcome.
+    pub fn new(job: u32, outcome: &Outcome) -> Self {
+        Self {
+            job,
+            task_id: outcome.task_id,
+            ok: outcome.is_ok(),
+            reward: outcome.reward,
+            score: outcome.score,
+            diagnostics: outcome.diagnostics.clone(),
+        }
+    }
+
+    /// The job and outcome; one marked ok with non-finite numbers becomes a failed outcome
+    /// (`Outcome::new` checks), so a NaN cannot come in through the network.
+    pub fn to_outcome(&self) -> (u32, Outcome) {
+        let outcome = if self.ok {
+            Outcome::new(self.task_id, self.reward, self.score).with_diagnostics(self.diagnostics.clone())
+        } else {
+            Outcome::failed(self.task_id)
+        };
+        (self.job, outcome)
+    }
+}
+
+/// A relay's message to its learner.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum Up {
+    /// Outcomes, and a request for `want` tasks (0: none) of the environment `serves` (`None`:
+    /// any), answered once with [`Down::Tasks`] of the same `request`.
+    Request {
+        /// The learner instance that admitted the relay.
+        instance: u64,
+        /// The request's number.
+        request: u64,
+        /// Tasks asked for.
+        want: u32,
+        /// The environment the tasks must need, `None` for any.
+        serves: Option<EnvironmentSpec>,
+        /// Workers connected to the relay.
+        workers: u32,
+        /// Their slowest rollout, in microseconds.
+        slowest_rollout_us: u64,
+        /// Outcomes.
+        outcomes: Vec<NetOutcome>,
+    },
+    /// Something the learner's user should read (a worker the relay refused).
+    Note {
+        /// The learner instance that admitted the relay.
+        instance: u64,
+        /// What happened.
+        text: String,
+    },
+}
+
+/// A learner's message to one relay.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum Down {
+    /// The answer to a request.
+    Tasks {
+        /// The request answered.
+        request: u64,
+        /// The tasks, by job.
+        tasks: Vec<(u32, Task)>,
+    },
+    /// The learner served every job of this serve: stop the workers.
+    Done,
+    /// The learner gave up on the relay (silent, cut off, unknown): join again.
+    Evicted {
+        /// Why.
+        reason: String,
+    },
+}
+
+/// A message that could not be encoded or decoded.
+#[derive(Debug, thiserror::Error)]
+#[error("{what}: {reason}")]
+pub struct CodecError {
+    what: &'static str,
+    reason: String,
+}
+
+/// Encode a message.
+pub fn encode<T: Serialize>(message: &T) -> Result<Vec<u8>, CodecError> {
+    bincode::serde::encode_to_vec(message, bincode::config::standard()).map_err(|e| CodecError {
+        what: "encoding a message",
+        reason: e.to_string(),
+    })
+}
+
+/// Decode a message of `len` bytes or fewer.
+pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, CodecError> {
+    let config = bincode::config::standard().with_limit::<{ 16 << 20 }>();
+    let (message, _) = bincode::serde::decode_from_slice(bytes, config).map_err(|e| CodecError {
+        what: "decoding a message",
+        reason: e.to_string(),
+    })?;
+    Ok(message)
+}
+
+/// How a process joins the network: where it listens or connects, its lease, and an optional
+/// Zenoh configuration file (TLS, user and password) under those.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetOptions {
+    /// Endpoints to listen on (`tcp/127.0.0.1:7447`, `tls/host:7447`).
+    pub listen: Vec<String>,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// A frozen or cut-off peer is noticed after this long.
+    pub lease: Duration,
+    /// A Zenoh configuration file (JSON5) whose settings (TLS, authentication) apply under
+    /// those above.
+    pub config_file: Option<PathBuf>,
+}
+
+/// A network setting that cannot work.
+#[derive(Debug, thiserror::Error)]
+pub enum NetError {
+    /// An endpoint that is not one.
+    #[error(
+        "endpoint {endpoint:?}: {reason} (expected PROTOCOL/HOST:PORT, PROTOCOL tcp or tls, e.g. tcp/127.0.0.1:7447)"
+    )]
+    Endpoint {
+        /// The endpoint given.
+        endpoint: String,
+        /// Why it is not one.
+        reason: String,
+    },
+    /// The lease is outside its range.
+    #[error("lease must be 0.1..=3600 seconds, got {0:?}")]
+    Lease(Duration),
+    /// The Zenoh configuration file cannot be read.
+    #[error("Zenoh configuration {}: {reason}", path.display())]
+    ConfigFile {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// Zenoh refused a setting or could not open the session (an address in use, say).
+    #[error("{what}: {reason}")]
+    Zenoh {
+        /// What was being done.
+        what: String,
+        /// Zenoh's reason.
+        reason: String,
+    },
+}
+
+impl NetError {
+    pub(crate) fn zenoh(what: impl Into<String>, reason: impl std::fmt::Display) -> Self {
+        Self::Zenoh {
+            what: what.into(),
+            reason: reason.to_string(),
+        }
+    }
+}
+
+/// Check an endpoint's form: `tcp/` or `tls/`, a host and a port.
+pub fn check_endpoint(endpoint: &str) -> Result<(), NetError> {
+    let error = |reason: &str| NetError::Endpoint {
+        endpoint: endpoint.to_string(),
+        reason: reason.to_string(),
+    };
+    let address = endpoint.split(['?', '#']).next().unwrap_or_default();
+    let Some((protocol, address)) = address.split_once('/') else {
+        return Err(error("no protocol"));
+    };
+    if !matches!(protocol, "tcp" | "tls") {
+        return Err(error(&format!("protocol {protocol:?} is not built in")));
+    }
+    let Some((host, port)) = address.rsplit_once(':') else {
+        return Err(error("no port"));
+    };
+    if host.is_empty() {
+        return Err(error("no host"));
+    }
+    match port.parse::<u16>() {
+        Ok(_) => Ok(()),
+        Err(_) => Err(error(&format!("port {port:?} is not 0..=65535"))),
+    }
+}
+
+/// The Zenoh configuration of `options`: peer mode, only the given endpoints, no multicast or
+/// gossip scouting (nothing is announced or discovered unless configured in the file), the
+/// lease, and quick reconnection.
+pub(crate) fn zenoh_config(options: &NetOptions) -> Result<zenoh::Config, NetError> {
+    for endpoint in options.listen.iter().chain(&options.connect) {
+        check_endpoint(endpoint)?;
+    }
+    if !LEASES.contains(&options.lease.as_secs_f64()) {
+        return Err(NetError::Lease(options.lease));
+    }
+    let mut config = match &options.config_file {
+        Some(path) => read_config(path)?,
+        None => zenoh::Config::default(),
+    };
+    let json = |value: &Vec<String>| serde_json_list(value);
+    let lease_ms = options.lease.as_millis().max(1);
+    let settings = [
+        ("mode", "\"peer\"".to_string()),
+        ("listen/endpoints", json(&options.listen)),
+        ("connect/endpoints", json(&options.connect)),
+        ("scouting/multicast/enabled", "false".to_string()),
+        ("scouting/gossip/enabled", "false".to_string()),
+        ("scouting/delay", "0".to_string()),
+        ("transport/link/tx/lease", lease_ms.to_string()),
+        (
+            "connect/retry",
+            "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 2}".to_string(),
+        ),
+        // Zenoh's own admin space and timestamps are not used.
+        ("adminspace/enabled", "false".to_string()),
+    ];
+    for (key, value) in settings {
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| NetError::zenoh(format!("setting {key} = {value}"), e))?;
+    }
+    Ok(config)
+}
+
+fn serde_json_list(values: &[String]) -> String {
+    let quoted: Vec<String> = values.iter().map(|v| format!("{v:?}")).collect();
+    format!("[{}]", quoted.join(", "))
+}
+
+fn read_config(path: &Path) -> Result<zenoh::Config, NetError> {
+    if !path.is_file() {
+        return Err(NetError::ConfigFile {
+            path: path.to_path_buf(),
+            reason: "not a readable file".into(),
+        });
+    }
+    zenoh::Config::from_file(path).map_err(|e| NetError::ConfigFile {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })
+}
+
+/// Open a Zenoh session.
+pub(crate) fn open(options: &NetOptions) -> Result<zenoh::Session, NetError> {
+    use zenoh::Wait as _;
+    let config = zenoh_config(options)?;
+    zenoh::open(config).wait().map_err(|e| {
+        let endpoints = options
+            .listen
+            .iter()
+            .chain(&options.connect)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join(", ");
+        NetError::zenoh(format!("opening the network session on {endpoints}"), e)
+    })
+}
+
+/// This host's name, for messages.
+pub(crate) fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|name| name.trim().to_string())
+        .ok()
+        .filter(|name| !name.is_empty())
+        .unwrap_or_else(|| "unknown host".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn endpoints_are_checked_naming_what_is_wrong() {
+        for good in ["tcp/127.0.0.1:7447", "tls/learner.lab:7447", "tcp/[::1]:0"] {
+            assert!(check_endpoint(good).is_ok(), "{good}");
+        }
+        for (bad, why) in [
+            ("127.0.0.1:7447", "no protocol"),
+            ("udp/127.0.0.1:7447", "protocol \"udp\" is not built in"),
+            ("tcp/127.0.0.1", "no port"),
+            ("tcp/:7447", "no host"),
+            ("tcp/127.0.0.1:70000", "port \"70000\" is not 0..=65535"),
+        ] {
+            let message = check_endpoint(bad).unwrap_err().to_string();
+            assert!(message.contains(why) && message.contains(bad), "{bad}: {message}");
+        }
+    }
+
+    #[test]
+    fn messages_round_trip_and_a_nan_outcome_arrives_failed() {
+        let outcome = Outcome::new(7, -1.5, 2.0).with_diagnostics(vec![0.25]);
+        let up = Up::Request {
+            instance: 3,
+            request: 9,
+            want: 4,
+            serves: None,
+            workers: 2,
+            slowest_rollout_us: 1500,
+            outcomes: vec![NetOutcome::new(1, &outcome)],
+        };
+        let Up::Request { outcomes, .. } = decode::<Up>(&encode(&up).unwrap()).unwrap() else {
+            panic!("not a request")
+        };
+        assert_eq!(outcomes[0].to_outcome(), (1, outcome));
+        let nan = NetOutcome {
+            reward: f64::NAN,
+            ..NetOutcome::new(0, &Outcome::new(1, 0.0, 0.0))
+        };
+        assert!(!nan.to_outcome().1.is_ok());
+        assert!(decode::<Up>(&[0xff, 0xff, 0xff]).is_err());
+    }
+}

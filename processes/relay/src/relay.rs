@@ -1,0 +1,644 @@
+//! The relay's side: one process per remote host. To the host's workers it is their learner (a
+//! [`Fleet`] serving a [`TaskSource`] of the tasks it fetched); to the learner it is one peer
+//! that asks for tasks in batches on behalf of all of them and returns their outcomes.
+
+use crate::net::{self, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, NetOutcome, Up, Welcome};
+use crate::pump::{Poke, Pump};
+use acps_fleet::{Fleet, FleetError, FleetProgress, Observer, SourceError, TaskSource};
+use acps_shared::{EnvironmentSpec, Outcome, Serves, Task};
+use acps_wire::wire::{PROTOCOL_VERSION, check_task_sizes};
+use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait as _;
+use zenoh::qos::CongestionControl;
+use zenoh::sample::SampleKind;
+
+/// How long one hello waits for answers.
+const HELLO_TIMEOUT: Duration = Duration::from_secs(2);
+/// How often a relay asks again while no learner answers or the learner is between serves.
+const HELLO_RETRY: Duration = Duration::from_millis(100);
+/// Outcomes wait at most this long for more to share their message.
+const FLUSH_EVERY: Duration = Duration::from_millis(1);
+/// Tasks a relay keeps asked for or queued beyond twice what its workers hold.
+const SPARE: usize = 16;
+
+/// How a relay behaves.
+#[derive(Debug, Clone)]
+pub struct RelayOptions {
+    /// Where the learner listens (`connect`), the lease and the Zenoh configuration file.
+    pub net: NetOptions,
+    /// The run to join; `None`: whichever the learner serves.
+    pub run: Option<String>,
+    /// The run identity to join; 0: any.
+    pub identity: u64,
+    /// How long to wait for the learner when the relay starts.
+    pub startup_timeout: Duration,
+    /// How long to wait for the learner to come back (a resumed run) once it vanished mid-run.
+    pub wait_for_learner: Duration,
+    /// Most tasks kept asked for or queued beyond those the workers hold.
+    pub queue: usize,
+}
+
+/// Why a relay stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum RelayError {
+    /// A setting or the session.
+    #[error(transparent)]
+    Net(#[from] NetError),
+    /// No learner answered in time.
+    #[error(
+        "no learner{} answered at {endpoints} within {waited:?}: is it started with --listen on that address, and do both use the same TLS or user settings?",
+        run.as_ref().map_or(String::new(), |run| format!(" of run '{run}'"))
+    )]
+    NoLearner {
+        /// The run asked for.
+        run: Option<String>,
+        /// Where.
+        endpoints: String,
+        /// How long the relay waited.
+        waited: Duration,
+    },
+    /// The learner refused the relay.
+    #[error("the learner of run '{run}' refused this relay: {reason}")]
+    Refused {
+        /// The learner's run.
+        run: String,
+        /// Why.
+        reason: String,
+    },
+    /// Several learners answered.
+    #[error("several learners answer ({0}): choose one with --run")]
+    Ambiguous(String),
+    /// The learner vanished and did not come back in time.
+    #[error("the learner of run '{run}' is gone and did not come back within {waited:?}")]
+    LearnerGone {
+        /// The run.
+        run: String,
+        /// How long the relay waited.
+        waited: Duration,
+    },
+    /// Serving the host's workers failed.
+    #[error(transparent)]
+    Fleet(#[from] FleetError),
+}
+
+/// What a relay did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RelayReport {
+    /// The run it served.
+    pub run: String,
+    /// Serves it took part in (experiments of the run, and rejoins).
+    pub serves: usize,
+    /// Outcomes it forwarded.
+    pub outcomes: u64,
+}
+
+/// The learner's presence as the relay's liveliness subscriber sees it.
+const UNKNOWN: u8 = 0;
+const PRESENT: u8 = 1;
+const GONE: u8 = 2;
+
+/// Serve this host's workers from the learner that `options` name, through `fleet` (the host's
+/// local run: its workers, its Ctrl-C), until the learner's run is over (its process ended after
+/// its last serve), Ctrl-C, or an error. `observer` sees the local fleet's progress.
+pub fn serve(
+    fleet: &mut Fleet,
+    options: &RelayOptions,
+    observer: &mut dyn Observer,
+) -> Result<RelayReport, RelayError> {
+    let session = net::open(&options.net)?;
+    let endpoints = options.net.connect.join(", ");
+    let mut report = RelayReport::default();
+    let learner = Arc::new(AtomicU8::new(UNKNOWN));
+    let mut watch = None;
+    let mut deadline = Instant::now() + options.startup_timeout;
+    let mut first_wait = true;
+    // Whether the last serve ended because the learner served every job: its token's going then
+    // means the run is over, not a crash.
+    let mut finished = false;
+    loop {
+        let welcome = match hello(&session, options, report.run.as_str())? {
+            Hello2::Accepted(welcome) => welcome,
+            Hello2::Wait(run) => {
+                if fleet.interrupted() {
+                    return Err(FleetError::Interrupted.into());
+                }
+                // The learner's run ended once its token is gone after it served.
+                if finished && learner.load(Ordering::Relaxed) == GONE && run.is_none() {
+                    return Ok(report);
+                }
+                if Instant::now() >= deadline {
+                    return Err(match (&run, report.serves) {
+                        (_, 0) => RelayError::NoLearner {
+                            run: options.run.clone(),
+                            endpoints,
+                            waited: options.startup_timeout,
+                        },
+                        _ => RelayError::LearnerGone {
+                            run: report.run.clone(),
+                            waited: options.wait_for_learner,
+                        },
+                    });
+                }
+                std::thread::sleep(HELLO_RETRY);
+                continue;
+            }
+        };
+        if watch.is_none() {
+            report.run = welcome.run.clone();
+            watch = Some(watch_learner(&session, &welcome.run, learner.clone())?);
+        }
+        // It answered: it is there, whatever its token's news in flight says.
+        learner.store(PRESENT, Ordering::Relaxed);
+        if first_wait {
+            tracing::info!(
+                "relay: joined run '{}' of the learner on {} as peer {}",
+                welcome.run,
+                welcome.host,
+                welcome.peer
+            );
+            first_wait = false;
+        }
+        report.serves += 1;
+        let mut source = RelaySource::new(&session, welcome, learner.clone(), options.queue, fleet.run())?;
+        let mut watching = Watching {
+            observer,
+            status: source.status.clone(),
+        };
+        let served = fleet.serve_with(&mut source, &mut watching, None);
+        report.outcomes += source.forwarded;
+        source.flush_now();
+        drop(source);
+        finished = served.is_ok();
+        match served {
+            // The experiment is over; the learner may serve another, or end.
+            Ok(_) => deadline = Instant::now() + options.wait_for_learner.max(options.startup_timeout),
+            Err(FleetError::Source(error)) if error.downcast_ref::<Evicted>().is_some() => {
+                tracing::warn!("relay: {error}; joining again");
+                deadline = Instant::now() + options.wait_for_learner;
+            }
+            Err(FleetError::Source(error)) if error.downcast_ref::<Gone>().is_some() => {
+                tracing::warn!(
+                    "relay: {}; waiting up to {:?} for it to come back",
+                    error,
+                    options.wait_for_learner
+                );
+                deadline = Instant::now() + options.wait_for_learner;
+            }
+            Err(error) => return Err(error.into()),
+        }
+    }
+}
+
+/// A hello's result: admitted, or wait and ask again (`Some(run)`: that learner is between
+/// serves; `None`: no learner answered).
+enum Hello2 {
+    Accepted(Accepted),
+    Wait(Option<String>),
+}
+
+struct Accepted {
+    run: String,
+    peer: u32,
+    instance: u64,
+    identity: u64,
+    environments: Vec<EnvironmentSpec>,
+    host: String,
+}
+
+/// Greet the learner(s) the session reaches.
+fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Result<Hello2, RelayError> {
+    let run = if joined.is_empty() {
+        options.run.clone()
+    } else {
+        Some(joined.to_string())
+    };
+    let greeting = Hello {
+        net_protocol: NET_PROTOCOL,
+        wire_protocol: PROTOCOL_VERSION,
+        build: BUILD.to_string(),
+        run: run.clone().unwrap_or_default(),
+        identity: options.identity,
+        host: net::host_name(),
+        pid: std::process::id(),
+    };
+    let key = net::hello_key(run.as_deref().unwrap_or("*"));
+    let replies = session
+        .get(&key)
+        .payload(net::encode(&greeting).map_err(|e| NetError::zenoh("greeting the learner", e))?)
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(HELLO_TIMEOUT)
+        .wait()
+        .map_err(|e| NetError::zenoh("greeting the learner", e))?;
+    let mut accepted = Vec::new();
+    let mut refusals = Vec::new();
+    let mut waiting = None;
+    while let Ok(reply) = replies.recv() {
+        let Ok(sample) = reply.result() else { continue };
+        match net::decode::<Welcome>(&sample.payload().to_bytes()) {
+            Ok(Welcome::Accepted {
+                run,
+                peer,
+                instance,
+                identity,
+                environments,
+                host,
+            }) => accepted.push(Accepted {
+                run,
+                peer,
+                instance,
+                identity,
+                environments,
+                host,
+            }),
+            Ok(Welcome::NotServing { run }) => waiting = Some(run),
+            Ok(Welcome::Refused { run, reason }) => refusals.push((run, reason)),
+            Err(error) => refusals.push((
+                "?".into(),
+                format!("its answer cannot be read ({error}): another acps build? (this relay runs acps {BUILD}, network protocol {NET_PROTOCOL})"),
+            )),
+        }
+    }
+    match accepted.len() {
+        0 => {}
+        1 => return Ok(Hello2::Accepted(accepted.remove(0))),
+        _ => {
+            let learners: Vec<String> = accepted
+                .iter()
+                .map(|a| format!("run '{}' on {}", a.run, a.host))
+                .collect();
+            return Err(RelayError::Ambiguous(learners.join(", ")));
+        }
+    }
+    if waiting.is_some() {
+        return Ok(Hello2::Wait(waiting));
+    }
+    // A refusal of the run asked for is final; a learner serving another run only says so.
+    if let Some((run, reason)) = refusals
+        .iter()
+        .find(|(learner, _)| run.as_deref().is_none_or(|run| run == learner))
+        .or(refusals.first())
+    {
+        return Err(RelayError::Refused {
+            run: run.clone(),
+            reason: reason.clone(),
+        });
+    }
+    Ok(Hello2::Wait(None))
+}
+
+/// Follow the learner's token of `run` into `learner`.
+fn watch_learner(
+    session: &zenoh::Session,
+    run: &str,
+    learner: Arc<AtomicU8>,
+) -> Result<zenoh::pubsub::Subscriber<()>, NetError> {
+    session
+        .liveliness()
+        .declare_subscriber(net::key(run, "learner"))
+        .history(true)
+        .callback(move |sample| {
+            let state = if sample.kind() == SampleKind::Delete {
+                GONE
+            } else {
+                PRESENT
+            };
+            learner.store(state, Ordering::Relaxed);
+        })
+        .wait()
+        .map_err(|e| NetError::zenoh("watching the learner's token", e))
+}
+
+/// The learner vanished.
+#[derive(Debug, thiserror::Error)]
+#[error("the learner of run '{0}' is gone")]
+struct Gone(String);
+
+/// The learner gave up on this relay.
+#[derive(Debug, thiserror::Error)]
+#[error("the learner of run '{run}' gave up on this relay: {reason}")]
+struct Evicted {
+    run: String,
+    reason: String,
+}
+
+/// What the local fleet reports that the relay forwards: its workers and their slowest rollout.
+#[derive(Debug, Clone, Copy, Default)]
+struct Status {
+    workers: usize,
+    slowest_rollout: Duration,
+}
+
+/// The caller's observer, and a copy of the status for the source.
+struct Watching<'a> {
+    observer: &'a mut dyn Observer,
+    status: Arc<Mutex<Status>>,
+}
+
+impl Observer for Watching<'_> {
+    fn progress(&mut self, progress: &FleetProgress) {
+        if let Ok(mut status) = self.status.lock() {
+            *status = Status {
+                workers: progress.workers,
+                slowest_rollout: progress.slowest_rollout,
+            };
+        }
+        self.observer.progress(progress);
+    }
+}
+
+/// What the network callbacks hand to the serving thread.
+#[derive(Default)]
+struct Inbox {
+    messages: VecDeque<Down>,
+    poke: Option<Poke>,
+}
+
+/// The tasks a relay fetched from its learner, served to the host's workers.
+struct RelaySource {
+    run: String,
+    instance: u64,
+    identity: u64,
+    environments: Vec<EnvironmentSpec>,
+    queues: Vec<VecDeque<Task>>,
+    queued: usize,
+    /// Tasks the host's workers hold, to re-issue locally when one of them dies.
+    held: HashMap<(u32, u64), Task>,
+    /// Requests sent and not answered: what they serve and how many tasks they asked for.
+    requests: HashMap<u64, (Serves, usize)>,
+    next_request: u64,
+    /// What the host's workers asked for.
+    classes: Vec<Serves>,
+    outgoing: Vec<NetOutcome>,
+    notes: Vec<String>,
+    last_flush: Instant,
+    done: bool,
+    forwarded: u64,
+    max_queue: usize,
+    learner: Arc<AtomicU8>,
+    status: Arc<Mutex<Status>>,
+    inbox: Arc<Mutex<Inbox>>,
+    // Dropped in this order: the pump's node before the fleet's run goes.
+    _pump: Pump,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    _down: zenoh::pubsub::Subscriber<()>,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl RelaySource {
+    fn new(
+        session: &zenoh::Session,
+        welcome: Accepted,
+        learner: Arc<AtomicU8>,
+        max_queue: usize,
+        local: &acps_wire::ipc::RunName,
+    ) -> Result<Self, RelayError> {
+        let run = welcome.run;
+        let (pump, poke) =
+            Pump::start(local, "relay-net").map_err(|e| NetError::zenoh("starting the relay's wake-up thread", e))?;
+        let inbox = Arc::new(Mutex::new(Inbox {
+            messages: VecDeque::new(),
+            poke: Some(poke),
+        }));
+        let peer = welcome.peer;
+        let down = {
+            let inbox = inbox.clone();
+            session
+                .declare_subscriber(net::key(&run, &format!("down/{peer}")))
+                .callback(move |sample| match net::decode::<Down>(&sample.payload().to_bytes()) {
+                    Ok(message) => {
+                        let mut inbox = inbox.lock().unwrap_or_else(|p| p.into_inner());
+                        inbox.messages.push_back(message);
+                        if let Some(poke) = &inbox.poke {
+                            poke.poke();
+                        }
+                    }
+                    Err(error) => tracing::warn!("a message of the learner cannot be read: {error}"),
+                })
+                .wait()
+                .map_err(|e| NetError::zenoh("subscribing to the learner's messages", e))?
+        };
+        let publisher = session
+            .declare_publisher(net::key(&run, &format!("up/{peer}")))
+            .congestion_control(CongestionControl::Block)
+            .wait()
+            .map_err(|e| NetError::zenoh("opening the channel to the learner", e))?;
+        let token = session
+            .liveliness()
+            .declare_token(net::key(&run, &format!("relay/{peer}")))
+            .wait()
+            .map_err(|e| NetError::zenoh("declaring the relay's token", e))?;
+        let jobs = welcome.environments.len();
+        Ok(Self {
+            run,
+            instance: welcome.instance,
+            identity: welcome.identity,
+            environments: welcome.environments,
+            queues: vec![VecDeque::new(); jobs],
+            queued: 0,
+            held: HashMap::new(),
+            requests: HashMap::new(),
+            next_request: 1,
+            classes: Vec::new(),
+            outgoing: Vec::new(),
+            notes: Vec::new(),
+            last_flush: Instant::now(),
+            done: false,
+            forwarded: 0,
+            max_queue,
+            learner,
+            status: Arc::new(Mutex::new(Status::default())),
+            inbox,
+            _pump: pump,
+            publisher,
+            _down: down,
+            _token: token,
+        })
+    }
+
+    /// Tasks asked for or queued that a worker serving `class` could take.
+    fn supply(&self, class: &Serves) -> usize {
+        let asked: usize = self
+            .requests
+            .values()
+            .filter(|(serves, _)| serves == class)
+            .map(|(_, want)| want)
+            .sum();
+        let queued = match class {
+            Serves::Any => self.queued,
+            Serves::One(spec) => self
+                .queues
+                .iter()
+                .zip(&self.environments)
+                .filter(|(_, environment)| *environment == spec)
+                .map(|(queue, _)| queue.len())
+                .sum(),
+        };
+        asked + queued
+    }
+
+    /// Send a request for `want` tasks of `class` (0: outcomes only) with the outcomes held.
+    fn send(&mut self, want: usize, class: Serves) -> Result<(), SourceError> {
+        let status = *self.status.lock().unwrap_or_else(|p| p.into_inner());
+        let request = self.next_request;
+        self.next_request += 1;
+        if want > 0 {
+            self.requests.insert(request, (class, want));
+        }
+        let message = Up::Request {
+            instance: self.instance,
+            request,
+            want: want as u32,
+            serves: match class {
+                Serves::One(spec) => Some(spec),
+                Serves::Any => None,
+            },
+            workers: status.workers as u32,
+            slowest_rollout_us: status.slowest_rollout.as_micros().try_into().unwrap_or(u64::MAX),
+            outcomes: std::mem::take(&mut self.outgoing),
+        };
+        self.publisher.put(net::encode(&message)?).wait()?;
+        self.last_flush = Instant::now();
+        Ok(())
+    }
+
+    /// Send the outcomes held, if any (at the end of a serve).
+    fn flush_now(&mut self) {
+        if !self.outgoing.is_empty() {
+            let _ = self.send(0, Serves::Any);
+        }
+    }
+
+    fn take(&mut self, message: Down) -> Result<(), SourceError> {
+        match message {
+            Down::Tasks { request, tasks } => {
+                self.requests.remove(&request);
+                for (job, task) in tasks {
+                    let Some(queue) = self.queues.get_mut(job as usize) else {
+                        return Err(format!(
+                            "the learner sent a task of job {job}, it has {} jobs",
+                            self.environments.len()
+                        )
+                        .into());
+                    };
+                    check_task_sizes(task.context.len(), task.theta.len())?;
+                    queue.push_back(task);
+                    self.queued += 1;
+                }
+            }
+            Down::Done => self.done = true,
+            Down::Evicted { reason } => {
+                return Err(Box::new(Evicted {
+                    run: self.run.clone(),
+                    reason,
+                }));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Drop for RelaySource {
+    fn drop(&mut self) {
+        // The pump thread ends once no callback can poke it: its sender goes first.
+        self.inbox.lock().unwrap_or_else(|p| p.into_inner()).poke = None;
+    }
+}
+
+impl TaskSource for RelaySource {
+    fn jobs(&self) -> usize {
+        self.environments.len()
+    }
+
+    fn environment(&self, job: usize) -> EnvironmentSpec {
+        self.environments[job]
+    }
+
+    fn identity(&self) -> u64 {
+        self.identity
+    }
+
+    fn ask(&mut self, job: usize) -> Option<Task> {
+        let task = self.queues[job].pop_front()?;
+        self.queued -= 1;
+        self.held.insert((job as u32, task.id), task.clone());
+        Some(task)
+    }
+
+    fn tell(&mut self, job: usize, outcome: Outcome) -> bool {
+        let key = (job as u32, outcome.task_id);
+        if self.held.remove(&key).is_none() {
+            // Re-issued here after its worker was given up on, and not handed out again yet.
+            let Some(queue) = self.queues.get_mut(job) else {
+                return false;
+            };
+            let Some(at) = queue.iter().position(|task| task.id == outcome.task_id) else {
+                return false;
+            };
+            queue.remove(at);
+            self.queued -= 1;
+        }
+        self.outgoing.push(NetOutcome::new(key.0, &outcome));
+        self.forwarded += 1;
+        true
+    }
+
+    fn reissue(&mut self, job: usize, task_id: u64) -> bool {
+        match self.held.remove(&(job as u32, task_id)) {
+            Some(task) => {
+                self.queues[job].push_front(task);
+                self.queued += 1;
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn jobs_done(&self) -> usize {
+        if self.done { self.jobs() } else { 0 }
+    }
+
+    fn starved(&mut self, serves: &Serves, _want: usize) {
+        if !self.classes.contains(serves) {
+            self.classes.push(*serves);
+        }
+    }
+
+    fn refused(&mut self, reason: &str) {
+        self.notes.push(format!("refused one of its workers: {reason}"));
+    }
+
+    fn pass(&mut self, idle: bool) -> Result<bool, SourceError> {
+        if self.learner.load(Ordering::Relaxed) == GONE {
+            return Err(Box::new(Gone(self.run.clone())));
+        }
+        let messages = std::mem::take(&mut self.inbox.lock().unwrap_or_else(|p| p.into_inner()).messages);
+        let arrived = !messages.is_empty();
+        for message in messages {
+            self.take(message)?;
+        }
+        for text in std::mem::take(&mut self.notes) {
+            let note = Up::Note {
+                instance: self.instance,
+                text,
+            };
+            self.publisher.put(net::encode(&note)?).wait()?;
+        }
+        // Keep twice what the workers hold asked for or queued, and a few more: the learner's
+        // answers then arrive before the workers need them.
+        let target = (2 * self.held.len() + SPARE).min(self.max_queue.max(1));
+        for class in self.classes.clone() {
+            let supply = self.supply(&class);
+            if supply < target {
+                self.send((target - supply).min(net::MAX_NET_BATCH), class)?;
+            }
+        }
+        let due = self.outgoing.len() >= net::MAX_NET_BATCH || idle || self.last_flush.elapsed() >= FLUSH_EVERY;
+        if !self.outgoing.is_empty() && due {
+            self.send(0, Serves::Any)?;
+        }
+        Ok(arrived)
+    }
+}
