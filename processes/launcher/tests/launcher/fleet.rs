@@ -25,7 +25,7 @@ fn acps() -> Command {
 }
 
 /// A short grid experiment: 2 methods x 2 runs.
-const GRID: [&str; 10] = [
+pub(crate) const GRID: [&str; 10] = [
     "grid",
     "--runs",
     "2",
@@ -38,7 +38,7 @@ const GRID: [&str; 10] = [
     "-q",
 ];
 
-fn in_process(args: &[&str], out: &Path) -> Vec<u8> {
+pub(crate) fn in_process(args: &[&str], out: &Path) -> Vec<u8> {
     succeeded(
         &watched()
             .arg("experiment")
@@ -126,7 +126,7 @@ fn learn_is_the_fleet_run_of_monotonic_progress_it_documents() {
 
 /// Wait until `condition` holds, polling; panics naming `what` after `limit` (a watchdog, not a
 /// timing claim).
-fn wait_until(what: &str, limit: Duration, mut condition: impl FnMut() -> bool) {
+pub(crate) fn wait_until(what: &str, limit: Duration, mut condition: impl FnMut() -> bool) {
     let start = Instant::now();
     while !condition() {
         assert!(start.elapsed() < limit, "waited {limit:?} for {what}");
@@ -135,12 +135,12 @@ fn wait_until(what: &str, limit: Duration, mut condition: impl FnMut() -> bool) 
 }
 
 /// True once `dir` holds a file.
-fn has_files(dir: &Path) -> bool {
+pub(crate) fn has_files(dir: &Path) -> bool {
     std::fs::read_dir(dir).is_ok_and(|mut entries| entries.next().is_some())
 }
 
 /// The number R of "..., N outcomes, R re-issued, ..." that a fleet run prints.
-fn reissued(stdout: &str) -> u64 {
+pub(crate) fn reissued(stdout: &str) -> u64 {
     stdout
         .split(" re-issued")
         .next()
@@ -213,7 +213,7 @@ fn an_oversubscribed_fleet_finishes_with_the_in_process_result_and_leaves_nothin
 }
 
 /// Wait for `child` to exit, at most `limit`.
-fn wait_for(child: &mut Child, limit: Duration) -> Option<Duration> {
+pub(crate) fn wait_for(child: &mut Child, limit: Duration) -> Option<Duration> {
     let start = Instant::now();
     while start.elapsed() < limit {
         if child.try_wait().unwrap().is_some() {
@@ -224,14 +224,14 @@ fn wait_for(child: &mut Child, limit: Duration) -> Option<Duration> {
     None
 }
 
-fn kill(child: &mut Child) {
+pub(crate) fn kill(child: &mut Child) {
     // SIGKILL: the process gets no chance to clean up.
     let _ = child.kill();
     let _ = child.wait();
 }
 
 /// The rapier backend makes the run last long enough to kill a worker in the middle.
-const SLOW: [&str; 10] = [
+pub(crate) const SLOW: [&str; 10] = [
     "grid",
     "--sim",
     "rapier",
@@ -246,11 +246,11 @@ const SLOW: [&str; 10] = [
 
 /// A slow run named `name`: its directory, the in-process result, its run name and the fleet's
 /// output directory.
-struct SlowRun {
-    dir: crate::TempDir,
-    reference: Vec<u8>,
-    run: RunName,
-    out: PathBuf,
+pub(crate) struct SlowRun {
+    pub(crate) dir: crate::TempDir,
+    pub(crate) reference: Vec<u8>,
+    pub(crate) run: RunName,
+    pub(crate) out: PathBuf,
 }
 
 fn slow_run(name: &str) -> SlowRun {
@@ -258,7 +258,7 @@ fn slow_run(name: &str) -> SlowRun {
 }
 
 /// [`slow_run`] with `extra` arguments.
-fn slow_run_with(name: &str, extra: &[&str]) -> SlowRun {
+pub(crate) fn slow_run_with(name: &str, extra: &[&str]) -> SlowRun {
     let dir = temp_dir(name);
     SlowRun {
         reference: in_process(&[&SLOW[..], extra].concat(), &dir.join("in-process")),
@@ -322,7 +322,7 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
 }
 
 /// Send `signal` to the process group `group`.
-fn signal_group(signal: &str, group: u32) {
+pub(crate) fn signal_group(signal: &str, group: u32) {
     let status = Command::new("kill")
         .args([signal, "--", &format!("-{group}")])
         .status()

@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 mod cli;
 mod config;
 mod fleet;
+mod hosts;
 mod outputs;
 mod problems;
 mod python;

@@ -1,0 +1,320 @@
+//! Workers on other hosts: a learner that listens, relays that connect, on emulated hosts. Each
+//! relay has its own run name, hence its own iceoryx2 domain: shared memory cannot carry the
+//! learner's work to its workers, only the network can. All traffic stays on loopback.
+
+use crate::fleet::{
+    GRID, SLOW, SlowRun, has_files as has_files_in, in_process, reissued, signal_group, slow_run_with, wait_for,
+    wait_until,
+};
+use crate::{assert_clean, run_name, succeeded, temp_dir, watched};
+use acps_wire::ipc::{self, RunName};
+use std::os::unix::process::CommandExt as _;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+/// A loopback endpoint on a port that was free a moment ago.
+fn free_endpoint() -> String {
+    let socket = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    format!("tcp/127.0.0.1:{}", socket.local_addr().unwrap().port())
+}
+
+/// `acps relay` of an emulated host: its own run `local`, `workers` workers, under a watchdog.
+fn relay(endpoint: &str, local: &RunName, workers: usize, extra: &[&str]) -> Command {
+    let mut command = watched();
+    command
+        .args([
+            "relay",
+            "--connect",
+            endpoint,
+            "--local-run",
+            local.as_str(),
+            "--workers",
+        ])
+        .arg(workers.to_string())
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    // A group of its own, the watchdog's and the workers' too: `kill_host` takes them all.
+    command.process_group(0);
+    command
+}
+
+/// SIGKILL the process group of `child` (an emulated host, or a learner under its watchdog) and
+/// reap it.
+fn kill_host(child: &mut Child) {
+    signal_group("-KILL", child.id());
+    let _ = child.wait();
+}
+
+/// `acps run ARGS --listen ENDPOINT --run RUN --out OUT`, not quiet (it reports re-issued tasks).
+fn learner(args: &[&str], endpoint: &str, run: &RunName, out: &Path, extra: &[&str]) -> Child {
+    let loud: Vec<&str> = args.iter().copied().filter(|a| *a != "-q").collect();
+    watched()
+        .arg("run")
+        .args(&loud)
+        .args(["--listen", endpoint, "--run", run.as_str()])
+        .args(extra)
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .process_group(0)
+        .spawn()
+        .unwrap()
+}
+
+fn finished(child: Child) -> String {
+    succeeded(&child.wait_with_output().unwrap())
+}
+
+#[test]
+fn a_run_served_only_through_a_relay_matches_the_in_process_run() {
+    let dir = temp_dir("relay-only");
+    let reference = in_process(&GRID, &dir.join("in-process"));
+    let (run, local) = (run_name("relay-only"), run_name("relay-only-h1"));
+    let endpoint = free_endpoint();
+    let out = dir.join("fleet");
+    let learner = learner(&GRID, &endpoint, &run, &out, &["--workers", "0"]);
+    let relay = relay(&endpoint, &local, 2, &[]).spawn().unwrap();
+    let stdout = finished(learner);
+    assert!(stdout.contains("and relays of other hosts"), "{stdout}");
+    let relayed = relay.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&relayed.stderr);
+    assert!(relayed.status.success(), "{said}");
+    assert!(said.contains(&format!("run '{run}' is over")), "{said}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+    assert_clean(&local);
+}
+
+#[test]
+fn a_killed_relay_s_tasks_go_to_other_workers_and_a_late_relay_joins() {
+    let SlowRun {
+        dir: _dir,
+        reference,
+        run,
+        out,
+    } = slow_run_with("relay-kill", &["--in-flight", "8"]);
+    let endpoint = free_endpoint();
+    let (first, second) = (run_name("relay-kill-h1"), run_name("relay-kill-h2"));
+    let learner = learner(
+        &SLOW,
+        &endpoint,
+        &run,
+        &out,
+        &["--in-flight", "8", "--workers", "1", "--checkpoint-every", "1"],
+    );
+    let mut victim = relay(&endpoint, &first, 1, &["-q"]).spawn().unwrap();
+    // The relay and its worker are in, and learning has begun.
+    wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
+        ipc::live_nodes(&first).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
+    });
+    kill_host(&mut victim);
+    // A relay that joins late; its start removes what the killed one left.
+    let late = relay(&endpoint, &second, 1, &["-q"]).spawn().unwrap();
+    let stdout = finished(learner);
+    assert!(reissued(&stdout) >= 1, "{stdout}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    let late = late.wait_with_output().unwrap();
+    assert!(late.status.success(), "{}", String::from_utf8_lossy(&late.stderr));
+    // The killed host's files go with the next start of any fleet on it.
+    ipc::clean_dead_runs();
+    for run in [&run, &first, &second] {
+        assert_clean(run);
+    }
+}
+
+#[test]
+fn a_frozen_relay_is_given_up_on_after_its_lease_and_the_result_is_unchanged() {
+    let SlowRun {
+        dir: _dir,
+        reference,
+        run,
+        out,
+    } = slow_run_with("relay-freeze", &["--in-flight", "8"]);
+    let endpoint = free_endpoint();
+    let local = run_name("relay-freeze-h1");
+    let lease = ["--lease", "0.5"];
+    let learner = learner(
+        &SLOW,
+        &endpoint,
+        &run,
+        &out,
+        &[
+            &["--in-flight", "8", "--workers", "1", "--checkpoint-every", "1"][..],
+            &lease,
+        ]
+        .concat(),
+    );
+    // The relay and its worker freeze together (a process group), as a host does.
+    let mut frozen = relay(
+        &endpoint,
+        &local,
+        1,
+        &[&lease[..], &["-q", "--wait-for-learner", "1"]].concat(),
+    )
+    .spawn()
+    .unwrap();
+    wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
+        ipc::live_nodes(&local).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
+    });
+    signal_group("-STOP", frozen.id());
+    let stdout = finished(learner);
+    signal_group("-CONT", frozen.id());
+    assert!(reissued(&stdout) >= 1, "{stdout}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    // Woken, it finds itself given up on, or its learner gone, and leaves.
+    assert!(
+        wait_for(&mut frozen, Duration::from_secs(60)).is_some(),
+        "the thawed relay must leave"
+    );
+    assert_clean(&run);
+    assert_clean(&local);
+}
+
+#[test]
+fn a_relay_waits_for_its_killed_learner_to_resume_and_the_run_ends_as_in_process() {
+    let SlowRun {
+        dir: _dir,
+        reference,
+        run,
+        out,
+    } = slow_run_with("relay-resume", &[]);
+    let endpoint = free_endpoint();
+    let local = run_name("relay-resume-h1");
+    let args = ["--workers", "0", "--checkpoint-every", "1"];
+    let mut first = learner(&SLOW, &endpoint, &run, &out, &args);
+    let relay = relay(&endpoint, &local, 1, &["-q", "--wait-for-learner", "120"])
+        .spawn()
+        .unwrap();
+    wait_until("the first checkpoints", Duration::from_secs(60), || {
+        has_files_in(&out.join("checkpoints"))
+    });
+    kill_host(&mut first);
+    // The relay waits; the resumed learner (same run, same address) gets it back.
+    let resumed = learner(
+        &SLOW,
+        &endpoint,
+        &run,
+        &out,
+        &[&args[..], &["--resume"], &[out.to_str().unwrap()]].concat(),
+    );
+    finished(resumed);
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    let relayed = relay.wait_with_output().unwrap();
+    assert!(relayed.status.success(), "{}", String::from_utf8_lossy(&relayed.stderr));
+    assert_clean(&run);
+    assert_clean(&local);
+}
+
+#[test]
+fn a_relay_whose_learner_is_gone_for_good_stops_its_workers_and_says_so() {
+    let dir = temp_dir("relay-orphan");
+    let (run, local) = (run_name("relay-orphan"), run_name("relay-orphan-h1"));
+    let endpoint = free_endpoint();
+    let out = dir.join("fleet");
+    let mut learner = learner(
+        &SLOW,
+        &endpoint,
+        &run,
+        &out,
+        &["--workers", "0", "--checkpoint-every", "1"],
+    );
+    let relay = relay(&endpoint, &local, 1, &["-q", "--wait-for-learner", "1"])
+        .spawn()
+        .unwrap();
+    wait_until("the first checkpoints", Duration::from_secs(60), || {
+        has_files_in(&out.join("checkpoints"))
+    });
+    kill_host(&mut learner);
+    let relayed = relay.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&relayed.stderr);
+    assert_eq!(relayed.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains(&format!(
+            "the learner of run '{run}' is gone and did not come back within 1s"
+        )),
+        "{said}"
+    );
+    assert_clean(&local);
+    // What the killed learner left goes with the next start of any fleet.
+    ipc::clean_dead_runs();
+    assert_clean(&run);
+}
+
+#[test]
+fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
+    let dir = temp_dir("relay-refused");
+    let reference = in_process(&GRID, &dir.join("in-process"));
+    let run = run_name("relay-refused");
+    let endpoint = free_endpoint();
+    let out = dir.join("fleet");
+    let users = dir.join("users.txt");
+    std::fs::create_dir_all(&*dir).unwrap();
+    std::fs::write(&users, "relay:right\n").unwrap();
+    let config = |name: &str, user: &str, password: &str, dictionary: bool| {
+        let path = dir.join(name);
+        let dictionary = if dictionary {
+            format!(", dictionary_file: {:?}", users.to_str().unwrap())
+        } else {
+            String::new()
+        };
+        std::fs::write(
+            &path,
+            format!(
+                "{{ transport: {{ auth: {{ usrpwd: {{ user: {user:?}, password: {password:?}{dictionary} }} }} }} }}"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let learner_config = config("learner.json5", "learner", "learner", true);
+    let learner = learner(
+        &GRID,
+        &endpoint,
+        &run,
+        &out,
+        &["--workers", "0", "--zenoh-config", learner_config.to_str().unwrap()],
+    );
+    let right = config("right.json5", "relay", "right", false);
+    let wrong = config("wrong.json5", "relay", "wrong", false);
+    let refused = |local: &str, extra: &[&str]| {
+        let output = relay(
+            &endpoint,
+            &run_name(local),
+            1,
+            &[&["-q", "--startup-timeout", "2"][..], extra].concat(),
+        )
+        .output()
+        .unwrap();
+        assert_eq!(output.status.code(), Some(2));
+        assert_clean(&run_name(local));
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let said = refused("relay-refused-h1", &["--zenoh-config", wrong.to_str().unwrap()]);
+    assert!(
+        said.contains("no learner answered") && said.contains("TLS or user settings"),
+        "{said}"
+    );
+    let said = refused(
+        "relay-refused-h2",
+        &["--zenoh-config", right.to_str().unwrap(), "--run", "another"],
+    );
+    assert!(
+        said.contains(&format!("it asked for run 'another', this learner serves run '{run}'")),
+        "{said}"
+    );
+    let served = relay(
+        &endpoint,
+        &run_name("relay-refused-h3"),
+        2,
+        &["-q", "--zenoh-config", right.to_str().unwrap()],
+    )
+    .output()
+    .unwrap();
+    assert!(served.status.success(), "{}", String::from_utf8_lossy(&served.stderr));
+    finished(learner);
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+}
