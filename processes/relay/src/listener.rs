@@ -1,6 +1,6 @@
 //! The learner's side: [`Listener`] admits relays over Zenoh and is the fleet's [`Remote`].
 
-use crate::net::{self, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, Up, Welcome};
+use crate::net::{self, Admission, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, Up, Welcome};
 use crate::pump::{Poke, Pump};
 use acps_fleet::{PeerId, Remote, RemoteEvent, SourceError};
 use acps_shared::{EnvironmentSpec, Serves, Task};
@@ -355,14 +355,14 @@ fn welcome(
         },
     );
     tracing::info!("run '{run}': admitted the {relay} as peer {peer}");
-    Welcome::Accepted {
+    Welcome::Accepted(Admission {
         run: run.to_string(),
         peer,
         instance,
         identity: serving.identity,
         environments: serving.environments,
         host: host.to_string(),
-    }
+    })
 }
 
 impl Remote for Listener {

@@ -55,24 +55,28 @@ pub struct Hello {
     pub pid: u32,
 }
 
+/// What a learner tells a relay it admitted.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Admission {
+    /// The run's name.
+    pub run: String,
+    /// The relay's number in this learner.
+    pub peer: u32,
+    /// The learner process's random instance, which the relay's messages carry.
+    pub instance: u64,
+    /// The run's identity.
+    pub identity: u64,
+    /// The environment of each job.
+    pub environments: Vec<EnvironmentSpec>,
+    /// The learner's host, for messages.
+    pub host: String,
+}
+
 /// The learner's answer to a [`Hello`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub enum Welcome {
-    /// Joined as `peer`.
-    Accepted {
-        /// The run's name.
-        run: String,
-        /// The relay's number in this learner.
-        peer: u32,
-        /// The learner process's random instance, which the relay's messages carry.
-        instance: u64,
-        /// The run's identity.
-        identity: u64,
-        /// The environment of each job.
-        environments: Vec<EnvironmentSpec>,
-        /// The learner's host, for messages.
-        host: String,
-    },
+    /// Joined.
+    Accepted(Admission),
     /// The learner is between two serves (one experiment ended, the next not begun): ask again.
     NotServing {
         /// The run's name.

@@ -2,7 +2,7 @@
 //! [`Fleet`] serving a [`TaskSource`] of the tasks it fetched); to the learner it is one peer
 //! that asks for tasks in batches on behalf of all of them and returns their outcomes.
 
-use crate::net::{self, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, NetOutcome, Up, Welcome};
+use crate::net::{self, Admission, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, NetOutcome, Up, Welcome};
 use crate::pump::{Poke, Pump};
 use acps_fleet::{Fleet, FleetError, FleetProgress, Observer, SourceError, TaskSource};
 use acps_shared::{EnvironmentSpec, Outcome, Serves, Task};
@@ -120,8 +120,8 @@ pub fn serve(
     let mut finished = false;
     loop {
         let welcome = match hello(&session, options, report.run.as_str())? {
-            Hello2::Accepted(welcome) => welcome,
-            Hello2::Wait(run) => {
+            Greeted::Accepted(welcome) => welcome,
+            Greeted::Wait(run) => {
                 if fleet.interrupted() {
                     return Err(FleetError::Interrupted.into());
                 }
@@ -194,22 +194,13 @@ pub fn serve(
 
 /// A hello's result: admitted, or wait and ask again (`Some(run)`: that learner is between
 /// serves; `None`: no learner answered).
-enum Hello2 {
-    Accepted(Accepted),
+enum Greeted {
+    Accepted(Admission),
     Wait(Option<String>),
 }
 
-struct Accepted {
-    run: String,
-    peer: u32,
-    instance: u64,
-    identity: u64,
-    environments: Vec<EnvironmentSpec>,
-    host: String,
-}
-
 /// Greet the learner(s) the session reaches.
-fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Result<Hello2, RelayError> {
+fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Result<Greeted, RelayError> {
     let run = if joined.is_empty() {
         options.run.clone()
     } else {
@@ -238,21 +229,7 @@ fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Resu
     while let Ok(reply) = replies.recv() {
         let Ok(sample) = reply.result() else { continue };
         match net::decode::<Welcome>(&sample.payload().to_bytes()) {
-            Ok(Welcome::Accepted {
-                run,
-                peer,
-                instance,
-                identity,
-                environments,
-                host,
-            }) => accepted.push(Accepted {
-                run,
-                peer,
-                instance,
-                identity,
-                environments,
-                host,
-            }),
+            Ok(Welcome::Accepted(admission)) => accepted.push(admission),
             Ok(Welcome::NotServing { run }) => waiting = Some(run),
             Ok(Welcome::Refused { run, reason }) => refusals.push((run, reason)),
             Err(error) => refusals.push((
@@ -263,7 +240,7 @@ fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Resu
     }
     match accepted.len() {
         0 => {}
-        1 => return Ok(Hello2::Accepted(accepted.remove(0))),
+        1 => return Ok(Greeted::Accepted(accepted.remove(0))),
         _ => {
             let learners: Vec<String> = accepted
                 .iter()
@@ -273,7 +250,7 @@ fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Resu
         }
     }
     if waiting.is_some() {
-        return Ok(Hello2::Wait(waiting));
+        return Ok(Greeted::Wait(waiting));
     }
     // A refusal of the run asked for is final; a learner serving another run only says so.
     if let Some((run, reason)) = refusals
@@ -286,7 +263,7 @@ fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Resu
             reason: reason.clone(),
         });
     }
-    Ok(Hello2::Wait(None))
+    Ok(Greeted::Wait(None))
 }
 
 /// Follow the learner's token of `run` into `learner`.
@@ -390,7 +367,7 @@ struct RelaySource {
 impl RelaySource {
     fn new(
         session: &zenoh::Session,
-        welcome: Accepted,
+        welcome: Admission,
         learner: Arc<AtomicU8>,
         max_queue: usize,
         local: &acps_wire::ipc::RunName,
