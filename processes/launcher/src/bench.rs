@@ -478,8 +478,10 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
         .collect::<Result<Vec<_>, _>>()?;
     let mut builder = Fleet::builder(name.as_str()).identity(0x0bec_4000 + workers as u64);
     builder = if relayed {
-        // The learner sees one peer: its clock starts with the relay's first request.
-        builder.start_with(1)
+        // The learner sees one peer: its clock starts with the relay's first request. On
+        // loopback it shares the cores with the relay and its workers, so it polls only if
+        // they leave it one (as a fleet of W + 1 workers would).
+        builder.start_with(1).spin(acps_fleet::processes::spin(workers + 1))
     } else {
         builder
             .spawn_workers(workers, crate::workers::command(options.worker_in_flight, workers))
