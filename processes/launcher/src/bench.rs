@@ -2,10 +2,11 @@
 //! in-process on one thread, in-process on all cores (rayon), and through a fleet of W worker
 //! processes for W = 1 ..= cores. The trivial environment costs nothing, so its fleet rows
 //! measure the transport; the analytic and rapier PA-10 throws show how close the fleet comes
-//! to W times one thread (the ratio).
+//! to W times one thread (the ratio). With `--relay`, every fleet is measured again through an
+//! `acps relay` on loopback that starts the W workers, as a host of workers on the network would.
 
 use crate::paper::{self, Options, Sim};
-use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress};
+use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress, Learners};
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
@@ -21,21 +22,28 @@ use std::time::Instant;
 pub struct Row {
     /// trivial, analytic or rapier.
     pub env: &'static str,
-    /// inprocess-1, inprocess-rayon or fleet.
+    /// inprocess-1, inprocess-rayon, fleet or relay.
     pub mode: &'static str,
-    /// Worker processes (fleet), threads (rayon) or 1.
+    /// Worker processes (fleet, relay), threads (rayon) or 1.
     pub workers: usize,
     /// Rollouts (training and evaluation) per second of wall time, the median over rounds; a
-    /// fleet's from the moment all its workers asked for tasks.
+    /// fleet's from the moment all its workers asked for tasks, a relay's from its first request
+    /// (the learner sees one peer, not its workers: the relay asks once its first worker did).
     pub rollouts_per_s: f64,
-    /// Median over rounds of the round's rate / (workers x its single-thread rate).
+    /// Median over rounds of the round's rate / (workers x its single-thread rate); for a relay,
+    /// of the round's rate / the same round's rate of the fleet of as many direct workers.
     pub ratio: f64,
     /// Share of the fleet's serving time (median round) spent inside the learner cores.
     pub learner_share: Option<f64>,
-    /// Fleet only: seconds (median round) from starting the worker processes until every one
-    /// has asked for tasks, which the rate leaves out (in-process rows build their environments
-    /// before the clock starts, too).
+    /// Fleet and relay only: seconds (median round) from starting the worker processes (the
+    /// relay's) until the clock starts, which the rate leaves out (in-process rows build their
+    /// environments before the clock starts, too).
     pub startup_seconds: Option<f64>,
+    /// Fleet and relay only: the serving process's CPU time (user and system, its workers and
+    /// relay excluded) per rollout served, in microseconds (median round; the whole serve,
+    /// start-up included): how many hosts of workers one learner's core can feed. `None` below
+    /// the counters' tick of 10 ms, or without Linux's /proc.
+    pub learner_cpu_us_per_task: Option<f64>,
     /// Rollouts performed in the median round.
     pub rollouts: u64,
     /// Wall time in seconds of the median round (a fleet's from its start, as for the rate).
@@ -66,6 +74,8 @@ impl Row {
 struct FleetCost {
     learner_seconds: f64,
     startup_seconds: f64,
+    /// The serving process's own CPU time during the serve.
+    cpu_seconds: Option<f64>,
 }
 
 /// An environment the bench measures.
@@ -94,6 +104,8 @@ pub struct BenchOptions {
     pub scale: f64,
     /// Times every mode is measured, interleaved, >= 1.
     pub rounds: usize,
+    /// Also measure every fleet through a relay on loopback.
+    pub relay: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -199,7 +211,7 @@ pub enum BenchEvent<'a> {
     Measuring {
         /// The environment.
         env: &'static str,
-        /// inprocess-1, inprocess-rayon or fleet.
+        /// inprocess-1, inprocess-rayon, fleet or relay.
         mode: &'static str,
         /// Worker processes, threads or 1.
         workers: usize,
@@ -215,7 +227,7 @@ pub enum BenchEvent<'a> {
 }
 
 /// How a row runs its jobs.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq, Eq)]
 enum Mode {
     /// In this process, one after another.
     Single,
@@ -223,6 +235,8 @@ enum Mode {
     Rayon,
     /// Through a fleet of this many worker processes.
     Fleet(usize),
+    /// Through a relay child, served over Zenoh on loopback, that starts this many workers.
+    Relay(usize),
 }
 
 impl Mode {
@@ -231,6 +245,7 @@ impl Mode {
             Mode::Single => "inprocess-1",
             Mode::Rayon => "inprocess-rayon",
             Mode::Fleet(_) => "fleet",
+            Mode::Relay(_) => "relay",
         }
     }
 
@@ -238,7 +253,16 @@ impl Mode {
         match self {
             Mode::Single => 1,
             Mode::Rayon => rayon::current_num_threads(),
-            Mode::Fleet(workers) => workers,
+            Mode::Fleet(workers) | Mode::Relay(workers) => workers,
+        }
+    }
+
+    /// What the ratio compares with: the same round's rate of this mode, times this factor. A
+    /// relay is compared with as many workers connected directly, the cost of the network hop.
+    fn reference(self) -> (Mode, f64) {
+        match self {
+            Mode::Relay(workers) => (Mode::Fleet(workers), 1.0),
+            mode => (Mode::Single, mode.workers() as f64),
         }
     }
 }
@@ -253,13 +277,16 @@ struct Measurement {
     others_share: Option<f64>,
 }
 
-/// CPU time, in clock ticks, that the whole machine and this process with its reaped children
-/// (a fleet's workers) had used, from Linux's /proc.
+/// CPU time, in clock ticks, that the whole machine, this process, and its reaped children (a
+/// fleet's workers, a relay) had used, from Linux's /proc.
 #[derive(Clone, Copy)]
 struct CpuTicks {
     machine_busy: u64,
     machine_total: u64,
-    own: u64,
+    /// This process: utime + stime.
+    process: u64,
+    /// Its reaped children: cutime + cstime.
+    children: u64,
 }
 
 impl CpuTicks {
@@ -278,26 +305,39 @@ impl CpuTicks {
         let own_stat = std::fs::read_to_string("/proc/self/stat").ok()?;
         // After the command name in parentheses: utime, stime, cutime, cstime are the 12th to
         // 15th fields.
-        let own: u64 = own_stat
+        let own: Vec<u64> = own_stat
             .rsplit_once(')')?
             .1
             .split_whitespace()
             .skip(11)
             .take(4)
-            .map(|field| field.parse::<u64>().ok())
-            .sum::<Option<u64>>()?;
+            .map(|field| field.parse().ok())
+            .collect::<Option<_>>()?;
+        let [utime, stime, cutime, cstime] = own[..] else {
+            return None;
+        };
         Some(Self {
             machine_busy,
             machine_total: machine_busy + field(3) + field(4),
-            own,
+            process: utime + stime,
+            children: cutime + cstime,
         })
+    }
+
+    /// Seconds of CPU this process alone used between `self` and `later`; `None` when less than
+    /// a tick.
+    fn process_seconds(self, later: Self) -> Option<f64> {
+        // SAFETY: sysconf only reads its integer argument.
+        let per_second = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+        let ticks = later.process.checked_sub(self.process).filter(|&t| t > 0)?;
+        (per_second > 0).then(|| ticks as f64 / per_second as f64)
     }
 
     /// The share of the machine's CPU time between `self` and `later` that other processes used.
     fn others_share(self, later: Self) -> Option<f64> {
         let total = later.machine_total.checked_sub(self.machine_total)?;
         let busy = later.machine_busy.checked_sub(self.machine_busy)?;
-        let own = later.own.checked_sub(self.own)?;
+        let own = (later.process + later.children).checked_sub(self.process + self.children)?;
         (total > 0).then(|| (busy.saturating_sub(own) as f64 / total as f64).min(1.0))
     }
 }
@@ -321,10 +361,10 @@ fn lower_median(values: &[f64]) -> f64 {
 
 /// Measure every row; `report` sees each measurement start and each row once it is final.
 ///
-/// Rounds interleave the modes (one thread, rayon, fleets, then again), so that a slow spell
-/// of a shared machine hits every mode of a round alike. A row is the round with the (lower)
-/// median rate; its ratio is the median over rounds of the round's rate / (W x the same
-/// round's single-thread rate).
+/// Rounds interleave the modes (one thread, rayon, fleets, each followed by its relay, then
+/// again), so that a slow spell of a shared machine hits every mode of a round alike. A row is
+/// the round with the (lower) median rate; its ratio is the median over rounds of the round's
+/// rate / (W x the same round's single-thread rate), a relay's / the same round's direct fleet.
 pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow::Result<Vec<Row>> {
     let mut rows = Vec::new();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -332,7 +372,10 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
     // Every measurement of a round, in the order taken; the first is the single-thread one.
     let modes: Vec<Mode> = [Mode::Single, Mode::Rayon]
         .into_iter()
-        .chain((1..=fleets).map(Mode::Fleet))
+        .chain((1..=fleets).flat_map(|workers| {
+            let relay = options.relay.then_some(Mode::Relay(workers));
+            [Mode::Fleet(workers)].into_iter().chain(relay)
+        }))
         .collect();
     let total = options.envs.len() * options.rounds * modes.len();
     let mut index = 0;
@@ -358,20 +401,21 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
                     Mode::Single => in_process(workload, options.scale, false)?,
                     Mode::Rayon => in_process(workload, options.scale, true)?,
                     // Returns once its workers are reaped, so their CPU time counts as ours.
-                    Mode::Fleet(workers) => fleet(workload, options, workers)?,
+                    Mode::Fleet(_) | Mode::Relay(_) => fleet(workload, options, mode)?,
                 };
                 measurement.others_share = before.zip(CpuTicks::now()).and_then(|(a, b)| a.others_share(b));
                 samples.push(measurement);
             }
         }
-        let single_rates: Vec<f64> = measured[0].iter().map(Measurement::rate).collect();
         for (&mode, samples) in modes.iter().zip(&measured) {
             let workers = mode.workers();
             let rates: Vec<f64> = samples.iter().map(Measurement::rate).collect();
+            let (reference, factor) = mode.reference();
+            let reference = &measured[modes.iter().position(|&m| m == reference).expect("measured")];
             let ratios: Vec<f64> = rates
                 .iter()
-                .zip(&single_rates)
-                .map(|(rate, single)| rate / (workers as f64 * single))
+                .zip(reference)
+                .map(|(rate, of)| rate / (factor * of.rate()))
                 .collect();
             let median = lower_median(&rates);
             let chosen = samples[rates
@@ -386,6 +430,10 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
                 ratio: lower_median(&ratios),
                 learner_share: chosen.fleet.map(|f| f.learner_seconds / chosen.seconds),
                 startup_seconds: chosen.fleet.map(|f| f.startup_seconds),
+                learner_cpu_us_per_task: chosen
+                    .fleet
+                    .and_then(|f| f.cpu_seconds)
+                    .map(|cpu| 1e6 * cpu / chosen.rollouts as f64),
                 rollouts: chosen.rollouts,
                 seconds: chosen.seconds,
                 round_rates: rates,
@@ -417,39 +465,87 @@ fn in_process(workload: Workload, scale: f64, parallel: bool) -> anyhow::Result<
     })
 }
 
-/// The jobs of `workload` served to a fleet of `workers` processes started for it.
-fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::Result<Measurement> {
-    let name = format!("bench-{}-{}-{workers}", std::process::id(), workload.name());
+/// The jobs of `workload` served by a fleet of this process: to `Fleet(W)` worker processes it
+/// starts, or (`Relay(W)`) to one `acps relay` child on loopback that starts the W workers.
+fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Result<Measurement> {
+    let workers = mode.workers();
+    let relayed = matches!(mode, Mode::Relay(_));
+    let kind = if relayed { "relay-" } else { "" };
+    let name = format!("bench-{}-{}-{kind}{workers}", std::process::id(), workload.name());
     let mut fleet_jobs = jobs(workload, options.scale)?
         .into_iter()
         .map(|j| FleetJob::new(j.learner))
         .collect::<Result<Vec<_>, _>>()?;
-    let mut builder = Fleet::builder(name)
-        .identity(0x0bec_4000 + workers as u64)
-        .spawn_workers(workers, crate::workers::command(options.worker_in_flight, workers))
-        // The clock starts with the whole fleet at work, not with its first worker.
-        .start_with(workers);
+    let mut builder = Fleet::builder(name.as_str()).identity(0x0bec_4000 + workers as u64);
+    builder = if relayed {
+        // The learner sees one peer: its clock starts with the relay's first request. On
+        // loopback it shares the cores with the relay and its workers, so it polls only if
+        // they leave it one (as a fleet of W + 1 workers would).
+        builder.start_with(1).spin(acps_fleet::processes::spin(workers + 1))
+    } else {
+        builder
+            .spawn_workers(workers, crate::workers::command(options.worker_in_flight, workers))
+            // The clock starts with the whole fleet at work, not with its first worker.
+            .start_with(workers)
+    };
     if let Some(nice) = options.worker_nice {
         builder = builder.worker_niceness(nice);
     }
     let mut fleet = builder.start()?;
-    let stop = fleet.stop_flag();
-    let mut worker_died = false;
+    let (mut listener, command) = if relayed {
+        let (listener, command) = relay_command(&name, options, workers)?;
+        (Some(listener), Some(command))
+    } else {
+        (None, None)
+    };
     let start = Instant::now();
-    let served = fleet.serve(&mut fleet_jobs, &mut |progress: &FleetProgress| {
-        // Workers leave only once the learner is done: one gone means a broken fleet, which
-        // would also keep the fleet from starting.
-        if progress.started_running < workers {
-            worker_died = true;
-            stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        }
-    });
+    let mut relay = match command {
+        Some(mut command) => Some(command.spawn().context("starting acps relay")?),
+        None => None,
+    };
+    let stop = fleet.stop_flag();
+    let mut exited = false;
+    let cpu_before = CpuTicks::now();
+    let served = fleet.serve_with(
+        &mut Learners(&mut fleet_jobs),
+        &mut |progress: &FleetProgress| {
+            // Workers and relays leave only once the learner is done: one gone means a broken
+            // fleet, which would also keep the fleet from starting.
+            let gone = match relay.as_mut() {
+                Some(child) => !matches!(child.try_wait(), Ok(None)),
+                None => progress.started_running < workers,
+            };
+            if gone {
+                exited = true;
+                stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+        },
+        listener.as_mut().map(|l| l as &mut dyn acps_fleet::Remote),
+    );
+    let cpu_seconds = cpu_before.zip(CpuTicks::now()).and_then(|(a, b)| a.process_seconds(b));
     let total_seconds = start.elapsed().as_secs_f64();
-    let context = || format!("fleet of {workers} on {}", workload.name());
-    let died = || format!("{}: a worker exited before the bench was done", context());
+    // The relay ends once the learner's token is gone with the listener; told to stop otherwise.
+    drop(listener);
+    if let Some(mut child) = relay {
+        if served.is_err() {
+            // SAFETY: kill only reads its integer arguments; the child is not reaped yet.
+            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+        }
+        acps_fleet::processes::reap(std::slice::from_mut(&mut child));
+        let status = child.try_wait().ok().flatten();
+        if served.is_ok() && !status.is_some_and(|s| s.success()) {
+            anyhow::bail!(
+                "the relay of {workers} workers on {} ended with {status:?}",
+                workload.name()
+            );
+        }
+    }
+    let context = || format!("{} of {workers} on {}", mode.name(), workload.name());
+    let who = if relayed { "the relay" } else { "a worker" };
+    let died = || format!("{}: {who} exited before the bench was done", context());
     let progress = match served {
-        Err(FleetError::Interrupted) if worker_died => anyhow::bail!(died()),
-        Err(error) if worker_died => return Err(anyhow::Error::new(error).context(died())),
+        Err(FleetError::Interrupted) if exited => anyhow::bail!(died()),
+        Err(error) if exited => return Err(anyhow::Error::new(error).context(died())),
         served => served.with_context(context)?,
     };
     Ok(Measurement {
@@ -458,16 +554,65 @@ fn fleet(workload: Workload, options: &BenchOptions, workers: usize) -> anyhow::
         fleet: Some(FleetCost {
             learner_seconds: progress.learner_seconds,
             startup_seconds: total_seconds - progress.serving_seconds,
+            cpu_seconds,
         }),
         others_share: None,
     })
 }
 
+/// Listen for relays of run `name` on a free loopback port, and the command of `acps relay` (this
+/// executable) there with `workers` workers, its own local run named after `name`.
+fn relay_command(
+    name: &str,
+    options: &BenchOptions,
+    workers: usize,
+) -> anyhow::Result<(acps_relay::Listener, std::process::Command)> {
+    // A port the system had free a moment ago; Zenoh binds it again at once.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|socket| socket.local_addr())
+        .context("finding a free loopback port")?
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let net = acps_relay::NetOptions {
+        listen: vec![endpoint.clone()],
+        connect: Vec::new(),
+        lease: acps_relay::net::DEFAULT_LEASE,
+        config_file: None,
+    };
+    let listener = acps_relay::Listener::open(name, &net).with_context(|| format!("listening at {endpoint}"))?;
+    let exe = std::env::current_exe().context("finding this executable")?;
+    let mut command = std::process::Command::new(exe);
+    command.args([
+        "relay",
+        "--connect",
+        &endpoint,
+        "--run",
+        name,
+        "--local-run",
+        &format!("{name}-host"),
+    ]);
+    command.args(["--workers", &workers.to_string()]);
+    command.args(["--worker-in-flight", &options.worker_in_flight.to_string(), "-q"]);
+    if let Some(nice) = options.worker_nice {
+        command.args(["--worker-nice", &nice.to_string()]);
+    }
+    Ok((listener, command))
+}
+
 /// The rows as an aligned table.
 pub fn table(rows: &[Row]) -> String {
     let mut text = format!(
-        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>13} {:>14} {:>11} {:>7}\n",
-        "env", "mode", "workers", "rollouts/s", "ratio", "ratio range", "learner share", "startup ms", "others"
+        "{:<9} {:<16} {:>7} {:>14} {:>7} {:>13} {:>14} {:>11} {:>15} {:>7}\n",
+        "env",
+        "mode",
+        "workers",
+        "rollouts/s",
+        "ratio",
+        "ratio range",
+        "learner share",
+        "startup ms",
+        "learner us/task",
+        "others"
     );
     for row in rows {
         let share = row
@@ -479,12 +624,15 @@ pub fn table(rows: &[Row]) -> String {
         let range = row
             .ratio_range()
             .map_or("-".to_string(), |(lowest, highest)| format!("{lowest:.2}-{highest:.2}"));
+        let cpu = row
+            .learner_cpu_us_per_task
+            .map_or("-".to_string(), |us| format!("{us:.2}"));
         let others = row
             .others_share
             .map_or("-".to_string(), |s| format!("{:.0}%", 100.0 * s));
         text += &format!(
-            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>13} {:>14} {:>11} {:>7}\n",
-            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, range, share, startup, others
+            "{:<9} {:<16} {:>7} {:>14.0} {:>7.2} {:>13} {:>14} {:>11} {:>15} {:>7}\n",
+            row.env, row.mode, row.workers, row.rollouts_per_s, row.ratio, range, share, startup, cpu, others
         );
     }
     text
@@ -537,6 +685,7 @@ mod tests {
             ratio: 1.0,
             learner_share: None,
             startup_seconds: None,
+            learner_cpu_us_per_task: None,
             rollouts: 1,
             seconds: 1.0,
             round_rates: rates.to_vec(),
@@ -572,16 +721,22 @@ mod tests {
         let before = CpuTicks {
             machine_busy: 1000,
             machine_total: 4000,
-            own: 100,
+            process: 60,
+            children: 40,
         };
-        // 400 ticks of the machine's 800 busy, 300 of them ours: others took 100 of 800.
+        // 400 ticks of the machine's 800 busy, 300 of them ours (100 this process's): others
+        // took 100 of 800.
         let after = CpuTicks {
             machine_busy: 1400,
             machine_total: 4800,
-            own: 400,
+            process: 160,
+            children: 240,
         };
         assert_eq!(before.others_share(after), Some(0.125));
         assert_eq!(after.others_share(before), None);
+        let tick = 1.0 / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+        assert_eq!(before.process_seconds(after), Some(100.0 * tick));
+        assert_eq!(before.process_seconds(before), None, "less than a tick");
         let now = CpuTicks::now().expect("Linux has /proc/stat and /proc/self/stat");
         assert!(now.machine_total >= now.machine_busy && now.machine_busy > 0);
     }

@@ -183,6 +183,11 @@ pub(crate) struct BenchArgs {
     pub(crate) env: Vec<crate::bench::BenchEnv>,
     #[command(flatten)]
     pub(crate) worker_nice: WorkerNiceArg,
+    /// Also measure every fleet through `acps relay` on loopback (a host of workers on the
+    /// network): rows 'relay', whose ratio is to the same round's fleet of as many workers
+    /// connected directly.
+    #[arg(long)]
+    pub(crate) relay: bool,
 }
 
 /// `--worker-nice` of `acps run` and `acps bench`.

@@ -371,6 +371,7 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
         worker_nice: args.worker_nice.worker_nice,
         scale: args.scale,
         rounds: args.rounds,
+        relay: args.relay,
     };
     print!("{}", crate::bench::table(&[]));
     let bar = ProgressBar::new(0).with_style(

@@ -1746,7 +1746,12 @@ impl Picture for BenchBars<'_> {
             let unmeasured = bars.iter().filter(|row| !row.rollouts_per_s.is_finite()).count();
             let caption = with_notes(
                 format!(
-                    "{env}: rollouts per second of the median round; above each bar its ratio to W x one thread and the range over rounds"
+                    "{env}: rollouts per second of the median round; above each bar its ratio to W x one thread{} and the range over rounds",
+                    if bars.iter().any(|row| row.mode == "relay") {
+                        " (a relay's: to the fleet of W)"
+                    } else {
+                        ""
+                    }
                 ),
                 &[left_out(unmeasured, "non-finite rate", "not drawn")],
             );
@@ -1768,7 +1773,11 @@ impl Picture for BenchBars<'_> {
                 .y_desc("rollouts per second")
                 .draw()?;
             chart.draw_series(bars.iter().enumerate().map(|(i, row)| {
-                let color = if row.mode == "fleet" { COLORS[1] } else { COLORS[0] };
+                let color = match row.mode {
+                    "fleet" => COLORS[1],
+                    "relay" => COLORS[2],
+                    _ => COLORS[0],
+                };
                 let mut bar = Rectangle::new(
                     [(SegmentValue::Exact(i), 0.0), (SegmentValue::Exact(i + 1), height(row))],
                     color.filled(),
@@ -2102,6 +2111,7 @@ mod tests {
                     ratio: rate,
                     learner_share: None,
                     startup_seconds: None,
+                    learner_cpu_us_per_task: None,
                     rollouts: 10,
                     seconds: 0.0,
                     round_rates: vec![rate, rate],
@@ -2327,21 +2337,28 @@ mod tests {
         let rows: Vec<crate::bench::Row> = ["trivial", "analytic", "rapier"]
             .iter()
             .flat_map(|&env| {
-                [("inprocess-1", 1), ("inprocess-rayon", 2), ("fleet", 1), ("fleet", 2)].map(|(mode, workers)| {
-                    crate::bench::Row {
-                        env,
-                        mode,
-                        workers,
-                        rollouts_per_s: 2.9e6 / f64::from(workers as u32),
-                        ratio: 0.97,
-                        learner_share: None,
-                        startup_seconds: None,
-                        rollouts: 100_000,
-                        seconds: 1.0,
-                        round_rates: vec![2.9e6, 2.8e6, 2.7e6],
-                        round_ratios: vec![0.97, 0.91, 0.99],
-                        others_share: Some(0.02),
-                    }
+                [
+                    ("inprocess-1", 1),
+                    ("inprocess-rayon", 2),
+                    ("fleet", 1),
+                    ("relay", 1),
+                    ("fleet", 2),
+                    ("relay", 2),
+                ]
+                .map(|(mode, workers)| crate::bench::Row {
+                    env,
+                    mode,
+                    workers,
+                    rollouts_per_s: 2.9e6 / f64::from(workers as u32),
+                    ratio: 0.97,
+                    learner_share: None,
+                    startup_seconds: None,
+                    learner_cpu_us_per_task: None,
+                    rollouts: 100_000,
+                    seconds: 1.0,
+                    round_rates: vec![2.9e6, 2.8e6, 2.7e6],
+                    round_ratios: vec![0.97, 0.91, 0.99],
+                    others_share: Some(0.02),
                 })
             })
             .collect();

@@ -1,7 +1,8 @@
 //! The `acps experiment` command-line contract: files written, summary.json fields, and errors
 //! that name the bad option.
 
-use crate::{acps, temp_dir};
+use crate::{acps, assert_clean, succeeded, temp_dir};
+use acps_wire::ipc::RunName;
 use std::path::Path;
 use std::process::Command;
 
@@ -301,6 +302,9 @@ fn bench_writes_its_table_and_json() {
         let startup = row["startup_seconds"].as_f64();
         assert_eq!(startup.is_some(), mode == "fleet", "{row}");
         assert!(startup.is_none_or(|s| s > 0.0), "{row}");
+        // Fleets only, and none where the serve took less than a tick of the CPU counters.
+        let cpu = row["learner_cpu_us_per_task"].as_f64();
+        assert!(cpu.is_none_or(|us| us > 0.0 && mode == "fleet"), "{row}");
     }
     for picture in ["bench.svg", "bench.png"] {
         assert!(
@@ -327,6 +331,52 @@ fn bench_writes_its_table_and_json() {
         "{}",
         String::from_utf8_lossy(&error.stderr)
     );
+}
+
+#[test]
+fn bench_relay_measures_each_fleet_again_through_a_relay() {
+    let dir = temp_dir("bench-relay");
+    let child = Command::new(env!("CARGO_BIN_EXE_acps"))
+        .args([
+            "bench",
+            "--relay",
+            "--env",
+            "trivial",
+            "--max-workers",
+            "1",
+            "--scale",
+            "0.05",
+        ])
+        .args(["--rounds", "1", "--out", dir.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("acps runs");
+    let pid = child.id();
+    let stdout = succeeded(&child.wait_with_output().unwrap());
+    assert!(stdout.contains("learner us/task"), "{stdout}");
+    let bench = summary(&dir.join("bench.json"));
+    let rows = bench["rows"].as_array().unwrap();
+    let modes: Vec<&str> = rows.iter().map(|row| row["mode"].as_str().unwrap()).collect();
+    assert_eq!(modes, ["inprocess-1", "inprocess-rayon", "fleet", "relay"], "{bench}");
+    let (fleet, relay) = (&rows[2], &rows[3]);
+    let rate = |row: &serde_json::Value| row["rollouts_per_s"].as_f64().unwrap();
+    assert!(
+        rate(relay) > 0.0 && relay["startup_seconds"].as_f64().unwrap() > 0.0,
+        "{relay}"
+    );
+    // The relay's ratio is to the same round's fleet of as many workers connected directly.
+    let ratio = relay["ratio"].as_f64().unwrap();
+    assert!((ratio - rate(relay) / rate(fleet)).abs() <= 1e-9 * ratio, "{bench}");
+    assert!(relay["learner_cpu_us_per_task"].as_f64().unwrap() > 0.0, "{relay}");
+    // The learner's runs, and the relay's own run of its workers, are gone.
+    for run in [
+        format!("bench-{pid}-trivial-1"),
+        format!("bench-{pid}-trivial-relay-1"),
+        format!("bench-{pid}-trivial-relay-1-host"),
+    ] {
+        assert_clean(&RunName::new(&run).unwrap());
+    }
 }
 
 #[test]
