@@ -328,6 +328,14 @@ impl Fleet {
             None => Vec::new(),
         };
         let launched = children.len();
+        let mut remote = remote;
+        if let Some(remote) = remote.as_deref_mut() {
+            let environments: Vec<_> = (0..source.jobs()).map(|job| source.environment(job)).collect();
+            if let Err(error) = remote.start(&self.run.0, identity, &environments) {
+                processes::reap(&mut children);
+                return Err(FleetError::Remote(error));
+            }
+        }
         let stop = || self.interrupted();
         let served = server::serve(
             source,
@@ -342,8 +350,12 @@ impl Fleet {
             &stop,
             observer,
             &mut || (processes::running(&mut children), launched),
-            remote,
+            remote.as_deref_mut(),
         );
+        // Before the seat goes: a remote's own node of the run must be gone with it.
+        if let Some(remote) = remote {
+            remote.finish(served.is_ok());
+        }
         // Before the workers are reaped: one that was not told to stop (busy in a rollout when
         // the run ended) leaves once it finds the learner's node gone.
         drop(seat);

@@ -240,7 +240,7 @@ pub trait Remote {
     fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), SourceError>;
 
     /// Answer `peer`'s request `request` with `tasks` (job, task): at least one.
-    fn send(&mut self, peer: PeerId, request: u64, tasks: &[(u32, Task)]) -> Result<(), SourceError>;
+    fn send(&mut self, peer: PeerId, request: u64, tasks: Vec<(u32, Task)>) -> Result<(), SourceError>;
 
     /// `peer` is given up on (silent for `silent`): its later messages are refused, and it is
     /// told so, to join again.
@@ -447,16 +447,9 @@ impl Parked {
     }
 }
 
-/// What the server knows of the remote peers it serves.
-#[derive(Default)]
-struct Peers {
-    /// Workers behind each peer, as it last said.
-    workers: HashMap<PeerId, usize>,
-}
-
-/// Serve `source` from `seat` to the workers of `run`, and to `remote`'s peers, until every job
-/// is done. `started` says how many worker processes the caller started are still running (they
-/// count as workers on their way).
+/// Serve `source` from `seat` to the workers of `run`, and to `remote`'s peers (started by the
+/// caller), until every job is done. `started` says how many worker processes the caller started
+/// are still running (they count as workers on their way).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn serve<'r>(
     source: &mut dyn TaskSource,
@@ -468,7 +461,6 @@ pub(crate) fn serve<'r>(
     started: &mut dyn FnMut() -> (usize, usize),
     mut remote: Option<&mut (dyn Remote + 'r)>,
 ) -> Result<FleetProgress, FleetError> {
-    let identity = options.identity;
     let Seat { server, services, .. } = seat;
     let listener = services
         .to_learner
@@ -476,43 +468,6 @@ pub(crate) fn serve<'r>(
         .create()
         .map_err(|e| IpcError::new("creating the learner's listener", e))?;
     let mut waker = Waker::new(services)?;
-    if let Some(remote) = remote.as_deref_mut() {
-        let environments: Vec<_> = (0..source.jobs()).map(|job| source.environment(job)).collect();
-        remote.start(run, identity, &environments).map_err(FleetError::Remote)?;
-    }
-    let served = serve_loop(
-        source,
-        run,
-        server,
-        services,
-        &listener,
-        &mut waker,
-        options,
-        stop,
-        observer,
-        started,
-        remote.as_deref_mut(),
-    );
-    if let Some(remote) = remote {
-        remote.finish(served.is_ok());
-    }
-    served
-}
-
-#[allow(clippy::too_many_arguments)]
-fn serve_loop<'r>(
-    source: &mut dyn TaskSource,
-    run: &RunName,
-    server: &TaskServer,
-    services: &ipc::Services,
-    listener: &iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>,
-    waker: &mut Waker,
-    options: ServeOptions,
-    stop: &dyn Fn() -> bool,
-    observer: &mut dyn Observer,
-    started: &mut dyn FnMut() -> (usize, usize),
-    mut remote: Option<&mut (dyn Remote + 'r)>,
-) -> Result<FleetProgress, FleetError> {
     let identity = options.identity;
     let mut progress = FleetProgress::default();
     let mut parked: VecDeque<Parked> = VecDeque::new();
@@ -536,7 +491,8 @@ fn serve_loop<'r>(
     let mut slowest_rollout = Duration::ZERO;
     let mut without_workers: Option<Instant> = None;
     let mut last_running = 0;
-    let mut peers = Peers::default();
+    // Workers behind each remote peer, as it last said.
+    let mut peers: HashMap<PeerId, usize> = HashMap::new();
     let mut events = Vec::new();
     loop {
         let mut active_now = false;
@@ -606,7 +562,7 @@ fn serve_loop<'r>(
                         let client = Client::Remote(peer);
                         heard.insert(client);
                         last_heard.insert(client, Instant::now());
-                        peers.workers.insert(peer, workers);
+                        peers.insert(peer, workers);
                         slowest_rollout = slowest_rollout.max(slowest);
                         for (job, outcome) in delivered {
                             holders.remove(&(job, outcome.task_id));
@@ -742,8 +698,8 @@ fn serve_loop<'r>(
             } else {
                 connected.len()
             };
-            progress.relays = peers.workers.len();
-            progress.workers = local + peers.workers.values().sum::<usize>();
+            progress.relays = peers.len();
+            progress.workers = local + peers.values().sum::<usize>();
             let deadline = options
                 .liveness
                 .silence
@@ -761,7 +717,7 @@ fn serve_loop<'r>(
             }
             let known = |client: &Client| match client {
                 Client::Local(_) => connected.contains(client),
-                Client::Remote(peer) => peers.workers.contains_key(peer),
+                Client::Remote(peer) => peers.contains_key(peer),
             };
             last_heard.retain(|client, _| known(client));
             hung.retain(known);
@@ -806,7 +762,7 @@ fn forget_peer(
     peer: PeerId,
     holders: &mut HashMap<(u32, u64), Client>,
     parked: &mut VecDeque<Parked>,
-    peers: &mut Peers,
+    peers: &mut HashMap<PeerId, usize>,
 ) -> u64 {
     let gone = Client::Remote(peer);
     let mut reissued = 0;
@@ -818,7 +774,7 @@ fn forget_peer(
         false
     });
     parked.retain(|request| request.client() != gone);
-    peers.workers.remove(&peer);
+    peers.remove(&peer);
     reissued
 }
 
@@ -1056,7 +1012,9 @@ fn answer<'r>(
             }
             Requester::Remote { peer, request } => {
                 if let Some(remote) = remote.as_deref_mut() {
-                    remote.send(*peer, *request, &tasks).map_err(FleetError::Remote)?;
+                    remote
+                        .send(*peer, *request, std::mem::take(&mut tasks))
+                        .map_err(FleetError::Remote)?;
                 }
             }
         }

@@ -89,7 +89,6 @@ struct Serving {
 pub struct Listener {
     run: String,
     instance: u64,
-    host: String,
     shared: Arc<Mutex<Shared>>,
     pump: Option<Pump>,
     // Undeclared on drop, before the session closes.
@@ -170,7 +169,6 @@ impl Listener {
             let shared = shared.clone();
             let session = session.clone();
             let run = run.to_string();
-            let host = host.clone();
             session
                 .clone()
                 .declare_queryable("acps/hello/**")
@@ -198,7 +196,6 @@ impl Listener {
         Ok(Self {
             run: run.to_string(),
             instance,
-            host,
             shared,
             pump: None,
             _queryable: queryable,
@@ -212,16 +209,6 @@ impl Listener {
     /// The run's name.
     pub fn run(&self) -> &str {
         &self.run
-    }
-
-    /// This learner's host name, as relays are told.
-    pub fn host(&self) -> &str {
-        &self.host
-    }
-
-    /// The relays admitted in the current serve.
-    pub fn relays(&self) -> usize {
-        lock(&self.shared).admitted.len()
     }
 
     fn tell(&self, peer: PeerId, message: &Down) {
@@ -453,14 +440,8 @@ impl Remote for Listener {
         Ok(())
     }
 
-    fn send(&mut self, peer: PeerId, request: u64, tasks: &[(u32, Task)]) -> Result<(), SourceError> {
-        self.tell(
-            peer,
-            &Down::Tasks {
-                request,
-                tasks: tasks.to_vec(),
-            },
-        );
+    fn send(&mut self, peer: PeerId, request: u64, tasks: Vec<(u32, Task)>) -> Result<(), SourceError> {
+        self.tell(peer, &Down::Tasks { request, tasks });
         Ok(())
     }
 

@@ -114,7 +114,6 @@ pub fn serve(
     let learner = Arc::new(AtomicU8::new(UNKNOWN));
     let mut watch = None;
     let mut deadline = Instant::now() + options.startup_timeout;
-    let mut first_wait = true;
     // Whether the last serve ended because the learner served every job: its token's going then
     // means the run is over, not a crash.
     let mut finished = false;
@@ -152,14 +151,13 @@ pub fn serve(
         }
         // It answered: it is there, whatever its token's news in flight says.
         learner.store(PRESENT, Ordering::Relaxed);
-        if first_wait {
+        if report.serves == 0 {
             tracing::info!(
                 "relay: joined run '{}' of the learner on {} as peer {}",
                 welcome.run,
                 welcome.host,
                 welcome.peer
             );
-            first_wait = false;
         }
         report.serves += 1;
         let mut source = RelaySource::new(&session, welcome, learner.clone(), options.queue, fleet.run())?;
