@@ -682,6 +682,58 @@ fn numbers_outside_their_ranges_are_refused_before_anything_runs() {
         ),
         (&["bench", "--scale", "100.01"], 2, "must be a number in (0, 100]"),
         (&["run", "grid", "--workers", "129"], 2, "must be an integer in 0..=128"),
+        // The network of hosts.
+        (
+            &["run", "grid", "--lease", "0.09"],
+            2,
+            "must be a number of seconds in 0.1..=3600",
+        ),
+        (
+            &["relay", "--connect", "tcp/127.0.0.1:1", "--lease", "3601"],
+            2,
+            "must be a number of seconds in 0.1..=3600",
+        ),
+        (
+            &["relay", "--connect", "tcp/127.0.0.1:1", "--queue", "0"],
+            2,
+            "invalid value '0' for '--queue <QUEUE>': must be an integer in 1..=4096",
+        ),
+        (
+            &["relay", "--connect", "tcp/127.0.0.1:1", "--wait-for-learner", "-1"],
+            2,
+            "must be a number of seconds in 0..=86400",
+        ),
+        (
+            &["relay", "--connect", "udp/127.0.0.1:7447"],
+            2,
+            "--connect udp/127.0.0.1:7447: endpoint \"udp/127.0.0.1:7447\": protocol \"udp\" is not built in",
+        ),
+        (
+            &["run", "grid", "--listen", "127.0.0.1:7447"],
+            2,
+            "--listen 127.0.0.1:7447: endpoint \"127.0.0.1:7447\": no protocol",
+        ),
+        (
+            &["run", "grid", "--lease", "1"],
+            2,
+            "--zenoh-config and --lease set up the network of hosts, which only --listen (acps run) or --connect (acps relay) opens",
+        ),
+        (
+            &[
+                "relay",
+                "--connect",
+                "tcp/127.0.0.1:1",
+                "--zenoh-config",
+                "/nonexistent.json5",
+            ],
+            2,
+            "--zenoh-config /nonexistent.json5: not a readable file",
+        ),
+        (
+            &["relay", "--connect", "tcp/127.0.0.1:1", "--run", "a_b"],
+            2,
+            "--run a_b",
+        ),
         // Not a number at all.
         (
             &["experiment", "toy", "--runs", "three"],
