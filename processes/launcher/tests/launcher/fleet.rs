@@ -321,6 +321,12 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
     assert_clean(&run);
 }
 
+/// Send `signal` to process `pid`; asserts that it was there to receive it.
+fn signal(signal: &str, pid: u32) {
+    let status = Command::new("kill").args([signal, &pid.to_string()]).status().unwrap();
+    assert!(status.success(), "kill {signal} {pid}: no such process");
+}
+
 /// Send `signal` to the process group `group`.
 pub(crate) fn signal_group(signal: &str, group: u32) {
     let status = Command::new("kill")
@@ -1158,11 +1164,7 @@ fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
     // Kill the worker the learner started: the one it serves by hand goes on.
     let started = children_of(learner.id());
     assert_eq!(started.len(), 1, "{started:?}");
-    let status = Command::new("kill")
-        .args(["-KILL", &started[0].to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    signal("-KILL", started[0]);
     let output = learner.wait_with_output().unwrap();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
@@ -1400,11 +1402,7 @@ fn a_second_learner_of_a_running_run_is_refused_at_once_and_starts_no_worker() {
     );
     assert!(!stderr.contains("still use"), "{stderr}");
     assert!(!dir.join("second").exists(), "the refused run wrote nothing");
-    let status = Command::new("kill")
-        .args(["-INT", &first_pid.to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    signal("-INT", first_pid);
     let mut rest = String::new();
     std::io::Read::read_to_string(&mut first_err, &mut rest).unwrap();
     assert_eq!(first.wait().unwrap().code(), Some(130), "{rest}");
@@ -1476,11 +1474,7 @@ fn killing_the_only_worker_ends_the_run_saying_so() {
         worker = children_of(acps);
         !worker.is_empty()
     });
-    let status = Command::new("kill")
-        .args(["-KILL", &worker[0].to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    signal("-KILL", worker[0]);
     let output = learner.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
@@ -1518,11 +1512,7 @@ fn a_fleet_run_that_fails_half_way_prints_the_command_that_continues_it() {
     });
     let worker = children_of(acps);
     assert_eq!(worker.len(), 1, "one started worker");
-    let status = Command::new("kill")
-        .args(["-KILL", &worker[0].to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    signal("-KILL", worker[0]);
     let output = learner.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
