@@ -44,6 +44,30 @@ enum Incoming {
 struct Admitted {
     host: String,
     publisher: zenoh::pubsub::Publisher<'static>,
+    traffic: Traffic,
+}
+
+/// Messages to and from one relay and what they carried, logged when it leaves: how well its
+/// messages are batched.
+#[derive(Default)]
+struct Traffic {
+    up: u64,
+    outcomes: u64,
+    down: u64,
+    tasks: u64,
+}
+
+impl Traffic {
+    fn log(&self, run: &str, host: &str) {
+        let per = |items: u64, messages: u64| items as f64 / messages.max(1) as f64;
+        tracing::info!(
+            "run '{run}': the relay on {host} sent {} messages ({:.1} outcomes each) and was sent {} ({:.1} tasks each)",
+            self.up,
+            per(self.outcomes, self.up),
+            self.down,
+            per(self.tasks, self.down)
+        );
+    }
 }
 
 /// State shared with the network callbacks.
@@ -212,8 +236,12 @@ impl Listener {
     }
 
     fn tell(&self, peer: PeerId, message: &Down) {
-        let shared = lock(&self.shared);
-        if let Some(admitted) = shared.admitted.get(&peer) {
+        let mut shared = lock(&self.shared);
+        if let Some(admitted) = shared.admitted.get_mut(&peer) {
+            admitted.traffic.down += 1;
+            if let Down::Tasks { tasks, .. } = message {
+                admitted.traffic.tasks += tasks.len() as u64;
+            }
             send(&admitted.publisher, message, peer);
         }
     }
@@ -339,6 +367,7 @@ fn welcome(
         Admitted {
             host: hello.host.clone(),
             publisher,
+            traffic: Traffic::default(),
         },
     );
     tracing::info!("run '{run}': admitted the {relay} as peer {peer}");
@@ -381,6 +410,7 @@ impl Remote for Listener {
                             self.run,
                             admitted.host
                         );
+                        admitted.traffic.log(&self.run, &admitted.host);
                         events.push(RemoteEvent::Gone { peer });
                     }
                 }
@@ -388,7 +418,7 @@ impl Remote for Listener {
                     let instance = match &message {
                         Up::Request { instance, .. } | Up::Note { instance, .. } => *instance,
                     };
-                    let Some(admitted) = shared.admitted.get(&peer).filter(|_| instance == self.instance) else {
+                    let Some(admitted) = shared.admitted.get_mut(&peer).filter(|_| instance == self.instance) else {
                         // Evicted, or admitted by an earlier learner of the run: join again.
                         if instance == self.instance && shared.evicted.insert(peer) {
                             evict.push(peer);
@@ -407,15 +437,19 @@ impl Remote for Listener {
                             slowest_rollout_us,
                             outcomes,
                             ..
-                        } => events.push(RemoteEvent::Request {
-                            peer,
-                            request,
-                            want: (want as usize).min(net::MAX_NET_BATCH),
-                            serves: serves.map_or(Serves::Any, Serves::One),
-                            workers: workers as usize,
-                            slowest_rollout: Duration::from_micros(slowest_rollout_us),
-                            outcomes: outcomes.iter().map(net::NetOutcome::to_outcome).collect(),
-                        }),
+                        } => {
+                            admitted.traffic.up += 1;
+                            admitted.traffic.outcomes += outcomes.len() as u64;
+                            events.push(RemoteEvent::Request {
+                                peer,
+                                request,
+                                want: (want as usize).min(net::MAX_NET_BATCH),
+                                serves: serves.map_or(Serves::Any, Serves::One),
+                                workers: workers as usize,
+                                slowest_rollout: Duration::from_micros(slowest_rollout_us),
+                                outcomes: outcomes.iter().map(net::NetOutcome::to_outcome).collect(),
+                            })
+                        }
                     }
                 }
             }
@@ -453,7 +487,9 @@ impl Remote for Listener {
             },
         );
         let mut shared = lock(&self.shared);
-        shared.admitted.remove(&peer);
+        if let Some(admitted) = shared.admitted.remove(&peer) {
+            admitted.traffic.log(&self.run, &admitted.host);
+        }
         shared.evicted.insert(peer);
     }
 
@@ -467,7 +503,9 @@ impl Remote for Listener {
             shared.told_done.extend(peers);
         }
         shared.serving = None;
-        shared.admitted.clear();
+        for admitted in std::mem::take(&mut shared.admitted).into_values() {
+            admitted.traffic.log(&self.run, &admitted.host);
+        }
         shared.incoming.clear();
         shared.poke = None;
         drop(shared);

@@ -23,6 +23,9 @@ const HELLO_RETRY: Duration = Duration::from_millis(100);
 const FLUSH_EVERY: Duration = Duration::from_millis(1);
 /// Tasks a relay keeps asked for or queued beyond twice what its workers hold.
 const SPARE: usize = 16;
+/// A relay asks for more once it lacks this many tasks (or a quarter of its target, if less):
+/// asking for each task its workers took made messages of a few tasks each way.
+const ASK_BATCH: usize = 64;
 
 /// How a relay behaves.
 #[derive(Debug, Clone)]
@@ -604,13 +607,18 @@ impl TaskSource for RelaySource {
         // Keep twice what the workers hold asked for or queued, and a few more: the learner's
         // answers then arrive before the workers need them.
         let target = (2 * self.held.len() + SPARE).min(self.max_queue.max(1));
+        let ask_at = (target / 4).clamp(1, ASK_BATCH);
         for class in self.classes.clone() {
-            let supply = self.supply(&class);
-            if supply < target {
-                self.send((target - supply).min(net::MAX_NET_BATCH), class)?;
+            let lacking = target.saturating_sub(self.supply(&class));
+            if lacking >= ask_at {
+                self.send(lacking.min(net::MAX_NET_BATCH), class)?;
             }
         }
-        let due = self.outgoing.len() >= net::MAX_NET_BATCH || idle || self.last_flush.elapsed() >= FLUSH_EVERY;
+        // An idle relay sends its outcomes at once unless its workers still hold four times as
+        // many tasks: they are busy for a while, and a message per few outcomes costs both ends
+        // more than the wait (at most FLUSH_EVERY).
+        let batched = idle && 4 * self.outgoing.len() >= self.held.len();
+        let due = self.outgoing.len() >= net::MAX_NET_BATCH || batched || self.last_flush.elapsed() >= FLUSH_EVERY;
         if !self.outgoing.is_empty() && due {
             self.send(0, Serves::Any)?;
         }
