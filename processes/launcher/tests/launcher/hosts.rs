@@ -318,3 +318,169 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
 }
+
+/// An emulated host with a network of its own: a network namespace joined to this one by a
+/// virtual Ethernet pair, with an address on each side (in 198.18.0.0/15, the range set aside for
+/// benchmarking networks). Dropping it removes the namespace and with it the pair.
+struct Netns {
+    name: String,
+    /// The pair's end on this side: taken down, it cuts the host off.
+    link: String,
+    /// This side's address, which the learner listens on.
+    here: String,
+}
+
+impl Netns {
+    /// A namespace for this test process, or why the machine cannot make one (network
+    /// namespaces need root, or CAP_NET_ADMIN, and iproute2).
+    fn new() -> Result<Self, String> {
+        Self::remove_dead();
+        let pid = std::process::id();
+        let name = format!("acpst{pid}");
+        let (link, inside) = (format!("acps{pid}h"), format!("acps{pid}n"));
+        let (third, fourth) = (pid % 256, (pid / 256) % 64 * 4);
+        let here = format!("198.18.{third}.{}", fourth + 1);
+        let there = format!("198.18.{third}.{}", fourth + 2);
+        ip(&["netns", "add", &name])?;
+        let netns = Self { name, link, here };
+        let name = netns.name.as_str();
+        ip(&["link", "add", &netns.link, "type", "veth", "peer", "name", &inside])?;
+        ip(&["link", "set", &inside, "netns", name])?;
+        ip(&["addr", "add", &format!("{}/30", netns.here), "dev", &netns.link])?;
+        ip(&["link", "set", &netns.link, "up"])?;
+        ip(&["-n", name, "addr", "add", &format!("{there}/30"), "dev", &inside])?;
+        ip(&["-n", name, "link", "set", &inside, "up"])?;
+        ip(&["-n", name, "link", "set", "lo", "up"])?;
+        Ok(netns)
+    }
+
+    /// Remove the namespaces of test processes that are gone (killed before their drop ran).
+    fn remove_dead() {
+        let Ok(entries) = std::fs::read_dir("/var/run/netns") else {
+            return;
+        };
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if let Some(pid) = name.strip_prefix("acpst").and_then(|p| p.parse::<u32>().ok())
+                && !Path::new(&format!("/proc/{pid}")).exists()
+            {
+                let _ = ip(&["netns", "del", &name]);
+            }
+        }
+    }
+
+    /// `command` run inside the namespace.
+    fn inside(&self, command: &Command) -> Command {
+        let mut inside = Command::new("ip");
+        inside.args(["netns", "exec", &self.name]).arg(command.get_program());
+        inside.args(command.get_args());
+        inside
+    }
+
+    /// Take this side's end of the link down (`false`) or up again.
+    fn connect(&self, up: bool) {
+        let state = if up { "up" } else { "down" };
+        ip(&["link", "set", &self.link, state]).unwrap();
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        let _ = ip(&["netns", "del", &self.name]);
+    }
+}
+
+fn ip(args: &[&str]) -> Result<(), String> {
+    let output = Command::new("ip")
+        .args(args)
+        .output()
+        .map_err(|e| format!("ip {}: {e}", args.join(" ")))?;
+    if output.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&output.stderr).trim()
+        ))
+    }
+}
+
+/// A network namespace for a test, or `None` with a note when the machine cannot make one; CI
+/// sets ACPS_REQUIRE_NETNS, so that there the test cannot pass without one.
+fn netns_or_skip(test: &str) -> Option<Netns> {
+    match Netns::new() {
+        Ok(netns) => Some(netns),
+        Err(why) if std::env::var_os("ACPS_REQUIRE_NETNS").is_none() => {
+            eprintln!("{test}: skipped, no network namespace here ({why}); ACPS_REQUIRE_NETNS=1 makes this a failure");
+            None
+        }
+        Err(why) => panic!("{test}: ACPS_REQUIRE_NETNS is set, and no network namespace can be made: {why}"),
+    }
+}
+
+#[test]
+fn a_host_cut_off_from_the_network_is_given_up_on_and_rejoins_when_the_link_is_back() {
+    let Some(host) = netns_or_skip("network cut") else {
+        return;
+    };
+    let SlowRun {
+        dir: _dir,
+        reference,
+        run,
+        out,
+    } = slow_run_with("relay-cut", &["--in-flight", "8"]);
+    let port = std::net::TcpListener::bind((host.here.as_str(), 0))
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let endpoint = format!("tcp/{}:{port}", host.here);
+    let local = run_name("relay-cut-h1");
+    let lease = ["--lease", "0.5"];
+    // The relay is the only way to the workers: nothing is learnt while the link is down.
+    let learner = learner(
+        &SLOW,
+        &endpoint,
+        &run,
+        &out,
+        &[
+            &["--in-flight", "8", "--workers", "0", "--checkpoint-every", "1"][..],
+            &lease,
+        ]
+        .concat(),
+    );
+    let relay = host
+        .inside(&relay(
+            &endpoint,
+            &local,
+            1,
+            &[&lease[..], &["-q", "--wait-for-learner", "120"]].concat(),
+        ))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .process_group(0)
+        .spawn()
+        .unwrap();
+    wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
+        ipc::live_nodes(&local).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
+    });
+    host.connect(false);
+    // Cut off, the relay loses its learner after the lease and stops its workers.
+    wait_until("the cut-off relay to stop its workers", Duration::from_secs(60), || {
+        ipc::live_nodes(&local).unwrap_or(0) < 2
+    });
+    host.connect(true);
+    let stdout = finished(learner);
+    assert!(reissued(&stdout) >= 1, "{stdout}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    let relayed = relay.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&relayed.stderr);
+    assert!(relayed.status.success(), "{said}");
+    assert!(
+        said.contains(&format!("the learner of run '{run}' is gone; waiting up to 120s")),
+        "{said}"
+    );
+    assert_clean(&run);
+    assert_clean(&local);
+}
