@@ -211,9 +211,10 @@ pub(crate) struct RunArgs {
     #[arg(long)]
     pub(crate) run: Option<String>,
     /// Also serve relays of other hosts (`acps relay --connect ENDPOINT` there) at ENDPOINT:
-    /// tcp/ADDRESS:PORT or tls/ADDRESS:PORT, e.g. tcp/127.0.0.1:7447. Listening on an address
-    /// other hosts reach is your choice: on networks that are not private, use tls/ with
-    /// --zenoh-config (docs/HOSTS.md). Repeat for several addresses.
+    /// tcp/ADDRESS:PORT, e.g. tcp/127.0.0.1:7447. Listening on an address other hosts reach is
+    /// your choice: on networks that are not private, listen on loopback and let relays come
+    /// through SSH tunnels, or require a password with --zenoh-config (docs/HOSTS.md). Repeat for
+    /// several addresses.
     #[arg(long, value_name = "ENDPOINT")]
     pub(crate) listen: Vec<String>,
     #[command(flatten)]
@@ -223,7 +224,7 @@ pub(crate) struct RunArgs {
 /// How a learner or relay joins the network of hosts.
 #[derive(clap::Args, Default)]
 pub(crate) struct NetArgs {
-    /// A Zenoh configuration file (JSON5) for TLS certificates or user/password authentication;
+    /// A Zenoh configuration file (JSON5), for user/password authentication;
     /// acps sets the mode, endpoints, scouting (off) and lease on top of it (docs/HOSTS.md).
     #[arg(long, value_name = "FILE")]
     pub(crate) zenoh_config: Option<PathBuf>,
@@ -256,7 +257,7 @@ pub(crate) struct StartedWorkers {
 
 #[derive(clap::Args)]
 pub(crate) struct RelayArgs {
-    /// Where the learner listens (its --listen): tcp/HOST:PORT or tls/HOST:PORT.
+    /// Where the learner listens (its --listen): tcp/HOST:PORT.
     #[arg(long, value_name = "ENDPOINT", required = true)]
     pub(crate) connect: Vec<String>,
     /// The run to join [default: the one the learner serves].

@@ -21,7 +21,6 @@ fn init_logging(verbose: u8) {
         "zenoh_transport",
         "zenoh_link_commons",
         "zenoh_link_tcp",
-        "zenoh_link_tls",
         "zenoh_config",
     ]
     .map(|target| format!(",{target}=error"))

@@ -9,7 +9,7 @@
 //! fleet server, so the run's results are bit for bit those of an in-process run.
 //!
 //! - [`net`]: the keys, the messages and the Zenoh session settings (peer mode, only the given
-//!   endpoints, no scouting, the lease; TLS and user/password from a Zenoh configuration file).
+//!   endpoints, no scouting, the lease; user/password from a Zenoh configuration file).
 //! - [`Listener`]: the learner's side, a [`Remote`](acps_fleet::Remote) of its fleet.
 //! - [`relay`]: the relay's side.
 //!

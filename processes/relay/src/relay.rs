@@ -52,7 +52,7 @@ pub enum RelayError {
     Net(#[from] NetError),
     /// No learner answered in time.
     #[error(
-        "no learner{} answered at {endpoints} within {waited:?}: is it started with --listen on that address, and do both use the same TLS or user settings?",
+        "no learner{} answered at {endpoints} within {waited:?}: is it started with --listen on that address, and do both use the same user and password settings?",
         run.as_ref().map_or(String::new(), |run| format!(" of run '{run}'"))
     )]
     NoLearner {

@@ -709,6 +709,11 @@ fn numbers_outside_their_ranges_are_refused_before_anything_runs() {
             "--connect udp/127.0.0.1:7447: endpoint \"udp/127.0.0.1:7447\": protocol \"udp\" is not built in",
         ),
         (
+            &["run", "grid", "--listen", "tls/127.0.0.1:7447"],
+            2,
+            "--listen tls/127.0.0.1:7447: endpoint \"tls/127.0.0.1:7447\": TLS is not built in: Zenoh 1.10's TLS links are unsound",
+        ),
+        (
             &["run", "grid", "--listen", "127.0.0.1:7447"],
             2,
             "--listen 127.0.0.1:7447: endpoint \"127.0.0.1:7447\": no protocol",

@@ -294,7 +294,7 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
     };
     let said = refused("relay-refused-h1", &["--zenoh-config", wrong.to_str().unwrap()]);
     assert!(
-        said.contains("no learner answered") && said.contains("TLS or user settings"),
+        said.contains("no learner answered") && said.contains("same user and password settings"),
         "{said}"
     );
     let said = refused(
