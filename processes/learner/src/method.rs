@@ -1,9 +1,9 @@
-//! The paper's context-selection methods by name, their configurations (each with only the
-//! parameters it uses), and how each is built for a problem.
+//! The context-selection methods by name (the paper's, and the teachers beyond it), their
+//! configurations (each with only the parameters it uses), and how each is built for a problem.
 
 use crate::selection::{
-    BanditSelector, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward, RoundRobin, SaggRiac, SaggRiacConfig,
-    SelectorCreateError, UniformContinuous, UniformDiscrete,
+    AbsoluteProgress, AbsoluteProgressConfig, BanditSelector, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward,
+    RetireConfig, RoundRobin, SaggRiac, SaggRiacConfig, SelectorCreateError, UniformContinuous, UniformDiscrete,
 };
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
@@ -32,11 +32,13 @@ pub enum Method {
     MonotonicProgress,
     /// SAGG-RIAC goal generation over the continuous space, snapped to the training contexts.
     SaggRiac,
+    /// Training contexts in proportion to their absolute learning progress (beyond the paper).
+    AbsoluteProgress,
 }
 
 impl Method {
     /// Every method, in the order of the paper's figures.
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 10] = [
         Method::RoundRobin,
         Method::Random,
         Method::RandomContinuous,
@@ -46,6 +48,7 @@ impl Method {
         Method::OneStepProgress,
         Method::MonotonicProgress,
         Method::SaggRiac,
+        Method::AbsoluteProgress,
     ];
 
     /// The command-line and summary name.
@@ -60,6 +63,7 @@ impl Method {
             Method::OneStepProgress => "one-step-progress",
             Method::MonotonicProgress => "monotonic-progress",
             Method::SaggRiac => "sagg-riac",
+            Method::AbsoluteProgress => "absolute-progress",
         }
     }
 
@@ -84,7 +88,7 @@ impl fmt::Display for Method {
 /// A name that [`Method::from_str`] does not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac"
+    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress"
 )]
 pub struct MethodParseError(pub String);
 
@@ -125,6 +129,9 @@ pub struct BanditConfig {
     /// What a progress heuristic compares a context's first return with (ignored by best
     /// reward and diversity, which have no baseline).
     pub first_visit: FirstVisit,
+    /// Retire solved contexts (beyond the paper; default: no, as in the paper).
+    #[serde(default)]
+    pub retire: Option<RetireConfig>,
 }
 
 impl Default for BanditConfig {
@@ -142,6 +149,7 @@ impl BanditConfig {
             intrinsic_reward,
             ducb: DUcbConfig::default(),
             first_visit: FirstVisit::default(),
+            retire: None,
         }
     }
 }
@@ -201,6 +209,8 @@ pub enum SelectorConfig {
     /// SAGG-RIAC goal generation over the continuous space, snapped to the training contexts
     /// (paper Sec. 2.2 and 4).
     SaggRiac(SaggRiacConfig),
+    /// Absolute learning progress over the training contexts.
+    AbsoluteProgress(AbsoluteProgressConfig),
 }
 
 impl Default for SelectorConfig {
@@ -228,9 +238,15 @@ impl From<SaggRiacConfig> for SelectorConfig {
     }
 }
 
+impl From<AbsoluteProgressConfig> for SelectorConfig {
+    fn from(config: AbsoluteProgressConfig) -> Self {
+        Self::AbsoluteProgress(config)
+    }
+}
+
 impl From<Method> for SelectorConfig {
-    /// The method with default parameters: [`BanditConfig::new`] for the D-UCB methods,
-    /// [`SaggRiacConfig::default`] for SAGG-RIAC.
+    /// The method with default parameters: [`BanditConfig::new`] for the D-UCB methods, and the
+    /// `Default` of the others' configurations.
     fn from(method: Method) -> Self {
         match method {
             Method::RoundRobin => Baseline::RoundRobin.into(),
@@ -238,6 +254,7 @@ impl From<Method> for SelectorConfig {
             Method::RandomContinuous => Baseline::RandomContinuous.into(),
             Method::Corners => Baseline::Corners.into(),
             Method::SaggRiac => SaggRiacConfig::default().into(),
+            Method::AbsoluteProgress => AbsoluteProgressConfig::default().into(),
             Method::BestReward | Method::Diversity | Method::OneStepProgress | Method::MonotonicProgress => {
                 let reward = method
                     .intrinsic_reward()
@@ -268,6 +285,7 @@ impl SelectorConfig {
                 IntrinsicReward::MonotonicProgress => Method::MonotonicProgress,
             },
             Self::SaggRiac(_) => Method::SaggRiac,
+            Self::AbsoluteProgress(_) => Method::AbsoluteProgress,
         }
     }
 
@@ -280,13 +298,20 @@ impl SelectorConfig {
             Self::Baseline(Baseline::Corners) => Box::new(RoundRobin::farthest(contexts)?),
             Self::Baseline(Baseline::Random) => Box::new(UniformDiscrete::new(contexts)?),
             Self::Baseline(Baseline::RandomContinuous) => Box::new(UniformContinuous::new(problem.space.clone())?),
-            Self::Bandit(bandit) => Box::new(BanditSelector::new(
-                contexts,
-                bandit.ducb.clone(),
-                bandit.intrinsic_reward,
-                bandit.first_visit,
-            )?),
+            Self::Bandit(bandit) => {
+                let selector = BanditSelector::new(
+                    contexts,
+                    bandit.ducb.clone(),
+                    bandit.intrinsic_reward,
+                    bandit.first_visit,
+                )?;
+                match &bandit.retire {
+                    Some(retire) => Box::new(selector.with_retirement(retire.clone())?),
+                    None => Box::new(selector),
+                }
+            }
             Self::SaggRiac(config) => Box::new(SaggRiac::new(problem.space.clone(), Some(contexts), config.clone())?),
+            Self::AbsoluteProgress(config) => Box::new(AbsoluteProgress::new(contexts, config.clone())?),
         })
     }
 }
