@@ -2,8 +2,9 @@
 //! configurations (each with only the parameters it uses), and how each is built for a problem.
 
 use crate::selection::{
-    AbsoluteProgress, AbsoluteProgressConfig, BanditSelector, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward,
-    RetireConfig, RoundRobin, SaggRiac, SaggRiacConfig, SelectorCreateError, UniformContinuous, UniformDiscrete,
+    AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, ContextSelector, DUcbConfig,
+    FirstVisit, IntrinsicReward, RetireConfig, RoundRobin, SaggRiac, SaggRiacConfig, SelectorCreateError,
+    UniformContinuous, UniformDiscrete,
 };
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
@@ -34,11 +35,13 @@ pub enum Method {
     SaggRiac,
     /// Training contexts in proportion to their absolute learning progress (beyond the paper).
     AbsoluteProgress,
+    /// ALP-GMM over the continuous space (beyond the paper).
+    AlpGmm,
 }
 
 impl Method {
     /// Every method, in the order of the paper's figures.
-    pub const ALL: [Method; 10] = [
+    pub const ALL: [Method; 11] = [
         Method::RoundRobin,
         Method::Random,
         Method::RandomContinuous,
@@ -49,6 +52,7 @@ impl Method {
         Method::MonotonicProgress,
         Method::SaggRiac,
         Method::AbsoluteProgress,
+        Method::AlpGmm,
     ];
 
     /// The command-line and summary name.
@@ -64,6 +68,7 @@ impl Method {
             Method::MonotonicProgress => "monotonic-progress",
             Method::SaggRiac => "sagg-riac",
             Method::AbsoluteProgress => "absolute-progress",
+            Method::AlpGmm => "alp-gmm",
         }
     }
 
@@ -88,7 +93,7 @@ impl fmt::Display for Method {
 /// A name that [`Method::from_str`] does not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress"
+    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, alp-gmm"
 )]
 pub struct MethodParseError(pub String);
 
@@ -159,7 +164,9 @@ impl BanditConfig {
 /// [`Learner::with_selector`](crate::Learner::with_selector).
 ///
 /// ```
-/// use acps_learner::selection::{DUcbConfig, IntrinsicReward, SaggRiacConfig};
+/// use acps_learner::selection::{
+///     AbsoluteProgressConfig, AlpGmmConfig, DUcbConfig, IntrinsicReward, RetireConfig, SaggRiacConfig,
+/// };
 /// use acps_learner::{BanditConfig, Baseline, Method, SelectorConfig};
 /// use acps_shared::{ContextSpace, EnvironmentSpec, Problem, ScoreAggregate};
 ///
@@ -192,11 +199,29 @@ impl BanditConfig {
 /// // SAGG-RIAC with a longer interest window.
 /// let sagg_riac = SelectorConfig::from(SaggRiacConfig { window: 20, ..SaggRiacConfig::default() });
 ///
-/// for config in [proposal, random, scaled, sagg_riac] {
+/// // Beyond the paper: the paper's proposal retiring solved contexts, and absolute progress.
+/// let retiring = SelectorConfig::from(BanditConfig {
+///     retire: Some(RetireConfig::default()),
+///     ..BanditConfig::default()
+/// });
+/// let progress = SelectorConfig::from(AbsoluteProgressConfig { random_share: 0.1, ..Default::default() });
+///
+/// for config in [proposal, random, scaled, sagg_riac, retiring, progress] {
+///     assert!(!config.draws_from_space());
 ///     let mut selector = config.build(&problem)?;
 ///     let choice = selector.choose(&mut rand::rng());
 ///     assert!(choice.arm.is_some_and(|arm| arm < 5));
 /// }
+///
+/// // ALP-GMM draws from the continuous space [0, 1] (refit every 100 contexts), unless it is
+/// // snapped to the training contexts.
+/// let alp_gmm = AlpGmmConfig { fit_rate: 100, ..AlpGmmConfig::default() };
+/// let continuous = SelectorConfig::from(alp_gmm.clone());
+/// assert!(continuous.draws_from_space());
+/// let choice = continuous.build(&problem)?.choose(&mut rand::rng());
+/// assert!(choice.arm.is_none() && problem.space.contains(&choice.context));
+/// let snapped = SelectorConfig::AlpGmm { config: alp_gmm, snap: true };
+/// assert!(snapped.build(&problem)?.choose(&mut rand::rng()).arm.is_some());
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -211,6 +236,14 @@ pub enum SelectorConfig {
     SaggRiac(SaggRiacConfig),
     /// Absolute learning progress over the training contexts.
     AbsoluteProgress(AbsoluteProgressConfig),
+    /// ALP-GMM over the continuous space.
+    AlpGmm {
+        /// Its parameters.
+        config: AlpGmmConfig,
+        /// Replace every context by the nearest training context, for problems that take only
+        /// those (as SAGG-RIAC does).
+        snap: bool,
+    },
 }
 
 impl Default for SelectorConfig {
@@ -244,6 +277,13 @@ impl From<AbsoluteProgressConfig> for SelectorConfig {
     }
 }
 
+impl From<AlpGmmConfig> for SelectorConfig {
+    /// ALP-GMM over the continuous space, not snapped.
+    fn from(config: AlpGmmConfig) -> Self {
+        Self::AlpGmm { config, snap: false }
+    }
+}
+
 impl From<Method> for SelectorConfig {
     /// The method with default parameters: [`BanditConfig::new`] for the D-UCB methods, and the
     /// `Default` of the others' configurations.
@@ -255,6 +295,7 @@ impl From<Method> for SelectorConfig {
             Method::Corners => Baseline::Corners.into(),
             Method::SaggRiac => SaggRiacConfig::default().into(),
             Method::AbsoluteProgress => AbsoluteProgressConfig::default().into(),
+            Method::AlpGmm => AlpGmmConfig::default().into(),
             Method::BestReward | Method::Diversity | Method::OneStepProgress | Method::MonotonicProgress => {
                 let reward = method
                     .intrinsic_reward()
@@ -286,11 +327,21 @@ impl SelectorConfig {
             },
             Self::SaggRiac(_) => Method::SaggRiac,
             Self::AbsoluteProgress(_) => Method::AbsoluteProgress,
+            Self::AlpGmm { .. } => Method::AlpGmm,
         }
     }
 
+    /// Whether the selector draws contexts from the continuous space rather than among the
+    /// training contexts: such a method cannot run on a problem that takes only those.
+    pub fn draws_from_space(&self) -> bool {
+        matches!(
+            self,
+            Self::Baseline(Baseline::RandomContinuous) | Self::AlpGmm { snap: false, .. }
+        )
+    }
+
     /// Build the selector for `problem`: over its training contexts, or its context space for
-    /// random (continuous) and SAGG-RIAC.
+    /// random (continuous), SAGG-RIAC and ALP-GMM.
     pub fn build(&self, problem: &Problem) -> Result<Box<dyn ContextSelector>, SelectorCreateError> {
         let contexts = problem.training_contexts.clone();
         Ok(match self {
@@ -312,6 +363,11 @@ impl SelectorConfig {
             }
             Self::SaggRiac(config) => Box::new(SaggRiac::new(problem.space.clone(), Some(contexts), config.clone())?),
             Self::AbsoluteProgress(config) => Box::new(AbsoluteProgress::new(contexts, config.clone())?),
+            Self::AlpGmm { config, snap } => Box::new(AlpGmm::new(
+                problem.space.clone(),
+                snap.then_some(contexts),
+                config.clone(),
+            )?),
         })
     }
 }

@@ -87,6 +87,19 @@ pub enum SelectorCreateError {
     /// Retired contexts probed more often than every second choice.
     #[error("retire probe_every must be >= 2, got {0}")]
     ProbeEvery(usize),
+    /// ALP-GMM's largest mixture outside its accepted range.
+    #[error("alp-gmm max_components must be in 2..=20, got {0}")]
+    MaxComponents(usize),
+    /// ALP-GMM's fit rate too small for its largest mixture, or too large.
+    #[error(
+        "alp-gmm fit_rate must be in {fewest}..=100000 (10 points per component of the largest mixture), got {fit_rate}"
+    )]
+    FitRate {
+        /// The offending fit rate.
+        fit_rate: usize,
+        /// The smallest one accepted with this `max_components`.
+        fewest: usize,
+    },
 }
 
 /// Why [`ContextSelector::restore_state`](super::ContextSelector::restore_state) refuses a saved
@@ -133,6 +146,9 @@ pub enum SelectorRestoreError {
     /// Absolute-progress statistics of another number of contexts; says why.
     #[error("selector state: absolute progress: {0}")]
     AbsoluteProgress(String),
+    /// ALP-GMM history or mixture that does not fit this selector; says why.
+    #[error("selector state: ALP-GMM: {0}")]
+    AlpGmm(String),
     /// A state a selector defined outside this crate refuses; its message says why.
     #[error("selector state: {0}")]
     Custom(String),

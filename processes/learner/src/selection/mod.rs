@@ -13,20 +13,27 @@
 //!   fast and a slow moving average of their returns (Kanitscheider et al. 2021).
 //! - [`RetireConfig`]: [`BanditSelector`] and [`AbsoluteProgress`] may retire solved contexts
 //!   and bring them back when their return falls (the paper's outlook, Sec. 6).
+//! - [`AlpGmm`]: contexts drawn from the continuous space where a Gaussian mixture over
+//!   (context, absolute learning progress) places the progress (Portelas et al. 2019).
 
 mod absolute_progress;
+mod alp_gmm;
 mod bandit;
 mod baselines;
 mod ducb;
 mod error;
 mod geometry;
+mod gmm;
 mod intrinsic;
+mod neighbours;
 mod progress;
 mod retire;
 mod sagg_riac;
 mod validate;
 
 pub use absolute_progress::{AbsoluteProgress, AbsoluteProgressConfig, AbsoluteProgressState};
+pub use alp_gmm::{AlpGmm, AlpGmmConfig, AlpGmmState};
+pub use gmm::Component;
 
 pub use bandit::BanditSelector;
 pub use baselines::{RoundRobin, UniformContinuous, UniformDiscrete};
@@ -114,6 +121,9 @@ pub enum SelectorState {
     SaggRiac(SaggRiacState),
     /// [`AbsoluteProgress`]: the moving averages, the initial sweep and the retired contexts.
     AbsoluteProgress(AbsoluteProgressState),
+    /// [`AlpGmm`]: the contexts seen with their returns, the points of the next fit and the
+    /// mixture of the last.
+    AlpGmm(AlpGmmState),
     /// A selector defined elsewhere, in an encoding of its own.
     Custom(Vec<u8>),
 }
@@ -128,6 +138,7 @@ impl SelectorState {
             SelectorState::Bandit { .. } => "D-UCB",
             SelectorState::SaggRiac(_) => "SAGG-RIAC",
             SelectorState::AbsoluteProgress(_) => "absolute progress",
+            SelectorState::AlpGmm(_) => "ALP-GMM",
             SelectorState::Custom(_) => "custom",
         }
     }
