@@ -103,9 +103,10 @@ impl Mixture {
                 *r = self.log_joint(c, point, &mut work);
             }
             let max = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let log_sum = max + row.iter().map(|l| (l - max).exp()).sum::<f64>().ln();
-            row.iter_mut().for_each(|r| *r = (*r - log_sum).exp());
-            total += log_sum;
+            row.iter_mut().for_each(|r| *r = (*r - max).exp());
+            let sum: f64 = row.iter().sum();
+            row.iter_mut().for_each(|r| *r /= sum);
+            total += max + sum.ln();
         }
         (total, responsibilities)
     }
