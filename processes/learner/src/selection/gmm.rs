@@ -2,10 +2,11 @@
 //!
 //! As scikit-learn's `GaussianMixture` (which the original ALP-GMM uses) with its defaults: EM
 //! until the mean log-likelihood per point changes by less than 1e-3, at most 100 iterations,
-//! 1e-6 added to every covariance's diagonal so that none becomes singular. The start differs:
-//! scikit-learn runs k-means first; here the points are split among k centres chosen by
-//! k-means++ from the caller's random stream, so a fit is a function of the data and that stream.
-//! The number of components is chosen by the Akaike information criterion, as in the original.
+//! 1e-6 added to every covariance's diagonal so that none becomes singular, and a start from the
+//! partition of Lloyd's k-means seeded by k-means++. Scikit-learn's k-means seeds greedily from
+//! several candidates and restarts; here one k-means++ seeding draws from the caller's random
+//! stream, so a fit is a function of the data and that stream. The number of components is
+//! chosen by the Akaike information criterion, as in the original.
 
 use super::progress::proportional;
 use rand::{Rng, RngCore};
@@ -127,17 +128,10 @@ impl Mixture {
     /// than `k` distinct points or a covariance cannot be factorised.
     pub(crate) fn fit(data: &[f64], dim: usize, k: usize, rng: &mut dyn RngCore) -> Option<(Self, f64)> {
         let n = data.len() / dim;
-        let centres = kmeans_plus_plus(data, dim, k, rng)?;
+        let labels = kmeans(data, dim, kmeans_plus_plus(data, dim, k, rng)?);
         let mut responsibilities = vec![0.0; n * k];
-        for (point, row) in data.chunks(dim).zip(responsibilities.chunks_mut(k)) {
-            let nearest = (0..k).fold(0, |best, c| {
-                if distance2(point, &centres[c]) < distance2(point, &centres[best]) {
-                    c
-                } else {
-                    best
-                }
-            });
-            row[nearest] = 1.0;
+        for (row, &label) in responsibilities.chunks_mut(k).zip(&labels) {
+            row[label] = 1.0;
         }
         let mut mixture = maximise(data, dim, k, &responsibilities)?;
         let mut previous = f64::NEG_INFINITY;
@@ -202,6 +196,41 @@ fn kmeans_plus_plus(data: &[f64], dim: usize, k: usize, rng: &mut dyn RngCore) -
         centres.push(next);
     }
     Some(centres)
+}
+
+/// Lloyd's k-means from `centres` until no point changes its centre (at most
+/// [`MAX_ITERATIONS`] rounds): the label of every point, its nearest centre (ties to the lowest
+/// index). A centre that loses every point stays where it was.
+fn kmeans(data: &[f64], dim: usize, mut centres: Vec<Vec<f64>>) -> Vec<usize> {
+    let nearest = |point: &[f64], centres: &[Vec<f64>]| {
+        (0..centres.len()).fold(0, |best, c| {
+            if distance2(point, &centres[c]) < distance2(point, &centres[best]) {
+                c
+            } else {
+                best
+            }
+        })
+    };
+    let mut labels: Vec<usize> = data.chunks(dim).map(|point| nearest(point, &centres)).collect();
+    for _ in 0..MAX_ITERATIONS {
+        let mut sums = vec![vec![0.0; dim]; centres.len()];
+        let mut counts = vec![0usize; centres.len()];
+        for (point, &label) in data.chunks(dim).zip(&labels) {
+            sums[label].iter_mut().zip(point).for_each(|(s, x)| *s += x);
+            counts[label] += 1;
+        }
+        for ((centre, sum), &count) in centres.iter_mut().zip(sums).zip(&counts) {
+            if count > 0 {
+                *centre = sum.into_iter().map(|s| s / count as f64).collect();
+            }
+        }
+        let next: Vec<usize> = data.chunks(dim).map(|point| nearest(point, &centres)).collect();
+        if next == labels {
+            break;
+        }
+        labels = next;
+    }
+    labels
 }
 
 /// The M step: weights, means and regularised covariances from the responsibilities.
