@@ -22,7 +22,7 @@ use super::geometry::{nearest, project};
 use super::gmm::{Component, Mixture};
 use super::neighbours::NeighbourIndex;
 use super::progress::proportional;
-use super::validate::{check_contexts, check_space};
+use super::validate::check_space_and_snap;
 use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
@@ -126,10 +126,7 @@ impl AlpGmm {
         snap_to: Option<Vec<Vec<f64>>>,
         config: AlpGmmConfig,
     ) -> Result<Self, SelectorCreateError> {
-        check_space(&space)?;
-        if let Some(contexts) = &snap_to {
-            check_contexts(contexts, Some(space.dim()))?;
-        }
+        check_space_and_snap(&space, snap_to.as_deref())?;
         config.validate()?;
         let (low, high) = space.bounding_box();
         let width = low.iter().zip(&high).map(|(l, h)| h - l).collect();
@@ -330,23 +327,43 @@ mod tests {
 
     /// A problem where only the left third of the square learns: the return of a context with
     /// x < -4/3 rises with the number of visits there, everywhere else it is 0 (plus a tiny
-    /// deterministic ripple). Returns the contexts chosen.
-    fn run(selector: &mut AlpGmm, rng: &mut ChaCha8Rng, steps: usize, scale: f64) -> Vec<Vec<f64>> {
-        let mut left_visits = 0.0;
-        (0..steps)
+    /// deterministic ripple).
+    #[derive(Default)]
+    struct LeftThird {
+        visits: f64,
+    }
+
+    impl LeftThird {
+        fn reward(&mut self, context: &[f64], t: usize) -> f64 {
+            if context[0] < -4.0 / 3.0 {
+                self.visits += 1.0;
+                self.visits * (1.0 + 0.1 * (t as f64).sin())
+            } else {
+                1e-3 * (t as f64).cos()
+            }
+        }
+    }
+
+    /// The contexts `selector` chooses at `steps` of `problem`, its returns times `scale`.
+    fn run_on(
+        selector: &mut AlpGmm,
+        rng: &mut ChaCha8Rng,
+        problem: &mut LeftThird,
+        steps: std::ops::Range<usize>,
+        scale: f64,
+    ) -> Vec<Vec<f64>> {
+        steps
             .map(|t| {
                 let choice = selector.choose(rng);
-                let x = choice.context[0];
-                let reward = if x < -4.0 / 3.0 {
-                    left_visits += 1.0;
-                    left_visits * (1.0 + 0.1 * (t as f64).sin())
-                } else {
-                    1e-3 * (t as f64).cos()
-                };
-                selector.observe(&choice, scale * reward);
+                selector.observe(&choice, scale * problem.reward(&choice.context, t));
                 choice.context
             })
             .collect()
+    }
+
+    /// `steps` choices on a fresh [`LeftThird`].
+    fn run(selector: &mut AlpGmm, rng: &mut ChaCha8Rng, steps: usize, scale: f64) -> Vec<Vec<f64>> {
+        run_on(selector, rng, &mut LeftThird::default(), 0..steps, scale)
     }
 
     #[test]
@@ -451,26 +468,13 @@ mod tests {
         let expected = run(&mut uninterrupted, &mut ChaCha8Rng::seed_from_u64(3), 450, 1.0);
         // Cut at 100 (a fit is due, not yet made), 250 (between fits) and 300 (due again).
         for cut in [100, 250, 300] {
-            let mut rng = ChaCha8Rng::seed_from_u64(3);
+            let (mut rng, mut problem) = (ChaCha8Rng::seed_from_u64(3), LeftThird::default());
             let mut first = AlpGmm::new(square(), None, small()).unwrap();
-            let mut contexts = run(&mut first, &mut rng, cut, 1.0);
+            let mut contexts = run_on(&mut first, &mut rng, &mut problem, 0..cut, 1.0);
             let mut second = AlpGmm::new(square(), None, small()).unwrap();
             second.restore_state(first.save_state()).unwrap();
             assert_eq!(second.save_state(), first.save_state());
-            // The problem's own visit counter restarts; continue it by hand.
-            let mut left_visits = contexts.iter().filter(|c| c[0] < -4.0 / 3.0).count() as f64;
-            for t in cut..450 {
-                let choice = second.choose(&mut rng);
-                let x = choice.context[0];
-                let reward = if x < -4.0 / 3.0 {
-                    left_visits += 1.0;
-                    left_visits * (1.0 + 0.1 * (t as f64).sin())
-                } else {
-                    1e-3 * (t as f64).cos()
-                };
-                second.observe(&choice, reward);
-                contexts.push(choice.context);
-            }
+            contexts.extend(run_on(&mut second, &mut rng, &mut problem, cut..450, 1.0));
             assert_eq!(contexts, expected, "cut at {cut}");
             assert_eq!(second.save_state(), uninterrupted.save_state());
         }

@@ -14,7 +14,7 @@
 //! |R1| |R2| |interest(R1) - interest(R2)| and the (interest - minimum) leaf weights.
 
 use super::geometry::{nearest, project};
-use super::validate::{check_contexts, check_space};
+use super::validate::check_space_and_snap;
 use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
@@ -161,10 +161,7 @@ impl SaggRiac {
         snap_to: Option<Vec<Vec<f64>>>,
         config: SaggRiacConfig,
     ) -> Result<Self, SelectorCreateError> {
-        check_space(&space)?;
-        if let Some(contexts) = &snap_to {
-            check_contexts(contexts, Some(space.dim()))?;
-        }
+        check_space_and_snap(&space, snap_to.as_deref())?;
         config.validate()?;
         let (low, high) = space.bounding_box();
         Ok(Self {
