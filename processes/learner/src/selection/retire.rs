@@ -171,11 +171,13 @@ impl Retirement {
     pub(crate) fn restore(&mut self, state: RetirementState) -> Result<(), SelectorRestoreError> {
         let arms = self.plateaus.len();
         let refuse = |why: String| Err(SelectorRestoreError::Retirement(why));
-        if state.plateaus.len() != arms || state.cursor >= arms {
+        if state.plateaus.len() != arms || state.cursor >= arms || state.since_probe >= self.config.probe_every {
             return refuse(format!(
-                "{} contexts with the probe cursor at {}, this selector has {arms}",
+                "{} contexts with the probe cursor at {} and {} choices since a probe, this selector has {arms} and probes every {}",
                 state.plateaus.len(),
-                state.cursor
+                state.cursor,
+                state.since_probe,
+                self.config.probe_every
             ));
         }
         if state.plateaus.iter().all(Option::is_some) {
@@ -339,6 +341,9 @@ mod tests {
         assert!(retirement.restore(state).is_err());
         let other = Retirement::new(config(), 3).unwrap().state();
         assert!(retirement.restore(other).is_err());
+        let mut late = retirement.state();
+        late.since_probe = 3;
+        assert!(retirement.restore(late).is_err(), "beyond probe_every");
         let mut moved = Retirement::new(config(), 2).unwrap();
         plateau_and_climb(&mut moved, 30);
         retirement.restore(moved.state()).unwrap();
