@@ -4,7 +4,8 @@
 
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
-use acps_learner::{Learner, LearnerConfig, Method, SelectorConfig, run_in_process};
+use acps_learner::selection::{AbsoluteProgressConfig, AlpGmmConfig, EmaRates, RetireConfig};
+use acps_learner::{BanditConfig, Learner, LearnerConfig, Method, SelectorConfig, run_in_process};
 use acps_models::contextual_function::ContextualFunction;
 use acps_models::learning_model::{LearningModel, LearningModelConfig};
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
@@ -42,9 +43,11 @@ impl Environment for Flaky {
 /// A run to interrupt: a learner and its environment, built afresh for every attempt.
 #[derive(Clone, Copy, Debug)]
 enum Setup {
-    /// The contextual function with `method`, a per-task memory when `per_task`.
+    /// The contextual function with `method` (retiring solved contexts when `retire`), a
+    /// per-task memory when `per_task`.
     Function {
         method: Method,
+        retire: bool,
         seed: u64,
         in_flight: usize,
         per_task: bool,
@@ -52,9 +55,38 @@ enum Setup {
     /// The Section 4 model: no policy, and an environment that keeps state.
     Toy {
         method: Method,
+        retire: bool,
         seed: u64,
         in_flight: usize,
     },
+}
+
+/// `method`'s selector for runs of a few hundred episodes: ALP-GMM fits every 50 (snapped to the
+/// training contexts when `snap`), and retirement, when on, settles after 4 visits with a wide
+/// band, so that contexts do retire within the run.
+fn selector(method: Method, retire: bool, snap: bool) -> SelectorConfig {
+    let retire = retire.then_some(RetireConfig {
+        rates: EmaRates { fast: 0.5, slow: 0.25 },
+        tolerance: 0.3,
+        probe_every: 3,
+    });
+    match SelectorConfig::from(method) {
+        SelectorConfig::AlpGmm { .. } => SelectorConfig::AlpGmm {
+            config: AlpGmmConfig {
+                fit_rate: 50,
+                max_components: 4,
+                ..AlpGmmConfig::default()
+            },
+            snap,
+        },
+        SelectorConfig::Bandit(bandit) => BanditConfig { retire, ..bandit }.into(),
+        SelectorConfig::AbsoluteProgress(_) => AbsoluteProgressConfig {
+            retire,
+            ..AbsoluteProgressConfig::default()
+        }
+        .into(),
+        other => other,
+    }
 }
 
 impl Setup {
@@ -62,13 +94,14 @@ impl Setup {
         match self {
             Setup::Function {
                 method,
+                retire,
                 seed,
                 in_flight,
                 per_task,
             } => {
                 let function = ContextualFunction::new(2, 6, seed).unwrap();
                 let problem = function.grid_problem().unwrap();
-                let selector = SelectorConfig::from(method).build(&problem).unwrap();
+                let selector = selector(method, retire, false).build(&problem).unwrap();
                 let memory = if per_task {
                     MemoryConfig::BestPerTask { per_task: 3 }
                 } else {
@@ -93,6 +126,7 @@ impl Setup {
             }
             Setup::Toy {
                 method,
+                retire,
                 seed,
                 in_flight,
             } => {
@@ -105,7 +139,7 @@ impl Setup {
                 )
                 .unwrap();
                 let problem = model.problem();
-                let selector = SelectorConfig::from(method).build(&problem).unwrap();
+                let selector = selector(method, retire, true).build(&problem).unwrap();
                 let config = LearnerConfig {
                     seed,
                     episodes: 200,
@@ -210,19 +244,24 @@ fn check(setup: Setup) {
 #[test]
 fn resumed_function_runs_are_bit_identical_for_every_selector() {
     let methods = [
-        Method::MonotonicProgress,
-        Method::BestReward,
-        Method::OneStepProgress,
-        Method::RoundRobin,
-        Method::Corners,
-        Method::Random,
-        Method::RandomContinuous,
-        Method::SaggRiac,
+        (Method::MonotonicProgress, false),
+        (Method::BestReward, false),
+        (Method::OneStepProgress, false),
+        (Method::RoundRobin, false),
+        (Method::Corners, false),
+        (Method::Random, false),
+        (Method::RandomContinuous, false),
+        (Method::SaggRiac, false),
+        (Method::AbsoluteProgress, false),
+        (Method::AlpGmm, false),
+        (Method::MonotonicProgress, true),
+        (Method::AbsoluteProgress, true),
     ];
-    for method in methods {
+    for (method, retire) in methods {
         for (seed, in_flight) in [(0, 1), (1, 4)] {
             check(Setup::Function {
                 method,
+                retire,
                 seed,
                 in_flight,
                 per_task: false,
@@ -232,6 +271,7 @@ fn resumed_function_runs_are_bit_identical_for_every_selector() {
     // The per-task memory, mid-window.
     check(Setup::Function {
         method: Method::Diversity,
+        retire: false,
         seed: 2,
         in_flight: 3,
         per_task: true,
@@ -240,10 +280,18 @@ fn resumed_function_runs_are_bit_identical_for_every_selector() {
 
 #[test]
 fn resumed_toy_runs_are_bit_identical_with_the_model_state() {
-    for method in [Method::MonotonicProgress, Method::SaggRiac, Method::Random] {
+    let methods = [
+        (Method::MonotonicProgress, false),
+        (Method::SaggRiac, false),
+        (Method::Random, false),
+        (Method::AbsoluteProgress, true),
+        (Method::AlpGmm, false),
+    ];
+    for (method, retire) in methods {
         for (seed, in_flight) in [(0, 1), (3, 5)] {
             check(Setup::Toy {
                 method,
+                retire,
                 seed,
                 in_flight,
             });
@@ -251,11 +299,42 @@ fn resumed_toy_runs_are_bit_identical_with_the_model_state() {
     }
 }
 
+/// The arms run 0 of `setup` chose.
+fn arms(setup: Setup) -> Vec<Option<usize>> {
+    let (mut learner, mut environment) = setup.build();
+    run_in_process(&mut learner, environment.as_mut()).unwrap();
+    learner.episodes().iter().map(|e| e.arm).collect()
+}
+
+/// The resumed runs above with retirement do retire contexts: their choices are not those of the
+/// same selector without it. (Retirement changes nothing until a context retires.)
+#[test]
+fn the_resumed_retiring_runs_did_retire() {
+    for method in [Method::MonotonicProgress, Method::AbsoluteProgress] {
+        let setup = |retire| Setup::Function {
+            method,
+            retire,
+            seed: 0,
+            in_flight: 1,
+            per_task: false,
+        };
+        assert_ne!(arms(setup(true)), arms(setup(false)), "{method}");
+    }
+    let toy = |retire| Setup::Toy {
+        method: Method::AbsoluteProgress,
+        retire,
+        seed: 0,
+        in_flight: 1,
+    };
+    assert_ne!(arms(toy(true)), arms(toy(false)));
+}
+
 #[test]
 fn the_interrupted_runs_did_fail_retry_and_update() {
     // The reference runs above exercise retries, failed episodes and updates.
     let (mut learner, mut environment) = Setup::Function {
         method: Method::MonotonicProgress,
+        retire: false,
         seed: 1,
         in_flight: 4,
         per_task: false,
@@ -273,6 +352,7 @@ fn the_interrupted_runs_did_fail_retry_and_update() {
 fn a_checkpoint_of_another_selector_or_window_is_refused() {
     let setup = |method, in_flight| Setup::Function {
         method,
+        retire: false,
         seed: 0,
         in_flight,
         per_task: false,
@@ -296,6 +376,7 @@ fn a_checkpoint_of_another_selector_or_window_is_refused() {
     // A toy checkpoint (no policy, a model state) for a function learner.
     let toy = Setup::Toy {
         method: Method::RoundRobin,
+        retire: false,
         seed: 0,
         in_flight: 2,
     };

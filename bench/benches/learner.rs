@@ -1,17 +1,24 @@
 //! Cost of the learner's hot operations: one C-REPS update at the PA-10 scale (N = 300 samples,
 //! 21 parameters, 6 polar-quadratic features, epsilon 0.5) and at the Section 5.1 scale (N = 50,
-//! 20 parameters, 6 quadratic features, epsilon 2), and one D-UCB step over K = 81 arms. The
-//! learner must stay far below the time of the rollouts it serves.
+//! 20 parameters, 6 quadratic features, epsilon 2), and one step (choose and observe) of the
+//! context selectors: D-UCB over K = 81 arms, with and without retirement, absolute progress over
+//! K = 81, and ALP-GMM between its refits, with a refit measured on its own. The learner must
+//! stay far below the time of the rollouts it serves.
 //!
 //! Before measuring, the Newton steps per update of 200 seeded data sets of each scale are
 //! printed.
 
 use acps_learner::creps::{CReps, CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
-use acps_learner::selection::{BanditSelector, Choice, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward};
+use acps_learner::selection::{
+    AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, Choice, ContextSelector,
+    DUcbConfig, FirstVisit, IntrinsicReward, RetireConfig,
+};
+use acps_shared::ContextSpace;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
+use std::time::{Duration, Instant};
 
 /// A C-REPS learner whose memory holds all but one rollout of an update, and that rollout: the
 /// next `record` runs an update.
@@ -128,30 +135,131 @@ fn creps_update(c: &mut Criterion) {
     }
 }
 
-fn ducb_step(c: &mut Criterion) {
+/// One choose and one observe of `selector`, the return drawn by `reward` from the choice.
+fn step(
+    selector: &mut dyn ContextSelector,
+    rng: &mut ChaCha8Rng,
+    reward_rng: &mut ChaCha8Rng,
+    reward: &impl Fn(&Choice, &mut ChaCha8Rng) -> f64,
+) -> Choice {
+    let choice = selector.choose(rng);
+    let r = reward(&choice, reward_rng);
+    selector.observe(&choice, r);
+    choice
+}
+
+/// The return of a choice, drawn with the given stream.
+type Reward = fn(&Choice, &mut ChaCha8Rng) -> f64;
+
+/// K = 81 arms whose returns have levels 100 apart and noise of 10, as on the dartboard (the
+/// paper's largest K) with returns of a few thousand.
+fn arm_levels(choice: &Choice, rng: &mut ChaCha8Rng) -> f64 {
+    -100.0 * choice.arm.unwrap_or(0) as f64 - 10.0 * rng.random::<f64>()
+}
+
+fn selector_steps(c: &mut Criterion) {
     let contexts: Vec<Vec<f64>> = (0..81).map(|i| vec![i as f64]).collect();
     let ducb = DUcbConfig {
         gamma: 0.99,
         xi: 1e-9,
         b: 10_000.0,
     };
-    let mut selector = BanditSelector::new(
-        contexts,
-        ducb,
-        IntrinsicReward::MonotonicProgress,
-        FirstVisit::InitialReturn,
-    )
-    .unwrap();
+    let bandit = || {
+        BanditSelector::new(
+            contexts.clone(),
+            ducb.clone(),
+            IntrinsicReward::MonotonicProgress,
+            FirstVisit::InitialReturn,
+        )
+        .unwrap()
+    };
+    let noise: Reward = |_, rng| -rng.random::<f64>() * 1e4;
+    let retiring = bandit().with_retirement(RetireConfig::default()).unwrap();
+    let progress = AbsoluteProgress::new(contexts.clone(), AbsoluteProgressConfig::default()).unwrap();
+    let mut cases: [(&str, Box<dyn ContextSelector>, Reward); 3] = [
+        ("ducb_step_k81_choose_and_observe", Box::new(bandit()), noise),
+        (
+            "ducb_retire_step_k81_choose_and_observe",
+            Box::new(retiring),
+            arm_levels,
+        ),
+        (
+            "absolute_progress_step_k81_choose_and_observe",
+            Box::new(progress),
+            arm_levels,
+        ),
+    ];
+    for (name, selector, reward) in &mut cases {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut reward_rng = ChaCha8Rng::seed_from_u64(1);
+        // Past the initial sweep, with averages settled and (with retirement) contexts retired.
+        for _ in 0..2000 {
+            step(selector.as_mut(), &mut rng, &mut reward_rng, reward);
+        }
+        c.bench_function(name, |b| {
+            b.iter(|| black_box(step(selector.as_mut(), &mut rng, &mut reward_rng, reward).arm))
+        });
+    }
+}
+
+/// ALP-GMM over the grid's target box [-5, -3]^2 with the original's parameters, after
+/// `observations` steps on a return that changes with the context and over time.
+fn alp_gmm_after(observations: usize) -> (AlpGmm, ChaCha8Rng, ChaCha8Rng) {
+    let space = ContextSpace::new_box(vec![-5.0, -5.0], vec![-3.0, -3.0]).unwrap();
+    let mut selector = AlpGmm::new(space, None, AlpGmmConfig::default()).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut reward_rng = ChaCha8Rng::seed_from_u64(1);
-    c.bench_function("ducb_step_k81_choose_and_observe", |b| {
-        b.iter(|| {
-            let choice: Choice = selector.choose(&mut rng);
-            selector.observe(&choice, -reward_rng.random::<f64>() * 1e4);
-            black_box(choice.arm)
+    for _ in 0..observations {
+        let t = selector.observations();
+        step(&mut selector, &mut rng, &mut reward_rng, &grid_return(t));
+    }
+    (selector, rng, reward_rng)
+}
+
+/// A return that improves over `t` observations, fastest in one corner of the box.
+fn grid_return(t: u64) -> impl Fn(&Choice, &mut ChaCha8Rng) -> f64 {
+    move |choice, rng| {
+        let (x, y) = (choice.context[0] + 4.0, choice.context[1] + 4.0);
+        let rate = 1e-3 * (1.0 + (3.0 * x).cos() * (2.0 * y).sin());
+        -(x * x + y * y) * (-rate * t as f64).exp() - 0.01 * rng.random::<f64>()
+    }
+}
+
+fn alp_gmm(c: &mut Criterion) {
+    const HISTORY: usize = 10_000;
+    let fit_rate = AlpGmmConfig::default().fit_rate;
+    // 10,000 observations (the grid's length) make a fit due: one choice makes it.
+    let (due, rng, reward_rng) = alp_gmm_after(HISTORY);
+    c.bench_function("alp_gmm_refit_fit_rate250_k2to10", |b| {
+        b.iter_batched(
+            || (due.clone(), rng.clone()),
+            |(mut selector, mut rng)| black_box(selector.choose(&mut rng)),
+            BatchSize::SmallInput,
+        )
+    });
+    let (mut fitted, mut rng, mut reward_rng) = (due, rng, reward_rng);
+    step(&mut fitted, &mut rng, &mut reward_rng, &grid_return(HISTORY as u64));
+    assert!(fitted.mixture().is_some());
+    // Steps between two fits: start again from the fitted state before the next one falls due.
+    c.bench_function("alp_gmm_step_history10000_choose_and_observe", |b| {
+        b.iter_custom(|iterations| {
+            let mut elapsed = Duration::ZERO;
+            let mut done = 0;
+            while done < iterations {
+                let mut selector = fitted.clone();
+                let steps = (iterations - done).min(fit_rate as u64 - 2);
+                let reward = grid_return(HISTORY as u64);
+                let start = Instant::now();
+                for _ in 0..steps {
+                    black_box(step(&mut selector, &mut rng, &mut reward_rng, &reward));
+                }
+                elapsed += start.elapsed();
+                done += steps;
+            }
+            elapsed
         })
     });
 }
 
-criterion_group!(benches, creps_update, ducb_step);
+criterion_group!(benches, creps_update, selector_steps, alp_gmm);
 criterion_main!(benches);

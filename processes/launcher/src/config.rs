@@ -13,7 +13,7 @@ use crate::experiment::Experiment;
 use crate::paper::{self, Options, Overrides};
 use crate::problem_file::{CheckedProblem, ProblemFile};
 use acps_learner::creps::MemoryConfig;
-use acps_learner::selection::FirstVisit;
+use acps_learner::selection::{AlpGmmConfig, EmaRates, FirstVisit};
 use acps_learner::{Method, SelectorConfig};
 use acps_wire::ipc;
 use acps_wire::wire::MAX_THETA;
@@ -153,8 +153,8 @@ pub struct ExperimentFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub in_flight: Option<usize>,
     /// Run only this method (repeatable): round-robin, random, random-continuous, corners,
-    /// best-reward, diversity, one-step-progress, monotonic-progress or sagg-riac [default: the
-    /// methods of the paper's figure].
+    /// best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, or beyond the
+    /// paper absolute-progress or alp-gmm [default: the methods of the paper's figure].
     #[arg(long = "method", value_name = "METHOD")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub methods: Option<Vec<Method>>,
@@ -187,6 +187,41 @@ pub struct ExperimentFile {
     #[arg(long, allow_hyphen_values = true, value_parser = parse_option::<f64>("xi"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub xi: Option<f64>,
+    /// D-UCB methods and absolute-progress: retire a context whose return has reached a plateau,
+    /// probe it every 10th choice and bring it back when its return falls (beyond the paper;
+    /// docs/CHOICES.md) [default: false].
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retire: Option<bool>,
+    /// absolute-progress and alp-gmm: share of contexts drawn uniformly (0..=1) [default: 0.2].
+    #[arg(long, value_name = "SHARE", allow_hyphen_values = true, value_parser = parse_option::<f64>("random_share"))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub random_share: Option<f64>,
+    /// absolute-progress: rate of the fast moving average of a context's return, in (0, 1] and
+    /// above --ema-slow [default: 0.1].
+    #[arg(long, value_name = "RATE", allow_hyphen_values = true, value_parser = parse_option::<f64>("ema_fast"))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ema_fast: Option<f64>,
+    /// absolute-progress: rate of the slow moving average, in (0, 1) and below --ema-fast
+    /// [default: 0.05].
+    #[arg(long, value_name = "RATE", allow_hyphen_values = true, value_parser = parse_option::<f64>("ema_slow"))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ema_slow: Option<f64>,
+    /// alp-gmm: contexts between two fits of its Gaussian mixture, and the points each fit uses
+    /// (10 x --max-components ..=100000) [default: 250].
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("fit_rate"))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit_rate: Option<usize>,
+    /// alp-gmm: mixtures of 2 ..= N components are fitted and compared by AIC (2..=20)
+    /// [default: 10].
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("max_components"))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_components: Option<usize>,
+    /// alp-gmm: replace every context by the nearest training context, for an experiment that
+    /// takes only those (toy) [default: false].
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub snap: Option<bool>,
     /// toy only: use the learning factors of the paper's Fig. 3 in every run instead of a random
     /// permutation per run [default: false].
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
@@ -307,7 +342,7 @@ const KEYS: &[Key] = &[
     },
     Key {
         name: "methods",
-        accepted: "a non-empty list of distinct methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac",
+        accepted: "a non-empty list of distinct methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, alp-gmm",
         applies: ALL,
     },
     Key {
@@ -338,6 +373,41 @@ const KEYS: &[Key] = &[
     Key {
         name: "xi",
         accepted: "a number in 0..=1e6 (D-UCB's exploration bonus is 2 B sqrt(xi ln n / N_i))",
+        applies: ALL,
+    },
+    Key {
+        name: "retire",
+        accepted: "true or false",
+        applies: ALL,
+    },
+    Key {
+        name: "random_share",
+        accepted: "a number in 0..=1 (the share of contexts drawn uniformly)",
+        applies: ALL,
+    },
+    Key {
+        name: "ema_fast",
+        accepted: "a number in (0, 1], above ema_slow (0.05 unless set)",
+        applies: ALL,
+    },
+    Key {
+        name: "ema_slow",
+        accepted: "a number in (0, 1), below ema_fast (0.1 unless set)",
+        applies: ALL,
+    },
+    Key {
+        name: "fit_rate",
+        accepted: "an integer in 10 * max_components (10 unless set) ..=100000 (10 points per component of the largest mixture)",
+        applies: ALL,
+    },
+    Key {
+        name: "max_components",
+        accepted: "an integer in 2..=20",
+        applies: ALL,
+    },
+    Key {
+        name: "snap",
+        accepted: "true or false",
         applies: ALL,
     },
     Key {
@@ -445,6 +515,17 @@ pub(crate) fn parse_option<T: std::str::FromStr>(
     move |text: &str| text.parse().map_err(|_| format!("must be {}", key(name).accepted))
 }
 
+/// Keys that set a parameter of one of the teachers beyond the paper: they apply only when
+/// `methods` lists one of the teachers that has it.
+const METHOD_KEYS: &[(&str, &[Method])] = &[
+    ("random_share", &[Method::AbsoluteProgress, Method::AlpGmm]),
+    ("ema_fast", &[Method::AbsoluteProgress]),
+    ("ema_slow", &[Method::AbsoluteProgress]),
+    ("fit_rate", &[Method::AlpGmm]),
+    ("max_components", &[Method::AlpGmm]),
+    ("snap", &[Method::AlpGmm]),
+];
+
 fn key(name: &str) -> &'static Key {
     KEYS.iter()
         .find(|k| k.name == name)
@@ -474,6 +555,8 @@ enum Problem {
     Missing,
     /// The key and this other one cannot both be set.
     Conflict(&'static str),
+    /// The key sets a parameter of these methods, and `methods` lists none of them.
+    NoMethod(&'static [Method]),
 }
 
 pub(crate) fn out_of_range(key: &'static str, got: impl std::fmt::Display) -> Invalid {
@@ -646,6 +729,13 @@ impl Plan {
             xi: settings.xi,
             epsilon: settings.epsilon,
             learning_factors: (settings.fig3_learning_factors == Some(true)).then_some(paper::FIG3_LEARNING_FACTORS),
+            retire: settings.retire,
+            random_share: settings.random_share,
+            ema_fast: settings.ema_fast,
+            ema_slow: settings.ema_slow,
+            fit_rate: settings.fit_rate,
+            max_components: settings.max_components,
+            snap: settings.snap,
         };
         let defaults = Options::default();
         let options = Options {
@@ -771,6 +861,15 @@ impl Plan {
             initial_sigma: creps.map(|c| c.initial_sigma),
             epsilon: creps.map(|c| c.epsilon),
             xi: recorded["ducb"]["xi"].as_f64(),
+            retire: Some(recorded["retire"].is_object()),
+            random_share: recorded["absolute_progress"]["random_share"]
+                .as_f64()
+                .or(recorded["alp_gmm"]["random_share"].as_f64()),
+            ema_fast: recorded["absolute_progress"]["rates"]["fast"].as_f64(),
+            ema_slow: recorded["absolute_progress"]["rates"]["slow"].as_f64(),
+            fit_rate: recorded["alp_gmm"]["fit_rate"].as_u64().map(|n| n as usize),
+            max_components: recorded["alp_gmm"]["max_components"].as_u64().map(|n| n as usize),
+            snap: recorded["alp_gmm"]["snap"].as_bool(),
             fig3_learning_factors: (paper == Some(Toy)).then(|| self.settings.fig3_learning_factors == Some(true)),
             problem: match &self.subject {
                 Subject::File(checked) => Some(checked.resolved.clone()),
@@ -868,6 +967,13 @@ impl ExperimentFile {
             initial_sigma: s.initial_sigma.or(base.initial_sigma),
             epsilon: s.epsilon.or(base.epsilon),
             xi: s.xi.or(base.xi),
+            retire: s.retire.or(base.retire),
+            random_share: s.random_share.or(base.random_share),
+            ema_fast: s.ema_fast.or(base.ema_fast),
+            ema_slow: s.ema_slow.or(base.ema_slow),
+            fit_rate: s.fit_rate.or(base.fit_rate),
+            max_components: s.max_components.or(base.max_components),
+            snap: s.snap.or(base.snap),
             fig3_learning_factors: s.fig3_learning_factors.or(base.fig3_learning_factors),
             problem: s.problem.or(base.problem),
         }
@@ -891,12 +997,21 @@ impl ExperimentFile {
             (Some(_), Some(_)) => return Err(Invalid::conflict("problem", "experiment")),
             (None, None) => return Err(Invalid::missing("experiment")),
         };
+        let listed = self.methods.as_deref().unwrap_or_default();
         for set in self.set_keys() {
             let key = key(&set);
             if !key.applies.contains(&kind) {
                 return Err(Invalid {
                     key: key.name,
                     problem: Problem::NotApplicable(kind),
+                });
+            }
+            if let Some((_, methods)) = METHOD_KEYS.iter().find(|(name, _)| *name == key.name)
+                && !methods.iter().any(|m| listed.contains(m))
+            {
+                return Err(Invalid {
+                    key: key.name,
+                    problem: Problem::NoMethod(methods),
                 });
             }
         }
@@ -941,11 +1056,41 @@ impl ExperimentFile {
                 in_range(key, range.contains(&value), format!("{value:?}"))?;
             }
         }
+        self.check_teachers()?;
         Ok(match (kind, &self.problem) {
             (Kind::File, Some(problem)) => Subject::File(Box::new(problem.check(stem)?)),
             (Kind::Paper(name), _) => Subject::Paper(name),
             (Kind::File, None) => unreachable!("a file's kind is that of its [problem] table"),
         })
+    }
+
+    /// The parameters of the teachers beyond the paper, each also against the other it is
+    /// bounded by (unless set, that one's default).
+    fn check_teachers(&self) -> Result<(), Invalid> {
+        let in_range = |key, ok: bool, got: String| if ok { Ok(()) } else { Err(out_of_range(key, got)) };
+        if let Some(share) = self.random_share {
+            in_range("random_share", (0.0..=1.0).contains(&share), format!("{share:?}"))?;
+        }
+        let rates = EmaRates::default();
+        let (fast, slow) = (self.ema_fast.unwrap_or(rates.fast), self.ema_slow.unwrap_or(rates.slow));
+        if let Some(fast) = self.ema_fast {
+            in_range("ema_fast", fast > slow && fast <= 1.0, format!("{fast:?}"))?;
+        }
+        if let Some(slow) = self.ema_slow {
+            in_range("ema_slow", slow > 0.0 && slow < fast && slow < 1.0, format!("{slow:?}"))?;
+        }
+        let defaults = AlpGmmConfig::default();
+        let components = self.max_components.unwrap_or(defaults.max_components);
+        if let Some(components) = self.max_components {
+            let accepted = AlpGmmConfig::MAX_COMPONENTS.contains(&components);
+            in_range("max_components", accepted, components.to_string())?;
+        }
+        if let Some(fit_rate) = self.fit_rate {
+            let fewest = AlpGmmConfig::POINTS_PER_COMPONENT * components;
+            let accepted = (fewest..=AlpGmmConfig::MAX_FIT_RATE).contains(&fit_rate);
+            in_range("fit_rate", accepted, fit_rate.to_string())?;
+        }
+        Ok(())
     }
 
     /// The file's text: `header` (comment lines) and every set key. Fails on integers TOML cannot
@@ -1044,6 +1189,10 @@ fn describe(invalid: Invalid, file: Option<&LoadedFile>, cli: &ExperimentFile) -
         Problem::Conflict(other) => {
             format!("{subject} and {other} exclude each other: give one of them")
         }
+        Problem::NoMethod(methods) => {
+            let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
+            format!("{subject} applies only when methods lists {}", names.join(" or "))
+        }
     })
 }
 
@@ -1089,6 +1238,13 @@ mod tests {
             initial_sigma: Some(1.0),
             epsilon: Some(1.0),
             xi: Some(0.0),
+            retire: Some(true),
+            random_share: Some(0.5),
+            ema_fast: Some(0.2),
+            ema_slow: Some(0.1),
+            fit_rate: Some(300),
+            max_components: Some(5),
+            snap: Some(true),
             fig3_learning_factors: Some(true),
             problem: Some(ProblemFile::default()),
         };
@@ -1327,6 +1483,173 @@ mod tests {
                 assert_eq!(again.values, job.config);
                 let replan = Plan::new(Some(&again), &ExperimentFile::default()).unwrap();
                 assert_eq!(replan.resolved(), job.config, "{name:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn teacher_keys_are_checked_against_their_ranges_each_other_and_the_methods() {
+        let cases = [
+            (
+                "methods = [\"random\"]\nfit_rate = 300\n",
+                "e.toml:3: fit_rate applies only when methods lists alp-gmm",
+            ),
+            (
+                "methods = [\"monotonic-progress\"]\nrandom_share = 0.5\n",
+                "e.toml:3: random_share applies only when methods lists absolute-progress or alp-gmm",
+            ),
+            (
+                "ema_slow = 0.01\n",
+                "e.toml:2: ema_slow applies only when methods lists absolute-progress",
+            ),
+            (
+                "methods = [\"alp-gmm\"]\nrandom_share = 1.5\n",
+                "e.toml:3: random_share must be a number in 0..=1 (the share of contexts drawn uniformly), got 1.5",
+            ),
+            (
+                "methods = [\"alp-gmm\"]\nfit_rate = 99\n",
+                "e.toml:3: fit_rate must be an integer in 10 * max_components (10 unless set) ..=100000 (10 points per component of the largest mixture), got 99",
+            ),
+            (
+                "methods = [\"alp-gmm\"]\nmax_components = 3\nfit_rate = 29\n",
+                "e.toml:4: fit_rate must be",
+            ),
+            ("methods = [\"alp-gmm\"]\nfit_rate = 100001\n", "got 100001"),
+            (
+                "methods = [\"alp-gmm\"]\nmax_components = 21\n",
+                "e.toml:3: max_components must be an integer in 2..=20, got 21",
+            ),
+            ("methods = [\"alp-gmm\"]\nmax_components = 1\n", "got 1"),
+            (
+                "methods = [\"alp-gmm\"]\nsnap = 1\n",
+                "e.toml:3: snap must be true or false, got 1",
+            ),
+            (
+                "retire = \"yes\"\n",
+                "e.toml:2: retire must be true or false, got \"yes\"",
+            ),
+            (
+                "methods = [\"absolute-progress\"]\nema_fast = 0.04\n",
+                "e.toml:3: ema_fast must be a number in (0, 1], above ema_slow (0.05 unless set), got 0.04",
+            ),
+            (
+                "methods = [\"absolute-progress\"]\nema_slow = 0.2\n",
+                "e.toml:3: ema_slow must be a number in (0, 1), below ema_fast (0.1 unless set), got 0.2",
+            ),
+            (
+                "methods = [\"absolute-progress\"]\nema_fast = 1.5\nema_slow = 0.5\n",
+                "got 1.5",
+            ),
+            ("methods = [\"absolute-progress\"]\nema_slow = 0.0\n", "got 0.0"),
+            ("methods = [\"absolute-progress\"]\nema_fast = nan\n", "got nan"),
+        ];
+        for (keys, expected) in cases {
+            let text = format!("experiment = \"function\"\n{keys}");
+            let message = error(&text);
+            let found = if expected.starts_with("e.toml:") {
+                message.starts_with(expected)
+            } else {
+                message.starts_with("e.toml:") && message.ends_with(expected)
+            };
+            assert!(found, "{text:?}: {message}");
+        }
+        // The bounds themselves are accepted.
+        for keys in [
+            "methods = [\"alp-gmm\", \"absolute-progress\"]\nrandom_share = 0.0\nema_fast = 1.0\nmax_components = 2\nfit_rate = 20\n",
+            "methods = [\"alp-gmm\"]\nrandom_share = 1.0\nmax_components = 20\nfit_rate = 100000\n",
+            "methods = [\"absolute-progress\"]\nema_fast = 0.3\nema_slow = 0.29\n",
+        ] {
+            let text = format!("experiment = \"function\"\n{keys}");
+            let file = LoadedFile::parse(Path::new("e.toml"), text.clone()).unwrap();
+            assert!(Plan::new(Some(&file), &ExperimentFile::default()).is_ok(), "{text}");
+        }
+        let cli = ExperimentFile {
+            experiment: Some(Grid),
+            fit_rate: Some(300),
+            ..Default::default()
+        };
+        let message = Plan::new(None, &cli).err().unwrap().to_string();
+        assert_eq!(message, "--fit-rate applies only when methods lists alp-gmm");
+    }
+
+    /// The teachers run with the values of their keys (else their defaults), the summary records
+    /// them, and the resolved file reads them back.
+    #[test]
+    fn teachers_run_with_their_keys_and_resolve_to_them() {
+        use acps_learner::SelectorConfig as S;
+        let every = ExperimentFile {
+            experiment: Some(Function),
+            methods: Some(vec![Method::AbsoluteProgress, Method::AlpGmm, Method::Diversity]),
+            retire: Some(true),
+            random_share: Some(0.3),
+            ema_fast: Some(0.4),
+            ema_slow: Some(0.2),
+            fit_rate: Some(120),
+            max_components: Some(4),
+            snap: Some(true),
+            ..Default::default()
+        };
+        let plan = Plan::new(None, &every).unwrap();
+        let job = plan.jobs(Path::new("out")).swap_remove(0);
+        let [
+            S::AbsoluteProgress(progress),
+            S::AlpGmm { config, snap },
+            S::Bandit(bandit),
+        ] = job.experiment.methods.as_slice()
+        else {
+            panic!("{:?}", job.experiment.methods)
+        };
+        assert_eq!(
+            (progress.rates.fast, progress.rates.slow, progress.random_share),
+            (0.4, 0.2, 0.3)
+        );
+        assert!(progress.retire.is_some() && bandit.retire.is_some());
+        assert_eq!(
+            (config.fit_rate, config.max_components, config.random_share, *snap),
+            (120, 4, 0.3, true)
+        );
+        let resolved = plan.resolved();
+        assert_eq!(
+            ExperimentFile {
+                n_theta: None,
+                first_visit: None,
+                memory: None,
+                initial_sigma: None,
+                epsilon: None,
+                xi: None,
+                runs: None,
+                episodes: None,
+                seed: None,
+                in_flight: None,
+                ..resolved.clone()
+            },
+            every
+        );
+        let text = resolved.to_toml("").unwrap();
+        let again = LoadedFile::parse(Path::new("r.toml"), text).unwrap();
+        assert_eq!(
+            Plan::new(Some(&again), &ExperimentFile::default()).unwrap().resolved(),
+            resolved
+        );
+        // Unset, the paper's methods do not retire, and nothing of the teachers is written.
+        let paper = Plan::new(
+            None,
+            &ExperimentFile {
+                experiment: Some(Grid),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let resolved = paper.resolved();
+        assert_eq!(resolved.retire, Some(false));
+        assert_eq!(
+            (resolved.random_share, resolved.fit_rate, resolved.snap),
+            (None, None, None)
+        );
+        for job in paper.jobs(Path::new("out")) {
+            assert!(job.experiment.settings["retire"].is_null());
+            for method in &job.experiment.methods {
+                assert!(!matches!(method, S::Bandit(b) if b.retire.is_some()));
             }
         }
     }

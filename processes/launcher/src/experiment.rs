@@ -323,7 +323,7 @@ pub enum RunError {
     NeedsWorkers(String),
     /// A method that cannot work on the experiment's environment.
     #[error(
-        "method {method} draws contexts from the continuous space, but experiment '{experiment}' takes only its training contexts; choose a method that selects among them (round-robin, random, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac)"
+        "method {method} draws contexts from the continuous space, but experiment '{experiment}' takes only its training contexts; choose a method that selects among them (round-robin, random, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, or alp-gmm with snap = true)"
     )]
     Method {
         /// The method's name.
@@ -385,13 +385,13 @@ impl Experiment {
         })
     }
 
-    /// Refuse a method that cannot work on this experiment (random-continuous where contexts
-    /// are not points of a continuous space).
+    /// Refuse a method that cannot work on this experiment (random-continuous, or alp-gmm
+    /// without snapping, where contexts are not points of a continuous space).
     pub fn check_methods(&self) -> Result<(), RunError> {
         match self
             .methods
             .iter()
-            .find(|s| !self.continuous_contexts && s.method() == acps_learner::Method::RandomContinuous)
+            .find(|s| !self.continuous_contexts && s.draws_from_space())
         {
             Some(selector) => Err(RunError::Method {
                 method: selector.method().name(),

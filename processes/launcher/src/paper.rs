@@ -5,7 +5,9 @@
 
 use crate::experiment::{Experiment, Instance, RunResult, mean};
 use acps_learner::creps::{CRepsConfig, MemoryConfig};
-use acps_learner::selection::{DUcbConfig, FirstVisit, SaggRiacConfig};
+use acps_learner::selection::{
+    AbsoluteProgressConfig, AlpGmmConfig, DUcbConfig, EmaRates, FirstVisit, RetireConfig, SaggRiacConfig,
+};
 use acps_learner::{BanditConfig, LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::environment;
@@ -66,6 +68,20 @@ pub struct Overrides {
     pub epsilon: Option<f64>,
     /// Section 4 model: fixed learning factors instead of a random permutation per run.
     pub learning_factors: Option<[f64; CONTEXTS]>,
+    /// D-UCB methods and absolute-progress: retire solved contexts ([`RetireConfig::default`]).
+    pub retire: Option<bool>,
+    /// absolute-progress and alp-gmm: share of uniform choices.
+    pub random_share: Option<f64>,
+    /// absolute-progress: rate of the fast moving average of a context's return.
+    pub ema_fast: Option<f64>,
+    /// absolute-progress: rate of the slow moving average.
+    pub ema_slow: Option<f64>,
+    /// alp-gmm: contexts between fits, and points per fit.
+    pub fit_rate: Option<usize>,
+    /// alp-gmm: largest number of components.
+    pub max_components: Option<usize>,
+    /// alp-gmm: snap its contexts to the training contexts.
+    pub snap: Option<bool>,
 }
 
 /// The learning factors of the paper's Fig. 3 (context 3 learns fastest, its neighbour 4 hardly
@@ -78,21 +94,74 @@ impl Options {
         self.overrides.first_visit.unwrap_or(FirstVisit::InitialReturn)
     }
 
+    /// Retirement of solved contexts, when asked for.
+    fn retire(&self) -> Option<RetireConfig> {
+        (self.overrides.retire == Some(true)).then(RetireConfig::default)
+    }
+
     /// The selected methods (else `defaults`), the D-UCB ones with `ducb(method)` and this
-    /// run's first-visit rule.
+    /// run's first-visit rule, every one with this run's settings of the teachers beyond the
+    /// paper.
     pub(crate) fn methods(&self, defaults: &[Method], ducb: impl Fn(Method) -> DUcbConfig) -> Vec<SelectorConfig> {
         let methods = self.methods.clone().unwrap_or_else(|| defaults.to_vec());
+        let o = &self.overrides;
         methods
             .into_iter()
             .map(|method| match SelectorConfig::from(method) {
                 SelectorConfig::Bandit(bandit) => SelectorConfig::Bandit(BanditConfig {
                     ducb: ducb(method),
                     first_visit: self.first_visit(),
+                    retire: self.retire(),
                     ..bandit
                 }),
+                SelectorConfig::AbsoluteProgress(defaults) => {
+                    SelectorConfig::AbsoluteProgress(AbsoluteProgressConfig {
+                        rates: EmaRates {
+                            fast: o.ema_fast.unwrap_or(defaults.rates.fast),
+                            slow: o.ema_slow.unwrap_or(defaults.rates.slow),
+                        },
+                        random_share: o.random_share.unwrap_or(defaults.random_share),
+                        retire: self.retire(),
+                    })
+                }
+                SelectorConfig::AlpGmm { config: defaults, snap } => SelectorConfig::AlpGmm {
+                    config: AlpGmmConfig {
+                        fit_rate: o.fit_rate.unwrap_or(defaults.fit_rate),
+                        max_components: o.max_components.unwrap_or(defaults.max_components),
+                        random_share: o.random_share.unwrap_or(defaults.random_share),
+                    },
+                    snap: o.snap.unwrap_or(snap),
+                },
                 other => other,
             })
             .collect()
+    }
+
+    /// `settings` with the settings of the teachers beyond the paper: `retire` always (null
+    /// when off), `absolute_progress` and `alp_gmm` when `methods` has them.
+    pub(crate) fn with_teachers(
+        &self,
+        mut settings: serde_json::Value,
+        methods: &[SelectorConfig],
+    ) -> serde_json::Value {
+        let map = settings
+            .as_object_mut()
+            .expect("an experiment's settings are an object");
+        map.insert("retire".into(), json!(self.retire()));
+        for method in methods {
+            match method {
+                SelectorConfig::AbsoluteProgress(config) => {
+                    map.insert("absolute_progress".into(), json!(config));
+                }
+                SelectorConfig::AlpGmm { config, snap } => {
+                    let mut recorded = json!(config);
+                    recorded["snap"] = json!(snap);
+                    map.insert("alp_gmm".into(), recorded);
+                }
+                _ => {}
+            }
+        }
+        settings
     }
 }
 
@@ -129,13 +198,22 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
     };
     let episodes = options.episodes.unwrap_or(1000);
     let learning_factors = options.overrides.learning_factors;
+    let methods = options.methods(&defaults, |method| DUcbConfig {
+        gamma: 0.95,
+        xi,
+        b: b(method),
+    });
+    let settings = json!({
+        "model": { "sigma_r": model.sigma_r, "sigma_b": model.sigma_b, "contexts": CONTEXTS, "learning_factors": learning_factors.map_or("random permutation per run".to_string(), |w| format!("{w:?}")) },
+        "ducb": { "gamma": 0.95, "xi": xi, "b_best_reward_diversity": 1.0, "b_progress": 0.25 },
+        "first_visit": options.first_visit(),
+        "sagg_riac": SaggRiacConfig::default(),
+        "eval_every": 10,
+    });
     Experiment {
         name: "toy".into(),
-        methods: options.methods(&defaults, |method| DUcbConfig {
-            gamma: 0.95,
-            xi,
-            b: b(method),
-        }),
+        settings: options.with_teachers(settings, &methods),
+        methods,
         runs: options.runs,
         base_seed: options.seed,
         learner: LearnerConfig {
@@ -160,13 +238,6 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
             }
         }),
         selection_window: episodes as usize,
-        settings: json!({
-            "model": { "sigma_r": model.sigma_r, "sigma_b": model.sigma_b, "contexts": CONTEXTS, "learning_factors": learning_factors.map_or("random permutation per run".to_string(), |w| format!("{w:?}")) },
-            "ducb": { "gamma": 0.95, "xi": xi, "b_best_reward_diversity": 1.0, "b_progress": 0.25 },
-            "first_visit": options.first_visit(),
-            "sagg_riac": SaggRiacConfig::default(),
-            "eval_every": 10,
-        }),
         detail: None,
         best_policy: false,
         user_problem: None,
@@ -257,9 +328,11 @@ fn function_experiment(
         "first_visit": options.first_visit(),
         "eval_every": setting.eval_every,
     });
+    let methods = options.methods(defaults, |_| ducb.clone());
     Experiment {
         name: name.into(),
-        methods: options.methods(defaults, |_| ducb.clone()),
+        settings: options.with_teachers(settings, &methods),
+        methods,
         runs: options.runs,
         base_seed: options.seed,
         learner: LearnerConfig {
@@ -274,7 +347,6 @@ fn function_experiment(
             stateless(problem(&function), Box::new(function))
         }),
         selection_window: 250,
-        settings,
         detail: None,
         best_policy: false,
         user_problem: None,
@@ -370,12 +442,13 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
     let ducb = throwing_ducb(options);
     let creps = throwing_creps(25, options);
     let eval_every = 100;
+    let methods = options.methods(&defaults, |_| ducb.clone());
     Experiment {
         name: "grid".into(),
-        methods: options.methods(&defaults, |_| ducb.clone()),
+        settings: options.with_teachers(throwing_settings(sim, &creps, &ducb, options, eval_every), &methods),
+        methods,
         runs: options.runs,
         base_seed: options.seed,
-        settings: throwing_settings(sim, &creps, &ducb, options, eval_every),
         learner: LearnerConfig {
             seed: options.seed,
             episodes: options.episodes.unwrap_or(10_000),
@@ -402,12 +475,13 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
     let creps = throwing_creps(81, options);
     let eval_every = 1000;
     let fields = environment::dartboard_fields();
+    let methods = options.methods(&[Method::MonotonicProgress], |_| ducb.clone());
     Experiment {
         name: "dartboard".into(),
-        methods: options.methods(&[Method::MonotonicProgress], |_| ducb.clone()),
+        settings: options.with_teachers(throwing_settings(sim, &creps, &ducb, options, eval_every), &methods),
+        methods,
         runs: options.runs,
         base_seed: options.seed,
-        settings: throwing_settings(sim, &creps, &ducb, options, eval_every),
         learner: LearnerConfig {
             seed: options.seed,
             episodes: options.episodes.unwrap_or(50_000),

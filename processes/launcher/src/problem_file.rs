@@ -435,9 +435,11 @@ pub fn experiment(checked: &CheckedProblem, options: &Options) -> Experiment {
         "first_visit": options.first_visit(),
         "eval_every": eval_every,
     });
+    let methods = options.methods(&[Method::MonotonicProgress, Method::Random], |_| ducb.clone());
     Experiment {
         name: problem.name.clone(),
-        methods: options.methods(&[Method::MonotonicProgress, Method::Random], |_| ducb.clone()),
+        settings: options.with_teachers(settings, &methods),
+        methods,
         runs: options.runs,
         base_seed: options.seed,
         learner: LearnerConfig {
@@ -454,7 +456,6 @@ pub fn experiment(checked: &CheckedProblem, options: &Options) -> Experiment {
             keeps_state: false,
         }),
         selection_window: 250.min(episodes as usize),
-        settings,
         detail: None,
         best_policy: false,
         user_problem: Some(checked.user.clone()),

@@ -3,11 +3,12 @@
 //! a [`Learner`] asks for tasks and is told their outcomes (see its docs for a complete example).
 //!
 //! - [`learner`]: the deterministic ask/tell core, [`Learner`] and [`LearnerConfig`].
-//! - [`method`]: the paper's methods by name ([`Method`]) and their configurations
-//!   ([`SelectorConfig`]: baselines, D-UCB with an intrinsic reward, SAGG-RIAC).
+//! - [`method`]: the methods by name ([`Method`]) and their configurations ([`SelectorConfig`]:
+//!   baselines, D-UCB with an intrinsic reward, SAGG-RIAC, and beyond the paper absolute
+//!   progress, ALP-GMM and the retirement of solved contexts).
 //! - [`selection`]: the context selectors themselves (D-UCB, intrinsic rewards, baselines,
-//!   SAGG-RIAC; paper Sections 2.2 and 3) and the [`ContextSelector`](selection::ContextSelector)
-//!   trait for selectors of your own.
+//!   SAGG-RIAC; paper Sections 2.2 and 3; absolute progress, ALP-GMM) and the
+//!   [`ContextSelector`](selection::ContextSelector) trait for selectors of your own.
 //! - [`creps`]: contextual relative entropy policy search (paper Appendix A): the upper-level
 //!   policy, its sample memory and its update.
 //! - [`checkpoint`]: a learner's state in a file, to resume a run bit for bit.

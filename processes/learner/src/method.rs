@@ -1,9 +1,10 @@
-//! The paper's context-selection methods by name, their configurations (each with only the
-//! parameters it uses), and how each is built for a problem.
+//! The context-selection methods by name (the paper's, and the teachers beyond it), their
+//! configurations (each with only the parameters it uses), and how each is built for a problem.
 
 use crate::selection::{
-    BanditSelector, ContextSelector, DUcbConfig, FirstVisit, IntrinsicReward, RoundRobin, SaggRiac, SaggRiacConfig,
-    SelectorCreateError, UniformContinuous, UniformDiscrete,
+    AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, ContextSelector, DUcbConfig,
+    FirstVisit, IntrinsicReward, RetireConfig, RoundRobin, SaggRiac, SaggRiacConfig, SelectorCreateError,
+    UniformContinuous, UniformDiscrete,
 };
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
@@ -32,11 +33,15 @@ pub enum Method {
     MonotonicProgress,
     /// SAGG-RIAC goal generation over the continuous space, snapped to the training contexts.
     SaggRiac,
+    /// Training contexts in proportion to their absolute learning progress (beyond the paper).
+    AbsoluteProgress,
+    /// ALP-GMM over the continuous space (beyond the paper).
+    AlpGmm,
 }
 
 impl Method {
     /// Every method, in the order of the paper's figures.
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 11] = [
         Method::RoundRobin,
         Method::Random,
         Method::RandomContinuous,
@@ -46,6 +51,8 @@ impl Method {
         Method::OneStepProgress,
         Method::MonotonicProgress,
         Method::SaggRiac,
+        Method::AbsoluteProgress,
+        Method::AlpGmm,
     ];
 
     /// The command-line and summary name.
@@ -60,6 +67,8 @@ impl Method {
             Method::OneStepProgress => "one-step-progress",
             Method::MonotonicProgress => "monotonic-progress",
             Method::SaggRiac => "sagg-riac",
+            Method::AbsoluteProgress => "absolute-progress",
+            Method::AlpGmm => "alp-gmm",
         }
     }
 
@@ -84,7 +93,7 @@ impl fmt::Display for Method {
 /// A name that [`Method::from_str`] does not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac"
+    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, alp-gmm"
 )]
 pub struct MethodParseError(pub String);
 
@@ -125,6 +134,9 @@ pub struct BanditConfig {
     /// What a progress heuristic compares a context's first return with (ignored by best
     /// reward and diversity, which have no baseline).
     pub first_visit: FirstVisit,
+    /// Retire solved contexts (beyond the paper; default: no, as in the paper).
+    #[serde(default)]
+    pub retire: Option<RetireConfig>,
 }
 
 impl Default for BanditConfig {
@@ -142,6 +154,7 @@ impl BanditConfig {
             intrinsic_reward,
             ducb: DUcbConfig::default(),
             first_visit: FirstVisit::default(),
+            retire: None,
         }
     }
 }
@@ -151,7 +164,9 @@ impl BanditConfig {
 /// [`Learner::with_selector`](crate::Learner::with_selector).
 ///
 /// ```
-/// use acps_learner::selection::{DUcbConfig, IntrinsicReward, SaggRiacConfig};
+/// use acps_learner::selection::{
+///     AbsoluteProgressConfig, AlpGmmConfig, DUcbConfig, IntrinsicReward, RetireConfig, SaggRiacConfig,
+/// };
 /// use acps_learner::{BanditConfig, Baseline, Method, SelectorConfig};
 /// use acps_shared::{ContextSpace, EnvironmentSpec, Problem, ScoreAggregate};
 ///
@@ -184,11 +199,29 @@ impl BanditConfig {
 /// // SAGG-RIAC with a longer interest window.
 /// let sagg_riac = SelectorConfig::from(SaggRiacConfig { window: 20, ..SaggRiacConfig::default() });
 ///
-/// for config in [proposal, random, scaled, sagg_riac] {
+/// // Beyond the paper: the paper's proposal retiring solved contexts, and absolute progress.
+/// let retiring = SelectorConfig::from(BanditConfig {
+///     retire: Some(RetireConfig::default()),
+///     ..BanditConfig::default()
+/// });
+/// let progress = SelectorConfig::from(AbsoluteProgressConfig { random_share: 0.1, ..Default::default() });
+///
+/// for config in [proposal, random, scaled, sagg_riac, retiring, progress] {
+///     assert!(!config.draws_from_space());
 ///     let mut selector = config.build(&problem)?;
 ///     let choice = selector.choose(&mut rand::rng());
 ///     assert!(choice.arm.is_some_and(|arm| arm < 5));
 /// }
+///
+/// // ALP-GMM draws from the continuous space [0, 1] (refit every 100 contexts), unless it is
+/// // snapped to the training contexts.
+/// let alp_gmm = AlpGmmConfig { fit_rate: 100, ..AlpGmmConfig::default() };
+/// let continuous = SelectorConfig::from(alp_gmm.clone());
+/// assert!(continuous.draws_from_space());
+/// let choice = continuous.build(&problem)?.choose(&mut rand::rng());
+/// assert!(choice.arm.is_none() && problem.space.contains(&choice.context));
+/// let snapped = SelectorConfig::AlpGmm { config: alp_gmm, snap: true };
+/// assert!(snapped.build(&problem)?.choose(&mut rand::rng()).arm.is_some());
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -201,6 +234,16 @@ pub enum SelectorConfig {
     /// SAGG-RIAC goal generation over the continuous space, snapped to the training contexts
     /// (paper Sec. 2.2 and 4).
     SaggRiac(SaggRiacConfig),
+    /// Absolute learning progress over the training contexts.
+    AbsoluteProgress(AbsoluteProgressConfig),
+    /// ALP-GMM over the continuous space.
+    AlpGmm {
+        /// Its parameters.
+        config: AlpGmmConfig,
+        /// Replace every context by the nearest training context, for problems that take only
+        /// those (as SAGG-RIAC does).
+        snap: bool,
+    },
 }
 
 impl Default for SelectorConfig {
@@ -228,9 +271,22 @@ impl From<SaggRiacConfig> for SelectorConfig {
     }
 }
 
+impl From<AbsoluteProgressConfig> for SelectorConfig {
+    fn from(config: AbsoluteProgressConfig) -> Self {
+        Self::AbsoluteProgress(config)
+    }
+}
+
+impl From<AlpGmmConfig> for SelectorConfig {
+    /// ALP-GMM over the continuous space, not snapped.
+    fn from(config: AlpGmmConfig) -> Self {
+        Self::AlpGmm { config, snap: false }
+    }
+}
+
 impl From<Method> for SelectorConfig {
-    /// The method with default parameters: [`BanditConfig::new`] for the D-UCB methods,
-    /// [`SaggRiacConfig::default`] for SAGG-RIAC.
+    /// The method with default parameters: [`BanditConfig::new`] for the D-UCB methods, and the
+    /// `Default` of the others' configurations.
     fn from(method: Method) -> Self {
         match method {
             Method::RoundRobin => Baseline::RoundRobin.into(),
@@ -238,6 +294,8 @@ impl From<Method> for SelectorConfig {
             Method::RandomContinuous => Baseline::RandomContinuous.into(),
             Method::Corners => Baseline::Corners.into(),
             Method::SaggRiac => SaggRiacConfig::default().into(),
+            Method::AbsoluteProgress => AbsoluteProgressConfig::default().into(),
+            Method::AlpGmm => AlpGmmConfig::default().into(),
             Method::BestReward | Method::Diversity | Method::OneStepProgress | Method::MonotonicProgress => {
                 let reward = method
                     .intrinsic_reward()
@@ -268,11 +326,22 @@ impl SelectorConfig {
                 IntrinsicReward::MonotonicProgress => Method::MonotonicProgress,
             },
             Self::SaggRiac(_) => Method::SaggRiac,
+            Self::AbsoluteProgress(_) => Method::AbsoluteProgress,
+            Self::AlpGmm { .. } => Method::AlpGmm,
         }
     }
 
+    /// Whether the selector draws contexts from the continuous space rather than among the
+    /// training contexts: such a method cannot run on a problem that takes only those.
+    pub fn draws_from_space(&self) -> bool {
+        matches!(
+            self,
+            Self::Baseline(Baseline::RandomContinuous) | Self::AlpGmm { snap: false, .. }
+        )
+    }
+
     /// Build the selector for `problem`: over its training contexts, or its context space for
-    /// random (continuous) and SAGG-RIAC.
+    /// random (continuous), SAGG-RIAC and ALP-GMM.
     pub fn build(&self, problem: &Problem) -> Result<Box<dyn ContextSelector>, SelectorCreateError> {
         let contexts = problem.training_contexts.clone();
         Ok(match self {
@@ -280,13 +349,25 @@ impl SelectorConfig {
             Self::Baseline(Baseline::Corners) => Box::new(RoundRobin::farthest(contexts)?),
             Self::Baseline(Baseline::Random) => Box::new(UniformDiscrete::new(contexts)?),
             Self::Baseline(Baseline::RandomContinuous) => Box::new(UniformContinuous::new(problem.space.clone())?),
-            Self::Bandit(bandit) => Box::new(BanditSelector::new(
-                contexts,
-                bandit.ducb.clone(),
-                bandit.intrinsic_reward,
-                bandit.first_visit,
-            )?),
+            Self::Bandit(bandit) => {
+                let selector = BanditSelector::new(
+                    contexts,
+                    bandit.ducb.clone(),
+                    bandit.intrinsic_reward,
+                    bandit.first_visit,
+                )?;
+                match &bandit.retire {
+                    Some(retire) => Box::new(selector.with_retirement(retire.clone())?),
+                    None => Box::new(selector),
+                }
+            }
             Self::SaggRiac(config) => Box::new(SaggRiac::new(problem.space.clone(), Some(contexts), config.clone())?),
+            Self::AbsoluteProgress(config) => Box::new(AbsoluteProgress::new(contexts, config.clone())?),
+            Self::AlpGmm { config, snap } => Box::new(AlpGmm::new(
+                problem.space.clone(),
+                snap.then_some(contexts),
+                config.clone(),
+            )?),
         })
     }
 }

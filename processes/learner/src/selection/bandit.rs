@@ -7,11 +7,15 @@
 //! ([`DUcb::select_with_pending`]), so the choices made in one window spread over arms with
 //! similar bounds instead of repeating one arm P times. With P = 1 nothing is pending when a
 //! choice is made, and the selector is exactly the paper's sequential D-UCB.
+//!
+//! With [`with_retirement`](BanditSelector::with_retirement), contexts whose return has reached
+//! a plateau are left out of the bandit's choices and only probed now and then
+//! ([`RetireConfig`]); without it nothing changes.
 
 use super::validate::check_contexts;
 use super::{
-    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, SelectorCreateError,
-    SelectorRestoreError, SelectorState,
+    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, RetireConfig, Retirement,
+    SelectorCreateError, SelectorRestoreError, SelectorState,
 };
 use rand::RngCore;
 use std::collections::VecDeque;
@@ -24,6 +28,8 @@ pub struct BanditSelector {
     intrinsic: IntrinsicTracker,
     /// Arms chosen but not yet observed, oldest first.
     pending: VecDeque<usize>,
+    /// Solved contexts, when they are retired.
+    retirement: Option<Retirement>,
 }
 
 impl BanditSelector {
@@ -42,7 +48,22 @@ impl BanditSelector {
             intrinsic: IntrinsicTracker::new(heuristic, first_visit, arms, bound),
             contexts,
             pending: VecDeque::new(),
+            retirement: None,
         })
+    }
+
+    /// The same selector, retiring solved contexts as `config` says.
+    pub fn with_retirement(self, config: RetireConfig) -> Result<Self, SelectorCreateError> {
+        let retirement = Retirement::new(config, self.contexts.len())?;
+        Ok(Self {
+            retirement: Some(retirement),
+            ..self
+        })
+    }
+
+    /// Which contexts are retired, when they are retired at all.
+    pub fn retirement(&self) -> Option<&Retirement> {
+        self.retirement.as_ref()
     }
 
     /// The training contexts, indexed by arm.
@@ -78,7 +99,14 @@ impl BanditSelector {
 
 impl ContextSelector for BanditSelector {
     fn choose(&mut self, _rng: &mut dyn RngCore) -> Choice {
-        let arm = self.ducb.select_with_pending(self.pending.make_contiguous());
+        let pending = self.pending.make_contiguous();
+        let arm = match &mut self.retirement {
+            None => self.ducb.select_with_pending(pending),
+            Some(retirement) => match retirement.probe() {
+                Some(probe) => probe,
+                None => self.ducb.select_among(pending, |arm| !retirement.is_retired(arm)),
+            },
+        };
         self.pending.push_back(arm);
         Choice {
             arm: Some(arm),
@@ -97,8 +125,11 @@ impl ContextSelector for BanditSelector {
         if let Some(index) = self.pending.iter().position(|&a| a == arm) {
             self.pending.remove(index);
         }
-        if !reward.is_finite() {
+        if !reward.is_finite() || arm >= self.contexts.len() {
             return;
+        }
+        if let Some(retirement) = &mut self.retirement {
+            retirement.observe(arm, reward);
         }
         if let Ok(r_beta) = self.intrinsic.reward(arm, reward) {
             // The arm is in range and r_beta finite (short of overflow in r - b_s, which is
@@ -121,6 +152,7 @@ impl ContextSelector for BanditSelector {
             ducb: self.ducb.state(),
             baselines: self.intrinsic.baselines().to_vec(),
             pending: self.pending.iter().copied().collect(),
+            retirement: self.retirement.as_ref().map(Retirement::state),
         }
     }
 
@@ -129,6 +161,7 @@ impl ContextSelector for BanditSelector {
             ducb,
             baselines,
             pending,
+            retirement,
         } = state
         else {
             return Err(state.wrong_kind("D-UCB"));
@@ -142,6 +175,17 @@ impl ContextSelector for BanditSelector {
         restored.ducb.restore(ducb)?;
         restored.intrinsic.restore_baselines(baselines)?;
         restored.pending = pending.into();
+        match (&mut restored.retirement, retirement) {
+            (None, None) => {}
+            (Some(mine), Some(saved)) => mine.restore(saved)?,
+            (mine, _) => {
+                return Err(SelectorRestoreError::Retirement(format!(
+                    "a state {} retirement for a selector {} it",
+                    if mine.is_some() { "without" } else { "with" },
+                    if mine.is_some() { "with" } else { "without" },
+                )));
+            }
+        }
         *self = restored;
         Ok(())
     }
@@ -150,7 +194,7 @@ impl ContextSelector for BanditSelector {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::selection::{DUcbCreateError, RoundRobin};
+    use crate::selection::{DUcbCreateError, RetireConfig, RoundRobin};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use std::collections::VecDeque;
@@ -516,5 +560,87 @@ mod tests {
                 "seed {seed}: area {bandit_area} vs round robin {rr_area}"
             );
         }
+    }
+
+    /// Retirement: the choices are the plain bandit's until a context retires; afterwards a
+    /// retired context is chosen only as a probe; a fall brings it back; never all retire; and a
+    /// restored selector continues exactly.
+    #[test]
+    fn retiring_selector_leaves_solved_contexts_to_probes() {
+        let retire = RetireConfig {
+            probe_every: 4,
+            ..RetireConfig::default()
+        };
+        let config = DUcbConfig {
+            xi: 1e-2,
+            ..paper_sec4(1.0)
+        };
+        let new = || {
+            BanditSelector::new(
+                grid(5),
+                config.clone(),
+                IntrinsicReward::MonotonicProgress,
+                FirstVisit::Zero,
+            )
+            .unwrap()
+        };
+        // Arm i climbs to level i + 1 after 10 (i + 1) pulls; from step 1500 on, arm 0 is
+        // forgotten and returns 0.
+        let reward = |arm: usize, pulls: u32, t: usize| {
+            if arm == 0 && t >= 1500 {
+                return 0.0;
+            }
+            (f64::from(pulls) / (10.0 * (arm + 1) as f64)).min(1.0) * (arm + 1) as f64
+        };
+        let drive = |selector: &mut BanditSelector, steps: std::ops::Range<usize>, pulls: &mut [u32; 5]| {
+            let mut rng = ChaCha8Rng::seed_from_u64(0);
+            steps
+                .map(|t| {
+                    let before: Vec<bool> = (0..5)
+                        .map(|arm| selector.retirement().is_some_and(|r| r.is_retired(arm)))
+                        .collect();
+                    let choice = selector.choose(&mut rng);
+                    let arm = choice.arm.unwrap();
+                    pulls[arm] += 1;
+                    selector.observe(&choice, reward(arm, pulls[arm], t));
+                    (arm, before)
+                })
+                .collect::<Vec<_>>()
+        };
+        let mut plain = new();
+        let plain_arms = drive(&mut plain, 0..2000, &mut [0; 5]);
+        let mut retiring = new().with_retirement(retire.clone()).unwrap();
+        let mut pulls = [0; 5];
+        let mut steps = drive(&mut retiring, 0..1000, &mut pulls);
+        // Interrupted at 1000 and continued by a selector restored from its state.
+        let mut restored = new().with_retirement(retire).unwrap();
+        restored.restore_state(retiring.save_state()).unwrap();
+        steps.extend(drive(&mut restored, 1000..2000, &mut pulls));
+
+        let first = steps
+            .iter()
+            .position(|(_, before)| before.iter().any(|&r| r))
+            .expect("something retires");
+        for t in 0..first {
+            assert_eq!(steps[t].0, plain_arms[t].0, "step {t}: nothing retired yet");
+        }
+        assert_ne!(
+            steps.iter().map(|s| s.0).collect::<Vec<_>>(),
+            plain_arms.iter().map(|s| s.0).collect::<Vec<_>>()
+        );
+        for (t, (arm, before)) in steps.iter().enumerate() {
+            assert!(before.iter().any(|&r| !r), "step {t}: every context retired");
+            if before[*arm] {
+                // A probe: at most one in every 4 choices.
+                let window = &steps[t.saturating_sub(3)..t];
+                assert!(!window.iter().any(|(a, b)| b[*a]), "step {t}: probes too close");
+            }
+        }
+        // Arm 0 was retired before 1500 and active again after its fall.
+        assert!(steps[1499].1[0], "arm 0 retired by step 1500");
+        assert!(
+            steps[1500..].iter().any(|(_, before)| !before[0]),
+            "the fall brought arm 0 back"
+        );
     }
 }

@@ -191,13 +191,20 @@ impl DUcb {
     ///
     /// With nothing pending this is exactly [`select`](Self::select), i.e. Algorithm 1.
     pub fn select_with_pending(&mut self, pending: &[usize]) -> usize {
+        self.select_among(pending, |_| true)
+    }
+
+    /// [`select_with_pending`](Self::select_with_pending) among the arms `eligible` accepts
+    /// (at least one must be; the initial sweep ignores it). Retired contexts are left out this
+    /// way; with every arm eligible the choice is exactly `select_with_pending`'s.
+    pub fn select_among(&mut self, pending: &[usize], eligible: impl Fn(usize) -> bool) -> usize {
         let sweep = self.selections;
         self.selections = self.selections.saturating_add(1);
         if sweep < self.arms() {
             return sweep;
         }
         if pending.is_empty() {
-            return self.best_arm(&self.counts, self.total);
+            return self.best_arm(&self.counts, self.total, eligible);
         }
         let gamma = self.config.gamma;
         let mut counts = self.counts.clone();
@@ -207,15 +214,15 @@ impl DUcb {
             total = gamma * total + 1.0;
             counts[arm] += 1.0;
         }
-        self.best_arm(&counts, total)
+        self.best_arm(&counts, total, eligible)
     }
 
-    /// The arm with the largest upper bound for these counts and total, ties going to the
-    /// lowest index.
-    fn best_arm(&self, counts: &[f64], total: f64) -> usize {
+    /// The eligible arm with the largest upper bound for these counts and total, ties going to
+    /// the lowest index (arm 0 if none is eligible).
+    fn best_arm(&self, counts: &[f64], total: f64, eligible: impl Fn(usize) -> bool) -> usize {
         let mut best = 0;
         let mut best_value = f64::NEG_INFINITY;
-        for (arm, &count) in counts.iter().enumerate() {
+        for (arm, &count) in counts.iter().enumerate().filter(|&(arm, _)| eligible(arm)) {
             let value = self.bound(arm, count, total);
             // Strictly greater keeps the lowest index among ties, as numpy's argmax does.
             if value > best_value {
@@ -593,5 +600,26 @@ mod tests {
         // the others', and arm 1 is now the lowest index among the two tied maxima.
         ducb.update(0, 0.5).unwrap();
         assert_eq!(ducb.select(), 1);
+    }
+
+    #[test]
+    fn selection_among_eligible_arms_skips_the_others_and_with_all_is_the_plain_selection() {
+        let mut ducb = DUcb::new(4, config(0.99, 1e-2, 1.0)).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for t in 0..300 {
+            let arm = ducb.select();
+            ducb.update(arm, rng.random::<f64>() * (arm + 1) as f64 / 4.0).unwrap();
+            if t < 4 {
+                continue;
+            }
+            let pending = [t % 4, (t + 1) % 4];
+            let best = ducb.clone().select_with_pending(&pending);
+            assert_eq!(ducb.clone().select_among(&pending, |_| true), best);
+            let second = ducb.clone().select_among(&pending, |arm| arm != best);
+            assert_ne!(second, best);
+            // The best of the others: removing it as well leaves neither.
+            let third = ducb.clone().select_among(&pending, |arm| arm != best && arm != second);
+            assert!(third != best && third != second);
+        }
     }
 }

@@ -61,6 +61,45 @@ pub enum SelectorCreateError {
     /// SAGG-RIAC's neighbourhood radius is negative or not finite.
     #[error("SAGG-RIAC near_radius must be finite and >= 0, got {0}")]
     NearRadius(f64),
+    /// Moving-average rates that are not ordered in the unit interval.
+    #[error(
+        "{teacher} ema_fast and ema_slow must satisfy 0 < ema_slow < ema_fast <= 1, got ema_fast {fast}, ema_slow {slow}"
+    )]
+    EmaRates {
+        /// Whose rates: `absolute-progress` or `retire`.
+        teacher: &'static str,
+        /// The fast rate.
+        fast: f64,
+        /// The slow rate.
+        slow: f64,
+    },
+    /// A share of uniform choices outside [0, 1].
+    #[error("{teacher} random_share must be in [0, 1], got {share}")]
+    RandomShare {
+        /// Whose share: `absolute-progress` or `alp-gmm`.
+        teacher: &'static str,
+        /// The offending share.
+        share: f64,
+    },
+    /// A retirement band outside (0, 1].
+    #[error("retire tolerance must be in (0, 1], got {0}")]
+    RetireTolerance(f64),
+    /// Retired contexts probed more often than every second choice.
+    #[error("retire probe_every must be >= 2, got {0}")]
+    ProbeEvery(usize),
+    /// ALP-GMM's largest mixture outside its accepted range.
+    #[error("alp-gmm max_components must be in 2..=20, got {0}")]
+    MaxComponents(usize),
+    /// ALP-GMM's fit rate too small for its largest mixture, or too large.
+    #[error(
+        "alp-gmm fit_rate must be in {fewest}..=100000 (10 points per component of the largest mixture), got {fit_rate}"
+    )]
+    FitRate {
+        /// The offending fit rate.
+        fit_rate: usize,
+        /// The smallest one accepted with this `max_components`.
+        fewest: usize,
+    },
 }
 
 /// Why [`ContextSelector::restore_state`](super::ContextSelector::restore_state) refuses a saved
@@ -101,6 +140,15 @@ pub enum SelectorRestoreError {
     /// A SAGG-RIAC region tree that is not one of this selector's space; says why.
     #[error("selector state: SAGG-RIAC: {0}")]
     Regions(String),
+    /// Retirement statistics that do not fit this selector; says why.
+    #[error("selector state: retirement: {0}")]
+    Retirement(String),
+    /// Absolute-progress statistics of another number of contexts; says why.
+    #[error("selector state: absolute progress: {0}")]
+    AbsoluteProgress(String),
+    /// ALP-GMM history or mixture that does not fit this selector; says why.
+    #[error("selector state: ALP-GMM: {0}")]
+    AlpGmm(String),
     /// A state a selector defined outside this crate refuses; its message says why.
     #[error("selector state: {0}")]
     Custom(String),

@@ -7,14 +7,33 @@
 //!   an [`IntrinsicReward`] (Sec. 3).
 //! - [`RoundRobin`], [`UniformDiscrete`], [`UniformContinuous`]: the paper's baselines.
 //! - [`SaggRiac`]: goal generation by competence progress in regions (Sec. 2.2, 4).
+//!
+//! Beyond the paper (issue 22):
+//! - [`AbsoluteProgress`]: training contexts drawn in proportion to the absolute difference of a
+//!   fast and a slow moving average of their returns (Kanitscheider et al. 2021).
+//! - [`RetireConfig`]: [`BanditSelector`] and [`AbsoluteProgress`] may retire solved contexts
+//!   and bring them back when their return falls (the paper's outlook, Sec. 6).
+//! - [`AlpGmm`]: contexts drawn from the continuous space where a Gaussian mixture over
+//!   (context, absolute learning progress) places the progress (Portelas et al. 2019).
 
+mod absolute_progress;
+mod alp_gmm;
 mod bandit;
 mod baselines;
 mod ducb;
 mod error;
+mod geometry;
+mod gmm;
 mod intrinsic;
+mod neighbours;
+mod progress;
+mod retire;
 mod sagg_riac;
 mod validate;
+
+pub use absolute_progress::{AbsoluteProgress, AbsoluteProgressConfig, AbsoluteProgressState};
+pub use alp_gmm::{AlpGmm, AlpGmmConfig, AlpGmmState};
+pub use gmm::Component;
 
 pub use bandit::BanditSelector;
 pub use baselines::{RoundRobin, UniformContinuous, UniformDiscrete};
@@ -24,6 +43,8 @@ pub use intrinsic::{
     FirstVisit, IntrinsicReward, IntrinsicRewardParseError, IntrinsicTracker, IntrinsicTrackerRestoreError,
     IntrinsicTrackerUpdateError,
 };
+pub use progress::{EmaRates, ReturnAverages};
+pub use retire::{RetireConfig, Retirement, RetirementState};
 pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig, SaggRiacState};
 
 use rand::RngCore;
@@ -93,9 +114,16 @@ pub enum SelectorState {
         baselines: Vec<Option<f64>>,
         /// Arms chosen but not yet observed, oldest first.
         pending: Vec<usize>,
+        /// The retired contexts and their statistics, when the selector retires contexts.
+        retirement: Option<RetirementState>,
     },
     /// [`SaggRiac`]: the region tree with its samples.
     SaggRiac(SaggRiacState),
+    /// [`AbsoluteProgress`]: the moving averages, the initial sweep and the retired contexts.
+    AbsoluteProgress(AbsoluteProgressState),
+    /// [`AlpGmm`]: the contexts seen with their returns, the points of the next fit and the
+    /// mixture of the last.
+    AlpGmm(AlpGmmState),
     /// A selector defined elsewhere, in an encoding of its own.
     Custom(Vec<u8>),
 }
@@ -109,6 +137,8 @@ impl SelectorState {
             SelectorState::UniformContinuous => "uniform over the context space",
             SelectorState::Bandit { .. } => "D-UCB",
             SelectorState::SaggRiac(_) => "SAGG-RIAC",
+            SelectorState::AbsoluteProgress(_) => "absolute progress",
+            SelectorState::AlpGmm(_) => "ALP-GMM",
             SelectorState::Custom(_) => "custom",
         }
     }

@@ -13,7 +13,8 @@
 //! (algorithms.md section 4): the mode probabilities 0.7 / 0.2 / 0.1, the split criterion
 //! |R1| |R2| |interest(R1) - interest(R2)| and the (interest - minimum) leaf weights.
 
-use super::validate::{check_contexts, check_space};
+use super::geometry::{nearest, project};
+use super::validate::check_space_and_snap;
 use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
@@ -160,10 +161,7 @@ impl SaggRiac {
         snap_to: Option<Vec<Vec<f64>>>,
         config: SaggRiacConfig,
     ) -> Result<Self, SelectorCreateError> {
-        check_space(&space)?;
-        if let Some(contexts) = &snap_to {
-            check_contexts(contexts, Some(space.dim()))?;
-        }
+        check_space_and_snap(&space, snap_to.as_deref())?;
         config.validate()?;
         let (low, high) = space.bounding_box();
         Ok(Self {
@@ -480,40 +478,6 @@ fn best_cut(low: &[f64], high: &[f64], samples: &[Sample], window: usize) -> (us
 /// zero-width intervals, unlike `random_range`.
 fn lerp(low: f64, high: f64, t: f64) -> f64 {
     low + t * (high - low)
-}
-
-/// Map a point of the bounding box into the space: a no-op for a box, the radial projection
-/// onto the surface for a point outside a ball.
-fn project(space: &ContextSpace, mut point: Vec<f64>) -> Vec<f64> {
-    match space {
-        ContextSpace::Box { low, high } => {
-            point
-                .iter_mut()
-                .zip(low.iter().zip(high))
-                .for_each(|(x, (l, h))| *x = x.clamp(*l, *h));
-        }
-        ContextSpace::Ball { radius, .. } => {
-            let norm = point.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if norm > *radius {
-                // A hair inside, so rounding cannot leave the point outside.
-                let scale = radius / norm * (1.0 - f64::EPSILON);
-                point.iter_mut().for_each(|x| *x *= scale);
-            }
-        }
-    }
-    point
-}
-
-/// Index of the context nearest to `point` (Euclidean; ties to the lowest index).
-fn nearest(contexts: &[Vec<f64>], point: &[f64]) -> usize {
-    let distance2 = |c: &Vec<f64>| c.iter().zip(point).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
-    (0..contexts.len()).fold(0, |best, i| {
-        if distance2(&contexts[i]) < distance2(&contexts[best]) {
-            i
-        } else {
-            best
-        }
-    })
 }
 
 #[cfg(test)]

@@ -21,6 +21,19 @@ pub(crate) fn check_contexts(contexts: &[Vec<f64>], expected_dim: Option<usize>)
     }
 }
 
+/// Check the space of a selector that draws from it and, when it snaps its draws to training
+/// contexts, that they are valid contexts of the space's dimension.
+pub(crate) fn check_space_and_snap(
+    space: &ContextSpace,
+    snap_to: Option<&[Vec<f64>]>,
+) -> Result<(), SelectorCreateError> {
+    check_space(space)?;
+    match snap_to {
+        Some(contexts) => check_contexts(contexts, Some(space.dim())),
+        None => Ok(()),
+    }
+}
+
 /// Check a context space again: its fields are public, so it may not have come from a validating
 /// constructor, and sampling from an inverted box would panic.
 pub(crate) fn check_space(space: &ContextSpace) -> Result<(), SelectorCreateError> {

@@ -1,0 +1,454 @@
+//! Gaussian mixtures with full covariances, fitted by expectation-maximisation, for ALP-GMM.
+//!
+//! As scikit-learn's `GaussianMixture` (which the original ALP-GMM uses) with its defaults: EM
+//! until the mean log-likelihood per point changes by less than 1e-3, at most 100 iterations,
+//! 1e-6 added to every covariance's diagonal so that none becomes singular, and a start from the
+//! partition of Lloyd's k-means seeded by k-means++. Scikit-learn's k-means seeds greedily from
+//! several candidates and restarts; here one k-means++ seeding draws from the caller's random
+//! stream, so a fit is a function of the data and that stream. The number of components is
+//! chosen by the Akaike information criterion, as in the original.
+
+use super::progress::proportional;
+use rand::{Rng, RngCore};
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+use std::ops::RangeInclusive;
+
+/// Stop when the mean log-likelihood per point changes by less than this (scikit-learn's `tol`).
+const TOLERANCE: f64 = 1e-3;
+/// Most EM iterations per fit (scikit-learn's `max_iter`).
+const MAX_ITERATIONS: usize = 100;
+/// Added to every covariance's diagonal (scikit-learn's `reg_covar`).
+const REGULARISATION: f64 = 1e-6;
+
+/// One Gaussian of a mixture over points of D coordinates.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Component {
+    /// Its share of the mixture.
+    pub weight: f64,
+    /// Mean, D coordinates.
+    pub mean: Vec<f64>,
+    /// Covariance, D x D, row by row.
+    pub covariance: Vec<f64>,
+}
+
+/// A mixture ready to evaluate and sample: its components and their Cholesky factors.
+#[derive(Debug, Clone)]
+pub(crate) struct Mixture {
+    dim: usize,
+    components: Vec<Component>,
+    /// Lower Cholesky factor of every covariance, D x D row by row.
+    factors: Vec<Vec<f64>>,
+    /// ln weight - (D ln 2 pi + ln det covariance) / 2 of every component.
+    log_norms: Vec<f64>,
+}
+
+impl Mixture {
+    /// The mixture of `components` over points of `dim` coordinates; `None` unless every
+    /// component has that dimension, a positive finite weight and a positive-definite
+    /// covariance.
+    pub(crate) fn new(dim: usize, components: Vec<Component>) -> Option<Self> {
+        let mut factors = Vec::with_capacity(components.len());
+        let mut log_norms = Vec::with_capacity(components.len());
+        for component in &components {
+            let valid = component.mean.len() == dim
+                && component.covariance.len() == dim * dim
+                && component.weight > 0.0
+                && component.weight.is_finite()
+                && component.mean.iter().all(|x| x.is_finite());
+            if !valid {
+                return None;
+            }
+            let factor = cholesky(&component.covariance, dim)?;
+            let log_det: f64 = (0..dim).map(|i| factor[i * dim + i].ln()).sum::<f64>() * 2.0;
+            log_norms.push(component.weight.ln() - 0.5 * (dim as f64 * (2.0 * std::f64::consts::PI).ln() + log_det));
+            factors.push(factor);
+        }
+        (!components.is_empty()).then_some(Self {
+            dim,
+            components,
+            factors,
+            log_norms,
+        })
+    }
+
+    /// The components.
+    pub(crate) fn components(&self) -> &[Component] {
+        &self.components
+    }
+
+    /// ln(weight * density) of `point` under component `k`.
+    fn log_joint(&self, k: usize, point: &[f64], work: &mut [f64]) -> f64 {
+        let (dim, factor, mean) = (self.dim, &self.factors[k], &self.components[k].mean);
+        // Solve L y = point - mean by forward substitution; the Mahalanobis distance is |y|^2.
+        let mut distance = 0.0;
+        for i in 0..dim {
+            let row = &factor[i * dim..i * dim + i];
+            let y = (point[i] - mean[i] - row.iter().zip(&work[..i]).map(|(l, y)| l * y).sum::<f64>())
+                / factor[i * dim + i];
+            work[i] = y;
+            distance += y * y;
+        }
+        self.log_norms[k] - 0.5 * distance
+    }
+
+    /// The log-likelihood of `data` (points of `dim` coordinates one after another), and every
+    /// point's responsibilities (row by row, one per component).
+    fn expect(&self, data: &[f64]) -> (f64, Vec<f64>) {
+        let k = self.components.len();
+        let mut responsibilities = vec![0.0; data.len() / self.dim * k];
+        let mut work = vec![0.0; self.dim];
+        let mut total = 0.0;
+        for (point, row) in data.chunks(self.dim).zip(responsibilities.chunks_mut(k)) {
+            for (c, r) in row.iter_mut().enumerate() {
+                *r = self.log_joint(c, point, &mut work);
+            }
+            let max = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            row.iter_mut().for_each(|r| *r = (*r - max).exp());
+            let sum: f64 = row.iter().sum();
+            row.iter_mut().for_each(|r| *r /= sum);
+            total += max + sum.ln();
+        }
+        (total, responsibilities)
+    }
+
+    /// The first `leading` coordinates of a draw from component `k`: the component's marginal
+    /// over them, whose Cholesky factor is the leading block of the full one. Draws `leading`
+    /// standard normals.
+    pub(crate) fn sample_leading(&self, k: usize, leading: usize, rng: &mut dyn RngCore) -> Vec<f64> {
+        let (dim, factor, mean) = (self.dim, &self.factors[k], &self.components[k].mean);
+        let z: Vec<f64> = (0..leading).map(|_| rng.sample(StandardNormal)).collect();
+        (0..leading)
+            .map(|i| mean[i] + (0..=i).map(|j| factor[i * dim + j] * z[j]).sum::<f64>())
+            .collect()
+    }
+
+    /// Fit `k` components to `data` (points of `dim` coordinates one after another) by EM from
+    /// a k-means++ start; the mixture and its log-likelihood, or `None` when the data have fewer
+    /// than `k` distinct points or a covariance cannot be factorised.
+    pub(crate) fn fit(data: &[f64], dim: usize, k: usize, rng: &mut dyn RngCore) -> Option<(Self, f64)> {
+        let n = data.len() / dim;
+        let labels = kmeans(data, dim, kmeans_plus_plus(data, dim, k, rng)?);
+        let mut responsibilities = vec![0.0; n * k];
+        for (row, &label) in responsibilities.chunks_mut(k).zip(&labels) {
+            row[label] = 1.0;
+        }
+        let mut mixture = maximise(data, dim, k, &responsibilities)?;
+        let mut previous = f64::NEG_INFINITY;
+        for _ in 0..MAX_ITERATIONS {
+            let (log_likelihood, next) = mixture.expect(data);
+            if (log_likelihood - previous).abs() < TOLERANCE * n as f64 {
+                return Some((mixture, log_likelihood));
+            }
+            previous = log_likelihood;
+            mixture = maximise(data, dim, k, &next)?;
+        }
+        let (log_likelihood, _) = mixture.expect(data);
+        Some((mixture, log_likelihood))
+    }
+
+    /// The mixture of lowest Akaike information criterion among fits of every `k` in `ks`
+    /// (in increasing order, so the random stream is used in a fixed order; ties to the fewer
+    /// components), or `None` when no `k` could be fitted.
+    pub(crate) fn fit_best(data: &[f64], dim: usize, ks: RangeInclusive<usize>, rng: &mut dyn RngCore) -> Option<Self> {
+        let mut best: Option<(f64, Self)> = None;
+        for k in ks {
+            let Some((mixture, log_likelihood)) = Self::fit(data, dim, k, rng) else {
+                continue;
+            };
+            let criterion = aic(log_likelihood, k, dim);
+            if best.as_ref().is_none_or(|(b, _)| criterion < *b) {
+                best = Some((criterion, mixture));
+            }
+        }
+        best.map(|(_, mixture)| mixture)
+    }
+}
+
+/// The Akaike information criterion of a mixture of `k` full-covariance Gaussians in `dim`
+/// dimensions: 2 (number of parameters) - 2 ln L.
+pub(crate) fn aic(log_likelihood: f64, k: usize, dim: usize) -> f64 {
+    let parameters = (k - 1) + k * dim + k * dim * (dim + 1) / 2;
+    2.0 * parameters as f64 - 2.0 * log_likelihood
+}
+
+fn distance2(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+}
+
+/// `k` centres among the points: the first uniformly, each next one with probability
+/// proportional to its squared distance to the nearest centre so far; `None` when fewer than
+/// `k` points are distinct (or there are none).
+fn kmeans_plus_plus(data: &[f64], dim: usize, k: usize, rng: &mut dyn RngCore) -> Option<Vec<Vec<f64>>> {
+    let n = data.len() / dim;
+    if n == 0 {
+        return None;
+    }
+    let point = |i: usize| &data[i * dim..(i + 1) * dim];
+    let first = point(rng.random_range(0..n)).to_vec();
+    let mut nearest: Vec<f64> = (0..n).map(|i| distance2(point(i), &first)).collect();
+    let mut centres = vec![first];
+    while centres.len() < k {
+        let next = point(proportional(nearest.iter().copied(), rng.random())?).to_vec();
+        for (i, d) in nearest.iter_mut().enumerate() {
+            *d = d.min(distance2(point(i), &next));
+        }
+        centres.push(next);
+    }
+    Some(centres)
+}
+
+/// Lloyd's k-means from `centres` until no point changes its centre (at most
+/// [`MAX_ITERATIONS`] rounds): the label of every point, its nearest centre (ties to the lowest
+/// index). A centre that loses every point stays where it was.
+fn kmeans(data: &[f64], dim: usize, mut centres: Vec<Vec<f64>>) -> Vec<usize> {
+    let nearest = |point: &[f64], centres: &[Vec<f64>]| {
+        (0..centres.len()).fold(0, |best, c| {
+            if distance2(point, &centres[c]) < distance2(point, &centres[best]) {
+                c
+            } else {
+                best
+            }
+        })
+    };
+    let mut labels: Vec<usize> = data.chunks(dim).map(|point| nearest(point, &centres)).collect();
+    for _ in 0..MAX_ITERATIONS {
+        let mut sums = vec![vec![0.0; dim]; centres.len()];
+        let mut counts = vec![0usize; centres.len()];
+        for (point, &label) in data.chunks(dim).zip(&labels) {
+            sums[label].iter_mut().zip(point).for_each(|(s, x)| *s += x);
+            counts[label] += 1;
+        }
+        for ((centre, sum), &count) in centres.iter_mut().zip(sums).zip(&counts) {
+            if count > 0 {
+                *centre = sum.into_iter().map(|s| s / count as f64).collect();
+            }
+        }
+        let next: Vec<usize> = data.chunks(dim).map(|point| nearest(point, &centres)).collect();
+        if next == labels {
+            break;
+        }
+        labels = next;
+    }
+    labels
+}
+
+/// The M step: weights, means and regularised covariances from the responsibilities.
+fn maximise(data: &[f64], dim: usize, k: usize, responsibilities: &[f64]) -> Option<Mixture> {
+    let n = data.len() / dim;
+    let components = (0..k)
+        .map(|c| {
+            let column = || responsibilities.iter().skip(c).step_by(k);
+            // scikit-learn's guard against a component that owns no point.
+            let mass = column().sum::<f64>() + 10.0 * f64::EPSILON;
+            let mut mean = vec![0.0; dim];
+            for (point, r) in data.chunks(dim).zip(column()) {
+                mean.iter_mut().zip(point).for_each(|(m, x)| *m += r * x);
+            }
+            mean.iter_mut().for_each(|m| *m /= mass);
+            let mut covariance = vec![0.0; dim * dim];
+            for (point, r) in data.chunks(dim).zip(column()) {
+                for i in 0..dim {
+                    for j in 0..=i {
+                        covariance[i * dim + j] += r * (point[i] - mean[i]) * (point[j] - mean[j]);
+                    }
+                }
+            }
+            for i in 0..dim {
+                for j in 0..=i {
+                    let value = covariance[i * dim + j] / mass + if i == j { REGULARISATION } else { 0.0 };
+                    covariance[i * dim + j] = value;
+                    covariance[j * dim + i] = value;
+                }
+            }
+            Component {
+                weight: mass / n as f64,
+                mean,
+                covariance,
+            }
+        })
+        .collect();
+    Mixture::new(dim, components)
+}
+
+/// The lower Cholesky factor of the symmetric `dim` x `dim` matrix `a` (row by row), or `None`
+/// when it is not positive definite.
+fn cholesky(a: &[f64], dim: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; dim * dim];
+    for i in 0..dim {
+        for j in 0..=i {
+            let dot: f64 = (0..j).map(|m| l[i * dim + m] * l[j * dim + m]).sum();
+            if i == j {
+                let pivot = a[i * dim + i] - dot;
+                if !(pivot > 0.0 && pivot.is_finite()) {
+                    return None;
+                }
+                l[i * dim + i] = pivot.sqrt();
+            } else {
+                l[i * dim + j] = (a[i * dim + j] - dot) / l[j * dim + j];
+            }
+        }
+    }
+    Some(l)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    /// `counts[c]` points from N(means[c], sd[c]^2 I), shuffled, one after another.
+    fn sample(means: &[Vec<f64>], sds: &[f64], counts: &[usize], rng: &mut ChaCha8Rng) -> Vec<f64> {
+        let mut points: Vec<Vec<f64>> = Vec::new();
+        for ((mean, &sd), &count) in means.iter().zip(sds).zip(counts) {
+            for _ in 0..count {
+                points.push(
+                    mean.iter()
+                        .map(|m| m + sd * rng.sample::<f64, _>(StandardNormal))
+                        .collect(),
+                );
+            }
+        }
+        rand::seq::SliceRandom::shuffle(points.as_mut_slice(), rng);
+        points.concat()
+    }
+
+    fn well_separated() -> (Vec<Vec<f64>>, Vec<f64>, Vec<usize>) {
+        (
+            vec![vec![0.1, 0.2, 0.0], vec![0.8, 0.7, 0.5], vec![0.2, 0.9, 1.0]],
+            vec![0.03, 0.05, 0.04],
+            vec![300, 180, 120],
+        )
+    }
+
+    #[test]
+    fn a_fit_recovers_the_means_and_weights_of_well_separated_gaussians() {
+        let (means, sds, counts) = well_separated();
+        for seed in 0..3 {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let data = sample(&means, &sds, &counts, &mut rng);
+            let (mixture, _) = Mixture::fit(&data, 3, 3, &mut rng).unwrap();
+            for (mean, (&sd, &count)) in means.iter().zip(sds.iter().zip(&counts)) {
+                let fitted = mixture
+                    .components()
+                    .iter()
+                    .min_by(|a, b| distance2(&a.mean, mean).total_cmp(&distance2(&b.mean, mean)))
+                    .unwrap();
+                assert!(
+                    distance2(&fitted.mean, mean).sqrt() < 0.02,
+                    "seed {seed}: {fitted:?} vs {mean:?}"
+                );
+                assert!(
+                    (fitted.weight - count as f64 / 600.0).abs() < 0.02,
+                    "seed {seed}: {fitted:?}"
+                );
+                // Each variance is about sd^2 (within 40% for 120..300 points).
+                for i in 0..3 {
+                    let variance = fitted.covariance[i * 3 + i];
+                    assert!(
+                        (variance / (sd * sd) - 1.0).abs() < 0.4,
+                        "seed {seed}: {variance} vs {}",
+                        sd * sd
+                    );
+                }
+            }
+            let weights: f64 = mixture.components().iter().map(|c| c.weight).sum();
+            assert!((weights - 1.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn aic_picks_the_number_of_components_that_made_the_data() {
+        for (components, seed) in [(2, 10), (3, 11), (4, 12)] {
+            let (mut means, mut sds, mut counts) = well_separated();
+            means.push(vec![0.9, 0.1, 0.9]);
+            sds.push(0.04);
+            counts.push(150);
+            means.truncate(components);
+            sds.truncate(components);
+            counts.truncate(components);
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let data = sample(&means, &sds, &counts, &mut rng);
+            let best = Mixture::fit_best(&data, 3, 2..=8, &mut rng).unwrap();
+            assert_eq!(best.components().len(), components, "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn the_criterion_counts_weights_means_and_full_covariances() {
+        // k = 2 in 3 dimensions: 1 weight, 6 mean coordinates, 12 covariance entries.
+        assert_eq!(aic(-10.0, 2, 3), 2.0 * 19.0 + 20.0);
+    }
+
+    #[test]
+    fn same_stream_same_fit_and_degenerate_data_fit_what_they_can() {
+        let (means, sds, counts) = well_separated();
+        let data = sample(&means, &sds, &counts, &mut ChaCha8Rng::seed_from_u64(5));
+        let fit = |seed| {
+            let mixture = Mixture::fit_best(&data, 3, 2..=5, &mut ChaCha8Rng::seed_from_u64(seed)).unwrap();
+            mixture.components().to_vec()
+        };
+        assert_eq!(fit(1), fit(1));
+        // Two distinct points, each repeated: two components fit, three do not.
+        let two = [[0.0, 0.0], [1.0, 1.0]].repeat(20).concat();
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        assert!(Mixture::fit(&two, 2, 2, &mut rng).is_some());
+        assert!(Mixture::fit(&two, 2, 3, &mut rng).is_none());
+        assert_eq!(
+            Mixture::fit_best(&two, 2, 2..=4, &mut rng).unwrap().components().len(),
+            2
+        );
+        let one = [0.5, 0.5].repeat(10);
+        assert!(Mixture::fit_best(&one, 2, 2..=4, &mut rng).is_none());
+        // Every point with the same value in one coordinate: the regularisation keeps the
+        // covariances positive definite.
+        let flat: Vec<f64> = (0..50).flat_map(|i| [i as f64 / 50.0, 0.0]).collect();
+        assert!(Mixture::fit_best(&flat, 2, 2..=3, &mut rng).is_some());
+    }
+
+    #[test]
+    fn draws_follow_the_marginal_of_the_leading_coordinates() {
+        // A correlated 3-D Gaussian: the first two coordinates have means (1, -2), variances
+        // 4 and 1 and covariance 1.2.
+        let component = Component {
+            weight: 1.0,
+            mean: vec![1.0, -2.0, 0.5],
+            covariance: vec![4.0, 1.2, 0.3, 1.2, 1.0, 0.1, 0.3, 0.1, 0.5],
+        };
+        let mixture = Mixture::new(3, vec![component]).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let n = 50_000;
+        let draws: Vec<Vec<f64>> = (0..n).map(|_| mixture.sample_leading(0, 2, &mut rng)).collect();
+        let mean = |i: usize| draws.iter().map(|d| d[i]).sum::<f64>() / n as f64;
+        let (m0, m1) = (mean(0), mean(1));
+        let moment = |i: usize, j: usize, mi: f64, mj: f64| {
+            draws.iter().map(|d| (d[i] - mi) * (d[j] - mj)).sum::<f64>() / n as f64
+        };
+        assert!((m0 - 1.0).abs() < 0.05 && (m1 + 2.0).abs() < 0.03, "{m0} {m1}");
+        assert!((moment(0, 0, m0, m0) - 4.0).abs() < 0.15);
+        assert!((moment(1, 1, m1, m1) - 1.0).abs() < 0.04);
+        assert!((moment(0, 1, m0, m1) - 1.2).abs() < 0.06);
+        // Not positive definite, or of the wrong size: refused.
+        let bad = Component {
+            weight: 1.0,
+            mean: vec![0.0, 0.0],
+            covariance: vec![1.0, 2.0, 2.0, 1.0],
+        };
+        assert!(Mixture::new(2, vec![bad.clone()]).is_none());
+        assert!(Mixture::new(3, vec![bad]).is_none());
+    }
+
+    #[test]
+    fn cholesky_factors_reproduce_the_matrix() {
+        let a = [4.0, 2.0, 0.4, 2.0, 5.0, 1.0, 0.4, 1.0, 3.0];
+        let l = cholesky(&a, 3).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let product: f64 = (0..3).map(|m| l[i * 3 + m] * l[j * 3 + m]).sum();
+                assert!((product - a[i * 3 + j]).abs() < 1e-12);
+            }
+            assert!((i + 1..3).all(|j| l[i * 3 + j] == 0.0), "lower triangular");
+        }
+    }
+}
