@@ -1,6 +1,9 @@
 //! Workers on other hosts: a learner that listens, relays that connect, on emulated hosts. Each
 //! relay has its own run name, hence its own iceoryx2 domain: shared memory cannot carry the
-//! learner's work to its workers, only the network can. All traffic stays on loopback.
+//! learner's work to its workers, only the network can. Where the machine allows (root and
+//! iproute2), the relays of a test run in a network namespace of their own, with their own
+//! address, joined to the learner's by a virtual link; elsewhere on loopback. No traffic leaves
+//! the machine.
 
 use crate::fleet::{
     GRID, SLOW, SlowRun, has_files as has_files_in, in_process, reissued, signal_group, slow_run_with, wait_for,
@@ -13,15 +16,52 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-/// A loopback endpoint on a port that was free a moment ago.
-fn free_endpoint() -> String {
-    let socket = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    format!("tcp/127.0.0.1:{}", socket.local_addr().unwrap().port())
+/// Where a test's emulated hosts are: a network namespace of their own, or (where the machine
+/// cannot make one) this host's loopback.
+struct Network {
+    netns: Option<Netns>,
 }
 
-/// `acps relay` of an emulated host: its own run `local`, `workers` workers, under a watchdog.
-fn relay(endpoint: &str, local: &RunName, workers: usize, extra: &[&str]) -> Command {
-    let mut command = watched();
+impl Network {
+    /// The network of test number `tag` (distinct per test of this file). CI sets
+    /// ACPS_REQUIRE_NETNS, so that there no test falls back to loopback.
+    fn new(tag: u32) -> Self {
+        let netns = match Netns::new(tag) {
+            Ok(netns) => Some(netns),
+            Err(why) if std::env::var_os("ACPS_REQUIRE_NETNS").is_none() => {
+                eprintln!("emulated hosts on loopback: no network namespace here ({why})");
+                None
+            }
+            Err(why) => panic!("ACPS_REQUIRE_NETNS is set, and no network namespace can be made: {why}"),
+        };
+        Self { netns }
+    }
+
+    /// An endpoint for the learner, on a port that was free a moment ago: the learner's side of
+    /// the link, or loopback.
+    fn endpoint(&self) -> String {
+        let address = self.netns.as_ref().map_or("127.0.0.1", |netns| netns.here.as_str());
+        let socket = std::net::TcpListener::bind((address, 0)).unwrap();
+        format!("tcp/{address}:{}", socket.local_addr().unwrap().port())
+    }
+
+    /// `acps` under a watchdog, on the emulated hosts' side.
+    fn watched(&self) -> Command {
+        let watched = watched();
+        let Some(netns) = &self.netns else {
+            return watched;
+        };
+        let mut inside = Command::new("ip");
+        inside.args(["netns", "exec", &netns.name]).arg(watched.get_program());
+        inside.args(watched.get_args());
+        inside
+    }
+}
+
+/// `acps relay` of an emulated host on `network`: its own run `local`, `workers` workers,
+/// under a watchdog.
+fn relay(network: &Network, endpoint: &str, local: &RunName, workers: usize, extra: &[&str]) -> Command {
+    let mut command = network.watched();
     command
         .args([
             "relay",
@@ -73,10 +113,11 @@ fn a_run_served_only_through_a_relay_matches_the_in_process_run() {
     let dir = temp_dir("relay-only");
     let reference = in_process(&GRID, &dir.join("in-process"));
     let (run, local) = (run_name("relay-only"), run_name("relay-only-h1"));
-    let endpoint = free_endpoint();
+    let network = Network::new(1);
+    let endpoint = network.endpoint();
     let out = dir.join("fleet");
     let learner = learner(&GRID, &endpoint, &run, &out, &["--workers", "0"]);
-    let relay = relay(&endpoint, &local, 2, &[]).spawn().unwrap();
+    let relay = relay(&network, &endpoint, &local, 2, &[]).spawn().unwrap();
     let stdout = finished(learner);
     assert!(stdout.contains("and relays of other hosts"), "{stdout}");
     let relayed = relay.wait_with_output().unwrap();
@@ -96,7 +137,8 @@ fn a_killed_relay_s_tasks_go_to_other_workers_and_a_late_relay_joins() {
         run,
         out,
     } = slow_run_with("relay-kill", &["--in-flight", "8"]);
-    let endpoint = free_endpoint();
+    let network = Network::new(2);
+    let endpoint = network.endpoint();
     let (first, second) = (run_name("relay-kill-h1"), run_name("relay-kill-h2"));
     let learner = learner(
         &SLOW,
@@ -105,14 +147,14 @@ fn a_killed_relay_s_tasks_go_to_other_workers_and_a_late_relay_joins() {
         &out,
         &["--in-flight", "8", "--workers", "1", "--checkpoint-every", "1"],
     );
-    let mut victim = relay(&endpoint, &first, 1, &["-q"]).spawn().unwrap();
+    let mut victim = relay(&network, &endpoint, &first, 1, &["-q"]).spawn().unwrap();
     // The relay and its worker are in, and learning has begun.
     wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
         ipc::live_nodes(&first).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
     });
     kill_host(&mut victim);
     // A relay that joins late; its start removes what the killed one left.
-    let late = relay(&endpoint, &second, 1, &["-q"]).spawn().unwrap();
+    let late = relay(&network, &endpoint, &second, 1, &["-q"]).spawn().unwrap();
     let stdout = finished(learner);
     assert!(reissued(&stdout) >= 1, "{stdout}");
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
@@ -133,7 +175,8 @@ fn a_frozen_relay_is_given_up_on_after_its_lease_and_the_result_is_unchanged() {
         run,
         out,
     } = slow_run_with("relay-freeze", &["--in-flight", "8"]);
-    let endpoint = free_endpoint();
+    let network = Network::new(3);
+    let endpoint = network.endpoint();
     let local = run_name("relay-freeze-h1");
     let lease = ["--lease", "0.5"];
     let learner = learner(
@@ -149,6 +192,7 @@ fn a_frozen_relay_is_given_up_on_after_its_lease_and_the_result_is_unchanged() {
     );
     // The relay and its worker freeze together (a process group), as a host does.
     let mut frozen = relay(
+        &network,
         &endpoint,
         &local,
         1,
@@ -181,11 +225,12 @@ fn a_relay_waits_for_its_killed_learner_to_resume_and_the_run_ends_as_in_process
         run,
         out,
     } = slow_run_with("relay-resume", &[]);
-    let endpoint = free_endpoint();
+    let network = Network::new(4);
+    let endpoint = network.endpoint();
     let local = run_name("relay-resume-h1");
     let args = ["--workers", "0", "--checkpoint-every", "1"];
     let mut first = learner(&SLOW, &endpoint, &run, &out, &args);
-    let relay = relay(&endpoint, &local, 1, &["-q", "--wait-for-learner", "120"])
+    let relay = relay(&network, &endpoint, &local, 1, &["-q", "--wait-for-learner", "120"])
         .spawn()
         .unwrap();
     wait_until("the first checkpoints", Duration::from_secs(60), || {
@@ -212,7 +257,8 @@ fn a_relay_waits_for_its_killed_learner_to_resume_and_the_run_ends_as_in_process
 fn a_relay_whose_learner_is_gone_for_good_stops_its_workers_and_says_so() {
     let dir = temp_dir("relay-orphan");
     let (run, local) = (run_name("relay-orphan"), run_name("relay-orphan-h1"));
-    let endpoint = free_endpoint();
+    let network = Network::new(5);
+    let endpoint = network.endpoint();
     let out = dir.join("fleet");
     let mut learner = learner(
         &SLOW,
@@ -221,7 +267,7 @@ fn a_relay_whose_learner_is_gone_for_good_stops_its_workers_and_says_so() {
         &out,
         &["--workers", "0", "--checkpoint-every", "1"],
     );
-    let relay = relay(&endpoint, &local, 1, &["-q", "--wait-for-learner", "1"])
+    let relay = relay(&network, &endpoint, &local, 1, &["-q", "--wait-for-learner", "1"])
         .spawn()
         .unwrap();
     wait_until("the first checkpoints", Duration::from_secs(60), || {
@@ -248,7 +294,8 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
     let dir = temp_dir("relay-refused");
     let reference = in_process(&GRID, &dir.join("in-process"));
     let run = run_name("relay-refused");
-    let endpoint = free_endpoint();
+    let network = Network::new(6);
+    let endpoint = network.endpoint();
     let out = dir.join("fleet");
     let users = dir.join("users.txt");
     std::fs::create_dir_all(&*dir).unwrap();
@@ -281,6 +328,7 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
     let wrong = config("wrong.json5", "relay", "wrong", false);
     let refused = |local: &str, extra: &[&str]| {
         let output = relay(
+            &network,
             &endpoint,
             &run_name(local),
             1,
@@ -306,6 +354,7 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
         "{said}"
     );
     let served = relay(
+        &network,
         &endpoint,
         &run_name("relay-refused-h3"),
         2,
@@ -331,14 +380,16 @@ struct Netns {
 }
 
 impl Netns {
-    /// A namespace for this test process, or why the machine cannot make one (network
+    /// Namespace `tag` of this test process, or why the machine cannot make one (network
     /// namespaces need root, or CAP_NET_ADMIN, and iproute2).
-    fn new() -> Result<Self, String> {
+    fn new(tag: u32) -> Result<Self, String> {
         Self::remove_dead();
         let pid = std::process::id();
-        let name = format!("acpst{pid}");
-        let (link, inside) = (format!("acps{pid}h"), format!("acps{pid}n"));
-        let (third, fourth) = (pid % 256, (pid / 256) % 64 * 4);
+        let name = format!("acpst{pid}-{tag}");
+        // Interface names have at most 15 characters.
+        let (link, inside) = (format!("a{pid}-{tag}h"), format!("a{pid}-{tag}n"));
+        // A /30 per test: 64 tests, and processes 256 PIDs apart share no subnet.
+        let (third, fourth) = (pid % 256, tag % 64 * 4);
         let here = format!("198.18.{third}.{}", fourth + 1);
         let there = format!("198.18.{third}.{}", fourth + 2);
         ip(&["netns", "add", &name])?;
@@ -361,20 +412,13 @@ impl Netns {
         };
         for entry in entries.flatten() {
             let name = entry.file_name().to_string_lossy().into_owned();
-            if let Some(pid) = name.strip_prefix("acpst").and_then(|p| p.parse::<u32>().ok())
+            let pid = name.strip_prefix("acpst").and_then(|rest| rest.split('-').next());
+            if let Some(pid) = pid.and_then(|p| p.parse::<u32>().ok())
                 && !Path::new(&format!("/proc/{pid}")).exists()
             {
                 let _ = ip(&["netns", "del", &name]);
             }
         }
-    }
-
-    /// `command` run inside the namespace.
-    fn inside(&self, command: &Command) -> Command {
-        let mut inside = Command::new("ip");
-        inside.args(["netns", "exec", &self.name]).arg(command.get_program());
-        inside.args(command.get_args());
-        inside
     }
 
     /// Take this side's end of the link down (`false`) or up again.
@@ -386,6 +430,8 @@ impl Netns {
 
 impl Drop for Netns {
     fn drop(&mut self) {
+        // The pair goes with the namespace, unless it was never moved into it.
+        let _ = ip(&["link", "del", &self.link]);
         let _ = ip(&["netns", "del", &self.name]);
     }
 }
@@ -406,22 +452,11 @@ fn ip(args: &[&str]) -> Result<(), String> {
     }
 }
 
-/// A network namespace for a test, or `None` with a note when the machine cannot make one; CI
-/// sets ACPS_REQUIRE_NETNS, so that there the test cannot pass without one.
-fn netns_or_skip(test: &str) -> Option<Netns> {
-    match Netns::new() {
-        Ok(netns) => Some(netns),
-        Err(why) if std::env::var_os("ACPS_REQUIRE_NETNS").is_none() => {
-            eprintln!("{test}: skipped, no network namespace here ({why}); ACPS_REQUIRE_NETNS=1 makes this a failure");
-            None
-        }
-        Err(why) => panic!("{test}: ACPS_REQUIRE_NETNS is set, and no network namespace can be made: {why}"),
-    }
-}
-
 #[test]
 fn a_host_cut_off_from_the_network_is_given_up_on_and_rejoins_when_the_link_is_back() {
-    let Some(host) = netns_or_skip("network cut") else {
+    let network = Network::new(7);
+    let Some(host) = &network.netns else {
+        eprintln!("network cut: skipped, it needs a network namespace");
         return;
     };
     let SlowRun {
@@ -430,12 +465,7 @@ fn a_host_cut_off_from_the_network_is_given_up_on_and_rejoins_when_the_link_is_b
         run,
         out,
     } = slow_run_with("relay-cut", &["--in-flight", "8"]);
-    let port = std::net::TcpListener::bind((host.here.as_str(), 0))
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/{}:{port}", host.here);
+    let endpoint = network.endpoint();
     let local = run_name("relay-cut-h1");
     let lease = ["--lease", "0.5"];
     // The relay is the only way to the workers: nothing is learnt while the link is down.
@@ -450,18 +480,15 @@ fn a_host_cut_off_from_the_network_is_given_up_on_and_rejoins_when_the_link_is_b
         ]
         .concat(),
     );
-    let relay = host
-        .inside(&relay(
-            &endpoint,
-            &local,
-            1,
-            &[&lease[..], &["-q", "--wait-for-learner", "120"]].concat(),
-        ))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .process_group(0)
-        .spawn()
-        .unwrap();
+    let relay = relay(
+        &network,
+        &endpoint,
+        &local,
+        1,
+        &[&lease[..], &["-q", "--wait-for-learner", "120"]].concat(),
+    )
+    .spawn()
+    .unwrap();
     wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
         ipc::live_nodes(&local).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
     });
