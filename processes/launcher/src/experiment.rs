@@ -85,6 +85,22 @@ pub struct UserProblem {
     pub lower_is_better: bool,
 }
 
+/// Whether lower scores are better: a problem file says so itself; of the paper's problems every
+/// score is a cost or a distance except Section 4's J (`toy`), which its learner raises towards
+/// J_opt. `acps compare` takes the direction from here.
+pub fn lower_is_better(experiment: &str, user_problem: Option<&UserProblem>) -> bool {
+    match user_problem {
+        Some(user) => user.lower_is_better,
+        None => experiment != "toy",
+    }
+}
+
+/// Whether the scores are distances from the throwing targets, in cm (the paper's grid and
+/// dartboard; not a problem file's, whatever it is called).
+pub fn scores_are_distances(experiment: &str, user_problem: Option<&UserProblem>) -> bool {
+    user_problem.is_none() && matches!(experiment, "grid" | "dartboard")
+}
+
 /// The result of one learner run.
 #[derive(Debug)]
 pub struct RunResult {
