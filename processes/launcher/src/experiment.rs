@@ -69,8 +69,9 @@ pub struct Experiment {
     /// this process; only a fleet of the user's workers runs it.
     pub user_problem: Option<UserProblem>,
     /// Whether the environment takes contexts other than the training contexts. The Section 4
-    /// model does not (its ten contexts are indices): a method that draws contexts from the
-    /// continuous space is refused before the run instead of failing every rollout.
+    /// model does not (its ten contexts are indices), nor does the dartboard (a throw counts only
+    /// at a field): a method that draws contexts from the continuous space is refused before the
+    /// run instead of failing every rollout.
     pub continuous_contexts: bool,
 }
 
