@@ -116,6 +116,9 @@ type Curve = Vec<(u64, f64)>;
 /// A run directory's runs: method -> seed -> evaluations.
 type Runs = BTreeMap<String, BTreeMap<u64, Curve>>;
 
+/// One metric of a method's runs and of the baseline's runs with the same seeds, in pairs.
+type Values = (Vec<f64>, Vec<f64>);
+
 /// The run directories being compared, merged.
 #[derive(Debug)]
 pub struct RunData {
@@ -635,21 +638,18 @@ pub fn compare(data: &RunData, baseline: Option<&str>, levels: &[f64]) -> Result
             .collect();
         let n = paired.len();
         let is_baseline = *method == baseline;
+        // A metric of every run of the method and of the baseline's run with the same seed.
+        let both = |of: &dyn Fn(&Curve) -> f64| -> Values {
+            (
+                paired.iter().map(|(c, _)| of(c)).collect(),
+                paired.iter().map(|(_, b)| of(b)).collect(),
+            )
+        };
         // Every curve has a score (checked above), so `last` is some.
         let last = |curve: &Curve| curve.last().map_or(f64::NAN, |p| p.1);
-        let mut metric_rows: Vec<(String, Vec<f64>, Vec<f64>, Option<usize>)> = vec![
-            (
-                "final".to_string(),
-                paired.iter().map(|(c, _)| last(c)).collect(),
-                paired.iter().map(|(_, b)| last(b)).collect(),
-                None,
-            ),
-            (
-                "auc".to_string(),
-                paired.iter().map(|(c, _)| mean_over_curve(c)).collect(),
-                paired.iter().map(|(_, b)| mean_over_curve(b)).collect(),
-                None,
-            ),
+        let mut metric_rows: Vec<(String, Values, Option<usize>)> = vec![
+            ("final".to_string(), both(&last), None),
+            ("auc".to_string(), both(&|c| mean_over_curve(c)), None),
         ];
         for &level in levels {
             let to = |curve: &Curve| episodes_to(curve, level, lower).unwrap_or_else(|| never(curve)) as f64;
@@ -657,14 +657,9 @@ pub fn compare(data: &RunData, baseline: Option<&str>, levels: &[f64]) -> Result
                 .iter()
                 .filter(|(c, _)| episodes_to(c, level, lower).is_none())
                 .count();
-            metric_rows.push((
-                format!("episodes to {level}"),
-                paired.iter().map(|(c, _)| to(c)).collect(),
-                paired.iter().map(|(_, b)| to(b)).collect(),
-                Some(missed),
-            ));
+            metric_rows.push((format!("episodes to {level}"), both(&to), Some(missed)));
         }
-        for (metric, a, b, not_reached) in metric_rows {
+        for (metric, (a, b), not_reached) in metric_rows {
             let d: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x - y).collect();
             let compared = !is_baseline && n > 0;
             rows.push(Row {
