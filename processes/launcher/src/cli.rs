@@ -63,10 +63,40 @@ pub(crate) enum Command {
     /// in the report), printing the landing point, error and reward of every throw (the return of
     /// every context for the contextual function).
     Evaluate(EvaluateArgs),
+    /// Compare every method of a run directory with a baseline, paired over runs of the same
+    /// seed: the final score, the area under the learning curve (as a mean score) and the
+    /// episodes to each --levels value, with mean +- SEM, the paired difference and two-sided
+    /// p-values (Wilcoxon signed-rank, paired t). Prints a markdown table, or JSON.
+    Compare(CompareArgs),
     /// Print the wire protocol's layout as JSON: every payload's fields (type, offset, size,
     /// alignment), the iceoryx2 type names, capacities, codes and service settings. Workers in
     /// other languages are tested against it; docs/PROTOCOL.md explains it.
     Protocol,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct CompareArgs {
+    /// A run directory written by `acps experiment` or `acps run` (summary.json and runs.csv).
+    pub(crate) dir: PathBuf,
+    /// A further run directory of the same experiment and seeds whose methods join the
+    /// comparison (repeatable); run with retire = true, its methods are named METHOD+retire.
+    #[arg(long, value_name = "DIR")]
+    pub(crate) with: Vec<PathBuf>,
+    /// The method every other is paired with [default: the best by final mean score of
+    /// round-robin, random, random-continuous and corners, among those present].
+    #[arg(long)]
+    pub(crate) baseline: Option<String>,
+    /// Score levels L1,L2,... for the episodes to reach each (the first evaluation at or better
+    /// than the level); above 0 for the throws' distances in cm.
+    #[arg(long, value_name = "L1,L2,...", allow_hyphen_values = true)]
+    pub(crate) levels: Option<String>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long, conflicts_with = "wide")]
+    pub(crate) json: bool,
+    /// One row per method and a column per metric (difference and p-values under each value),
+    /// instead of a row per method and metric.
+    #[arg(long)]
+    pub(crate) wide: bool,
 }
 
 #[derive(clap::Args)]
@@ -397,6 +427,21 @@ impl Cli {
             Command::Relay(args) => commands::relay(args),
             Command::Bench(args) => commands::bench(args),
             Command::Evaluate(args) => commands::evaluate(args),
+            Command::Compare(args) => {
+                let report = crate::compare::run(
+                    &args.dir,
+                    &args.with,
+                    args.baseline.as_deref(),
+                    args.levels.as_deref(),
+                    match (args.json, args.wide) {
+                        (true, _) => crate::compare::Layout::Json,
+                        (false, true) => crate::compare::Layout::Wide,
+                        (false, false) => crate::compare::Layout::Long,
+                    },
+                )?;
+                print!("{report}");
+                Ok(())
+            }
             Command::Protocol => {
                 println!("{}", serde_json::to_string_pretty(&acps_wire::layout::describe())?);
                 Ok(())

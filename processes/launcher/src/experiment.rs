@@ -69,8 +69,9 @@ pub struct Experiment {
     /// this process; only a fleet of the user's workers runs it.
     pub user_problem: Option<UserProblem>,
     /// Whether the environment takes contexts other than the training contexts. The Section 4
-    /// model does not (its ten contexts are indices): a method that draws contexts from the
-    /// continuous space is refused before the run instead of failing every rollout.
+    /// model does not (its ten contexts are indices), nor does the dartboard (a throw counts only
+    /// at a field): a method that draws contexts from the continuous space is refused before the
+    /// run instead of failing every rollout.
     pub continuous_contexts: bool,
 }
 
@@ -83,6 +84,22 @@ pub struct UserProblem {
     /// Whether lower scores are better (costs, errors), as in all the paper's problems but the
     /// Section 4 model.
     pub lower_is_better: bool,
+}
+
+/// Whether lower scores are better: a problem file says so itself; of the paper's problems every
+/// score is a cost or a distance except Section 4's J (`toy`), which its learner raises towards
+/// J_opt. `acps compare` takes the direction from here.
+pub fn lower_is_better(experiment: &str, user_problem: Option<&UserProblem>) -> bool {
+    match user_problem {
+        Some(user) => user.lower_is_better,
+        None => experiment != "toy",
+    }
+}
+
+/// Whether the scores are distances from the throwing targets, in cm (the paper's grid and
+/// dartboard; not a problem file's, whatever it is called).
+pub fn scores_are_distances(experiment: &str, user_problem: Option<&UserProblem>) -> bool {
+    user_problem.is_none() && matches!(experiment, "grid" | "dartboard")
 }
 
 /// The result of one learner run.

@@ -6,6 +6,7 @@ pub mod bench;
 pub mod checkpoints;
 pub mod cli;
 pub mod commands;
+pub mod compare;
 pub mod config;
 pub mod evaluate;
 pub mod experiment;

@@ -501,7 +501,8 @@ pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
         detail: Some(Box::new(move |runs| dartboard_detail(&fields, runs))),
         best_policy: false,
         user_problem: None,
-        continuous_contexts: true,
+        // A throw at any point but a field's centre is a failed rollout (the fields are the contexts).
+        continuous_contexts: false,
     }
 }
 

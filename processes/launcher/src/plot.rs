@@ -209,7 +209,7 @@ fn score_unit(summary: &Summary) -> Option<&str> {
 
 /// Whether the training contexts are the paper's throwing targets: points on the ground, in m.
 fn throws_at_targets(summary: &Summary) -> bool {
-    summary.user_problem.is_none() && matches!(summary.experiment.as_str(), "grid" | "dartboard")
+    crate::experiment::scores_are_distances(&summary.experiment, summary.user_problem.as_ref())
 }
 
 /// What the recorded settings say about how the scores came about, for a title: the throws'

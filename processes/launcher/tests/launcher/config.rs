@@ -61,18 +61,36 @@ fn every_shipped_file_validates_sets_every_key_and_matches_the_defaults() {
         }
         // Every setting is written out, so the file documents the whole run.
         assert_eq!(plan.resolved(), file.values, "{} is not fully resolved", path.display());
-        // Only what selects the figure differs from what `acps experiment NAME` runs.
+        // Only what selects the figure differs from what `acps experiment NAME` runs; the
+        // comparisons of issue 22 (beyond-*.toml) choose their methods and retirement too, and
+        // snap where the problem takes only its training contexts, but keep every other setting
+        // of the figure and the teachers' defaults (untuned).
         let v = &file.values;
+        let stem = path.file_stem().unwrap().to_str().unwrap();
+        let comparison = stem.starts_with("beyond-");
         let selection = ExperimentFile {
             experiment: v.experiment,
             panel: v.panel,
             n_s: v.n_s,
             sim: v.sim.filter(|&s| s == SimName::Rapier),
             fig3_learning_factors: v.fig3_learning_factors.filter(|&f| f),
+            methods: v.methods.clone().filter(|_| comparison),
+            retire: v.retire.filter(|_| comparison),
+            snap: v.snap.filter(|_| comparison),
             ..ExperimentFile::default()
         };
         let defaults = Plan::new(None, &selection).unwrap().resolved();
         assert_eq!(defaults, file.values, "{} differs from the defaults", path.display());
+        if comparison {
+            let name = format!("{:?}", v.experiment.unwrap()).to_lowercase();
+            let expected = [format!("beyond-{name}"), format!("beyond-{name}-retire")];
+            assert!(
+                expected.iter().any(|e| e == stem),
+                "{stem}: expected one of {expected:?}"
+            );
+            assert_eq!(v.retire == Some(true), stem.ends_with("-retire"), "{stem}");
+            continue;
+        }
         let expected_stem = match v.experiment.unwrap() {
             ExperimentName::Toy if v.fig3_learning_factors == Some(true) => "toy-fig3".to_string(),
             ExperimentName::Toy => format!("toy-fig2{}", v.panel.unwrap()),

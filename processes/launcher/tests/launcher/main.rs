@@ -8,6 +8,7 @@ use std::process::{Command, Output};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 mod cli;
+mod compare;
 mod config;
 mod fleet;
 mod hosts;
