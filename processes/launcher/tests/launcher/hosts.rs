@@ -167,36 +167,53 @@ fn a_killed_relay_s_tasks_go_to_other_workers_and_a_late_relay_joins() {
     }
 }
 
+/// The lease of the tests that freeze or cut off a relay: they end sooner.
+const LEASE: [&str; 2] = ["--lease", "0.5"];
+
+/// A slow run, eight tasks in flight per job, served by a learner with `workers` local workers
+/// that listens on `network` with [`LEASE`], and the run name of the relay host to come.
+struct LeasedRun {
+    slow: SlowRun,
+    endpoint: String,
+    local: RunName,
+    learner: Child,
+}
+
+fn leased_run(name: &str, network: &Network, workers: usize) -> LeasedRun {
+    let slow = slow_run_with(name, &["--in-flight", "8"]);
+    let endpoint = network.endpoint();
+    let workers = workers.to_string();
+    let options = ["--in-flight", "8", "--workers", &workers, "--checkpoint-every", "1"];
+    let learner = learner(&SLOW, &endpoint, &slow.run, &slow.out, &[&options[..], &LEASE].concat());
+    LeasedRun {
+        local: run_name(&format!("{name}-h1")),
+        slow,
+        endpoint,
+        learner,
+    }
+}
+
 #[test]
 fn a_frozen_relay_is_given_up_on_after_its_lease_and_the_result_is_unchanged() {
-    let SlowRun {
-        dir: _dir,
-        reference,
-        run,
-        out,
-    } = slow_run_with("relay-freeze", &["--in-flight", "8"]);
     let network = Network::new(3);
-    let endpoint = network.endpoint();
-    let local = run_name("relay-freeze-h1");
-    let lease = ["--lease", "0.5"];
-    let learner = learner(
-        &SLOW,
-        &endpoint,
-        &run,
-        &out,
-        &[
-            &["--in-flight", "8", "--workers", "1", "--checkpoint-every", "1"][..],
-            &lease,
-        ]
-        .concat(),
-    );
+    let LeasedRun {
+        slow: SlowRun {
+            dir: _dir,
+            reference,
+            run,
+            out,
+        },
+        endpoint,
+        local,
+        learner,
+    } = leased_run("relay-freeze", &network, 1);
     // The relay and its worker freeze together (a process group), as a host does.
     let mut frozen = relay(
         &network,
         &endpoint,
         &local,
         1,
-        &[&lease[..], &["-q", "--wait-for-learner", "1"]].concat(),
+        &[&LEASE[..], &["-q", "--wait-for-learner", "1"]].concat(),
     )
     .spawn()
     .unwrap();
@@ -459,33 +476,24 @@ fn a_host_cut_off_from_the_network_is_given_up_on_and_rejoins_when_the_link_is_b
         eprintln!("network cut: skipped, it needs a network namespace");
         return;
     };
-    let SlowRun {
-        dir: _dir,
-        reference,
-        run,
-        out,
-    } = slow_run_with("relay-cut", &["--in-flight", "8"]);
-    let endpoint = network.endpoint();
-    let local = run_name("relay-cut-h1");
-    let lease = ["--lease", "0.5"];
     // The relay is the only way to the workers: nothing is learnt while the link is down.
-    let learner = learner(
-        &SLOW,
-        &endpoint,
-        &run,
-        &out,
-        &[
-            &["--in-flight", "8", "--workers", "0", "--checkpoint-every", "1"][..],
-            &lease,
-        ]
-        .concat(),
-    );
+    let LeasedRun {
+        slow: SlowRun {
+            dir: _dir,
+            reference,
+            run,
+            out,
+        },
+        endpoint,
+        local,
+        learner,
+    } = leased_run("relay-cut", &network, 0);
     let relay = relay(
         &network,
         &endpoint,
         &local,
         1,
-        &[&lease[..], &["-q", "--wait-for-learner", "120"]].concat(),
+        &[&LEASE[..], &["-q", "--wait-for-learner", "120"]].concat(),
     )
     .spawn()
     .unwrap();
