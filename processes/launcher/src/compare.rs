@@ -261,14 +261,10 @@ pub struct MeanSem {
 
 /// Mean and SEM of `values` (not empty).
 pub fn mean_sem(values: &[f64]) -> MeanSem {
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let sem = if values.len() < 2 {
-        0.0
-    } else {
-        (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
-    };
-    MeanSem { mean, sem }
+    MeanSem {
+        mean: crate::experiment::mean(values),
+        sem: crate::experiment::standard_error(values),
+    }
 }
 
 /// ln Gamma(x) for x > 0: Stirling's series with five terms, after shifting x above 12 by the
