@@ -7,6 +7,7 @@
 //! bring nalgebra into the launcher for two distribution functions.
 
 use crate::experiment::{UserProblem, lower_is_better, scores_are_distances};
+use crate::records::RUNS_CSV_HEADER;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -151,11 +152,8 @@ fn read_runs(dir: &Path) -> Result<Runs, CompareError> {
     };
     let mut lines = text.lines();
     let header = lines.next().unwrap_or_default();
-    if header != "method,run,seed,episode,score" {
-        return Err(bad(
-            1,
-            format!("header '{header}', expected 'method,run,seed,episode,score'"),
-        ));
+    if header != RUNS_CSV_HEADER {
+        return Err(bad(1, format!("header '{header}', expected '{RUNS_CSV_HEADER}'")));
     }
     let mut runs = Runs::new();
     for (i, line) in lines.enumerate() {

@@ -23,6 +23,9 @@ use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+/// The header of `runs.csv`, which `acps compare` reads back.
+pub(crate) const RUNS_CSV_HEADER: &str = "method,run,seed,episode,score";
+
 /// The `format` of policy files this build writes and reads.
 pub const POLICY_FORMAT: &str = "acps-policy-2";
 
@@ -245,7 +248,7 @@ fn curves_csv(summary: &Summary) -> String {
 }
 
 fn runs_csv(summary: &Summary) -> String {
-    let mut csv = String::from("method,run,seed,episode,score\n");
+    let mut csv = format!("{RUNS_CSV_HEADER}\n");
     for (method, runs) in &summary.run_results {
         for (index, run) in runs.iter().enumerate() {
             for (episode, score) in run.eval_episodes.iter().zip(&run.scores) {
