@@ -156,6 +156,12 @@ pub trait TaskSource {
         let _ = idle;
         Ok(false)
     }
+
+    /// The server is about to wait for workers: a source fed from other threads, which wake the
+    /// server only while it waits, says whether it may (`false`: something came in meanwhile).
+    fn may_wait(&mut self) -> bool {
+        true
+    }
 }
 
 /// The run's learner cores: the [`TaskSource`] of a learner's fleet.
@@ -238,7 +244,8 @@ pub enum RemoteEvent {
 
 /// Peers served over a network (relays of other hosts, `acps-relay`): the server hands them tasks
 /// as it does local workers, and wakes when they speak through the run's own wake-up event (a
-/// remote notifies the run's `to-learner` event service after every message it queues).
+/// remote notifies the run's `to-learner` event service when it queues a message while the
+/// server waits, see [`Remote::may_wait`]).
 pub trait Remote {
     /// Serving of `run` starts: admit peers for a source of this `identity` whose jobs need
     /// these `environments` (by job).
@@ -256,6 +263,11 @@ pub trait Remote {
 
     /// Serving ends (done, or stopped): tell every peer.
     fn finish(&mut self, done: bool);
+
+    /// The server is about to wait: whether it may (`false`: a message came in meanwhile). A
+    /// remote wakes the server through the run's event only while it waits, so this must say
+    /// that the server sleeps, or its messages wait for the next tick.
+    fn may_wait(&mut self) -> bool;
 }
 
 /// Progress of a fleet run, reported every tick.
@@ -763,7 +775,7 @@ pub(crate) fn serve<'r>(
             idle_since = None;
         } else if idle_since.get_or_insert_with(Instant::now).elapsed() < options.spin {
             std::thread::yield_now();
-        } else {
+        } else if source.may_wait() && remote.as_deref_mut().is_none_or(|remote| remote.may_wait()) {
             idle_since = None;
             match listener.timed_wait(|_| {}, waker.until_heartbeat()) {
                 // Any signal interrupts the wait, also SIGSTOP and SIGCONT (a paused and resumed

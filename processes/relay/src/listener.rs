@@ -1,7 +1,7 @@
 //! The learner's side: [`Listener`] admits relays over Zenoh and is the fleet's [`Remote`].
 
 use crate::net::{self, Admission, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, Up, Welcome};
-use crate::pump::{Poke, Pump};
+use crate::pump::{Bell, Pump};
 use acps_fleet::{PeerId, Remote, RemoteEvent, SourceError};
 use acps_shared::{EnvironmentSpec, Serves, Task};
 use acps_wire::ipc::RunName;
@@ -84,7 +84,7 @@ struct Shared {
     told_done: HashSet<PeerId>,
     next_peer: PeerId,
     incoming: VecDeque<Incoming>,
-    poke: Option<Poke>,
+    bell: Bell,
 }
 
 #[derive(Clone)]
@@ -272,9 +272,7 @@ fn queue(shared: &Mutex<Shared>, incoming: Incoming) {
         return;
     }
     shared.incoming.push_back(incoming);
-    if let Some(poke) = &shared.poke {
-        poke.poke();
-    }
+    shared.bell.ring();
 }
 
 fn send(publisher: &zenoh::pubsub::Publisher<'static>, message: &Down, peer: PeerId) {
@@ -392,7 +390,7 @@ impl Remote for Listener {
             identity,
             environments: environments.to_vec(),
         });
-        shared.poke = Some(poke);
+        shared.bell = Bell::new(poke);
         drop(shared);
         self.pump = Some(pump);
         Ok(())
@@ -400,6 +398,7 @@ impl Remote for Listener {
 
     fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), SourceError> {
         let mut shared = lock(&self.shared);
+        shared.bell.awake();
         let mut evict = Vec::new();
         while let Some(incoming) = shared.incoming.pop_front() {
             match incoming {
@@ -507,9 +506,15 @@ impl Remote for Listener {
             admitted.traffic.log(&self.run, &admitted.host);
         }
         shared.incoming.clear();
-        shared.poke = None;
+        shared.bell = Bell::default();
         drop(shared);
         // Joins the pump thread, whose node must be gone before the fleet removes the run.
         self.pump = None;
+    }
+
+    fn may_wait(&mut self) -> bool {
+        let mut shared = lock(&self.shared);
+        let queued = shared.incoming.len();
+        shared.bell.may_sleep(queued)
     }
 }

@@ -2,7 +2,9 @@
 //!
 //! Zenoh delivers messages on its own threads, and iceoryx2's ports cannot move between threads,
 //! so a pump thread owns a node of the run and a notifier of its `to-learner` event: the network
-//! callbacks queue their message and poke the pump, which notifies, once per burst.
+//! callbacks queue their message and ring a [`Bell`], which pokes the pump only while the server
+//! sleeps; the pump notifies, once per burst. A server that is awake takes the message in on its
+//! next pass: poking it then cost a thread wake-up and a notification for nothing.
 
 use acps_wire::ipc::{self, IpcError, RunName};
 use std::sync::mpsc;
@@ -16,6 +18,46 @@ impl Poke {
     pub(crate) fn poke(&self) {
         // A pump that ended wakes nobody, and needs not.
         let _ = self.0.send(());
+    }
+}
+
+/// Whether the server sleeps, kept under the same lock as the queue the callbacks fill. The
+/// default wakes nobody (no serve, or it ended).
+#[derive(Default)]
+pub(crate) struct Bell {
+    poke: Option<Poke>,
+    asleep: bool,
+}
+
+impl Bell {
+    /// A bell that pokes through `poke`; the server counts as asleep until it looks.
+    pub(crate) fn new(poke: Poke) -> Self {
+        Self {
+            poke: Some(poke),
+            asleep: true,
+        }
+    }
+
+    /// Something was queued: wake the server if it sleeps, once per sleep.
+    pub(crate) fn ring(&mut self) {
+        if std::mem::take(&mut self.asleep)
+            && let Some(poke) = &self.poke
+        {
+            poke.poke();
+        }
+    }
+
+    /// The server takes in what is queued: it needs no wake-up until it sleeps again.
+    pub(crate) fn awake(&mut self) {
+        self.asleep = false;
+    }
+
+    /// The server is about to sleep, with `queued` messages waiting: it may unless there are
+    /// some (they rang while it was awake). Called under the queue's lock, so a message queued
+    /// after it rings, and the notification waits for the server in its listener.
+    pub(crate) fn may_sleep(&mut self, queued: usize) -> bool {
+        self.asleep = queued == 0;
+        self.asleep
     }
 }
 
@@ -89,5 +131,39 @@ impl Drop for Pump {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bell_pokes_once_per_sleep_and_keeps_the_server_up_when_messages_wait() {
+        let (poke, pokes) = mpsc::channel();
+        let mut bell = Bell::new(Poke(poke));
+        let count = || pokes.try_iter().count();
+        // Asleep until the server first looks: the first message wakes it, the next ones not.
+        bell.ring();
+        bell.ring();
+        assert_eq!(count(), 1);
+        // Awake: nothing pokes.
+        bell.awake();
+        bell.ring();
+        assert_eq!(count(), 0);
+        // A message came in while it was awake: it must not sleep, and is not poked.
+        assert!(!bell.may_sleep(1));
+        bell.ring();
+        assert_eq!(count(), 0);
+        // Nothing waits: it sleeps, and the next message wakes it once.
+        assert!(bell.may_sleep(0));
+        bell.ring();
+        bell.ring();
+        assert_eq!(count(), 1);
+        // A default bell wakes nobody.
+        let mut silent = Bell::default();
+        assert!(silent.may_sleep(0));
+        silent.ring();
+        assert_eq!(count(), 0);
     }
 }

@@ -3,7 +3,7 @@
 //! that asks for tasks in batches on behalf of all of them and returns their outcomes.
 
 use crate::net::{self, Admission, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, NetOutcome, Up, Welcome};
-use crate::pump::{Poke, Pump};
+use crate::pump::{Bell, Pump};
 use acps_fleet::{Fleet, FleetError, FleetProgress, Observer, SourceError, TaskSource};
 use acps_shared::{EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::wire::{PROTOCOL_VERSION, check_task_sizes};
@@ -328,10 +328,9 @@ impl Observer for Watching<'_> {
 }
 
 /// What the network callbacks hand to the serving thread.
-#[derive(Default)]
 struct Inbox {
     messages: VecDeque<Down>,
-    poke: Option<Poke>,
+    bell: Bell,
 }
 
 /// The tasks a relay fetched from its learner, served to the host's workers.
@@ -378,7 +377,7 @@ impl RelaySource {
             Pump::start(local, "relay-net").map_err(|e| NetError::zenoh("starting the relay's wake-up thread", e))?;
         let inbox = Arc::new(Mutex::new(Inbox {
             messages: VecDeque::new(),
-            poke: Some(poke),
+            bell: Bell::new(poke),
         }));
         let peer = welcome.peer;
         let down = {
@@ -389,9 +388,7 @@ impl RelaySource {
                     Ok(message) => {
                         let mut inbox = inbox.lock().unwrap_or_else(|p| p.into_inner());
                         inbox.messages.push_back(message);
-                        if let Some(poke) = &inbox.poke {
-                            poke.poke();
-                        }
+                        inbox.bell.ring();
                     }
                     Err(error) => tracing::warn!("a message of the learner cannot be read: {error}"),
                 })
@@ -521,7 +518,7 @@ impl RelaySource {
 impl Drop for RelaySource {
     fn drop(&mut self) {
         // The pump thread ends once no callback can poke it: its sender goes first.
-        self.inbox.lock().unwrap_or_else(|p| p.into_inner()).poke = None;
+        self.inbox.lock().unwrap_or_else(|p| p.into_inner()).bell = Bell::default();
     }
 }
 
@@ -592,7 +589,11 @@ impl TaskSource for RelaySource {
         if self.learner.load(Ordering::Relaxed) == GONE {
             return Err(Box::new(Gone(self.run.clone())));
         }
-        let messages = std::mem::take(&mut self.inbox.lock().unwrap_or_else(|p| p.into_inner()).messages);
+        let messages = {
+            let mut inbox = self.inbox.lock().unwrap_or_else(|p| p.into_inner());
+            inbox.bell.awake();
+            std::mem::take(&mut inbox.messages)
+        };
         let arrived = !messages.is_empty();
         for message in messages {
             self.take(message)?;
@@ -623,5 +624,11 @@ impl TaskSource for RelaySource {
             self.send(0, Serves::Any)?;
         }
         Ok(arrived)
+    }
+
+    fn may_wait(&mut self) -> bool {
+        let mut inbox = self.inbox.lock().unwrap_or_else(|p| p.into_inner());
+        let queued = inbox.messages.len();
+        inbox.bell.may_sleep(queued)
     }
 }
