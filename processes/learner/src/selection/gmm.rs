@@ -247,27 +247,60 @@ fn kmeans(data: &[f64], dim: usize, mut centres: Vec<Vec<f64>>) -> Vec<usize> {
     labels
 }
 
-/// The M step: weights, means and regularised covariances from the responsibilities.
+/// The M step: weights, means and regularised covariances from the responsibilities (row by
+/// row, one per component). One pass over the points makes every component's sums, each still
+/// added in point order as a pass per component would; the covariances take a second pass,
+/// about the final means.
 fn maximise(data: &[f64], dim: usize, k: usize, responsibilities: &[f64]) -> Option<Mixture> {
+    // The dimension a constant for ALP-GMM's points (a context of 1 to 3 coordinates and its
+    // ALP), so that the compiler unrolls the loops over coordinates; the arithmetic is the same.
+    match dim {
+        2 => maximise_in::<2>(data, dim, k, responsibilities),
+        3 => maximise_in::<3>(data, dim, k, responsibilities),
+        4 => maximise_in::<4>(data, dim, k, responsibilities),
+        _ => maximise_in::<0>(data, dim, k, responsibilities),
+    }
+}
+
+/// [`maximise`] for points of `D` coordinates, or of `dim` when `D` is 0.
+fn maximise_in<const D: usize>(data: &[f64], dim: usize, k: usize, responsibilities: &[f64]) -> Option<Mixture> {
+    let dim = if D == 0 { dim } else { D };
     let n = data.len() / dim;
-    let components = (0..k)
-        .map(|c| {
-            let column = || responsibilities.iter().skip(c).step_by(k);
-            // scikit-learn's guard against a component that owns no point.
-            let mass = column().sum::<f64>() + 10.0 * f64::EPSILON;
-            let mut mean = vec![0.0; dim];
-            for (point, r) in data.chunks(dim).zip(column()) {
-                mean.iter_mut().zip(point).for_each(|(m, x)| *m += r * x);
-            }
-            mean.iter_mut().for_each(|m| *m /= mass);
-            let mut covariance = vec![0.0; dim * dim];
-            for (point, r) in data.chunks(dim).zip(column()) {
-                for i in 0..dim {
-                    for j in 0..=i {
-                        covariance[i * dim + j] += r * (point[i] - mean[i]) * (point[j] - mean[j]);
-                    }
+    // Masses from -0.0, where `Iterator::sum` (a pass per component) starts.
+    let mut masses = vec![-0.0; k];
+    let mut means = vec![0.0; k * dim];
+    for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
+        for ((mass, mean), r) in masses.iter_mut().zip(means.chunks_exact_mut(dim)).zip(row) {
+            *mass += r;
+            mean.iter_mut().zip(point).for_each(|(m, x)| *m += r * x);
+        }
+    }
+    for (mass, mean) in masses.iter_mut().zip(means.chunks_exact_mut(dim)) {
+        // scikit-learn's guard against a component that owns no point.
+        *mass += 10.0 * f64::EPSILON;
+        mean.iter_mut().for_each(|m| *m /= *mass);
+    }
+    let mut covariances = vec![0.0; k * dim * dim];
+    let mut centred = vec![0.0; dim];
+    for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
+        let sums = covariances.chunks_exact_mut(dim * dim).zip(means.chunks_exact(dim));
+        for ((covariance, mean), r) in sums.zip(row) {
+            centred
+                .iter_mut()
+                .zip(point.iter().zip(mean))
+                .for_each(|(d, (x, m))| *d = x - m);
+            for i in 0..dim {
+                for j in 0..=i {
+                    covariance[i * dim + j] += r * centred[i] * centred[j];
                 }
             }
+        }
+    }
+    let components = masses
+        .into_iter()
+        .zip(means.chunks_exact(dim))
+        .zip(covariances.chunks_exact_mut(dim * dim))
+        .map(|((mass, mean), covariance)| {
             for i in 0..dim {
                 for j in 0..=i {
                     let value = covariance[i * dim + j] / mass + if i == j { REGULARISATION } else { 0.0 };
@@ -277,8 +310,8 @@ fn maximise(data: &[f64], dim: usize, k: usize, responsibilities: &[f64]) -> Opt
             }
             Component {
                 weight: mass / n as f64,
-                mean,
-                covariance,
+                mean: mean.to_vec(),
+                covariance: covariance.to_vec(),
             }
         })
         .collect();
