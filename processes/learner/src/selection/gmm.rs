@@ -216,14 +216,13 @@ fn kmeans_plus_plus(data: &[f64], dim: usize, k: usize, rng: &mut dyn RngCore) -
 /// [`MAX_ITERATIONS`] rounds): the label of every point, its nearest centre (ties to the lowest
 /// index). A centre that loses every point stays where it was.
 fn kmeans(data: &[f64], dim: usize, mut centres: Vec<Vec<f64>>) -> Vec<usize> {
+    // Each distance once, and the first of the least; as a NaN is never less, one never wins.
     let nearest = |point: &[f64], centres: &[Vec<f64>]| {
-        (0..centres.len()).fold(0, |best, c| {
-            if distance2(point, &centres[c]) < distance2(point, &centres[best]) {
-                c
-            } else {
-                best
-            }
-        })
+        let mut distances = centres.iter().map(|centre| distance2(point, centre)).enumerate();
+        let first = distances.next().unwrap_or((0, 0.0));
+        distances
+            .fold(first, |best, (c, d)| if d < best.1 { (c, d) } else { best })
+            .0
     };
     let mut labels: Vec<usize> = data.chunks(dim).map(|point| nearest(point, &centres)).collect();
     for _ in 0..MAX_ITERATIONS {
