@@ -77,39 +77,65 @@ impl Mixture {
         &self.components
     }
 
-    /// ln(weight * density) of `point` under component `k`.
-    fn log_joint(&self, k: usize, point: &[f64], work: &mut [f64]) -> f64 {
-        let (dim, factor, mean) = (self.dim, &self.factors[k], &self.components[k].mean);
-        // Solve L y = point - mean by forward substitution; the Mahalanobis distance is |y|^2.
-        let mut distance = 0.0;
-        for i in 0..dim {
-            let row = &factor[i * dim..i * dim + i];
-            let y = (point[i] - mean[i] - row.iter().zip(&work[..i]).map(|(l, y)| l * y).sum::<f64>())
-                / factor[i * dim + i];
-            work[i] = y;
-            distance += y * y;
-        }
-        self.log_norms[k] - 0.5 * distance
-    }
-
-    /// The log-likelihood of `data` (points of `dim` coordinates one after another), and every
-    /// point's responsibilities (row by row, one per component).
-    fn expect(&self, data: &[f64]) -> (f64, Vec<f64>) {
-        let k = self.components.len();
-        let mut responsibilities = vec![0.0; data.len() / self.dim * k];
-        let mut work = vec![0.0; self.dim];
-        let mut total = 0.0;
-        for (point, row) in data.chunks(self.dim).zip(responsibilities.chunks_mut(k)) {
-            for (c, r) in row.iter_mut().enumerate() {
-                *r = self.log_joint(c, point, &mut work);
+    /// The log-likelihood of the points of `e`, and every point's responsibilities (row by row,
+    /// one per component) into `responsibilities`. Each loop runs over all the points, which
+    /// the compiler vectorises, but makes every point's quantities with the operations, and in
+    /// the order, of a point at a time.
+    fn expect(&self, e: &mut EStep, responsibilities: &mut [f64]) -> f64 {
+        let (dim, n, k) = (self.dim, e.n, self.components.len());
+        let EStep {
+            columns,
+            joints,
+            solved,
+            largest,
+            sums,
+            ..
+        } = e;
+        for (c, joints) in joints.chunks_exact_mut(n).enumerate() {
+            let (factor, mean) = (&self.factors[c], &self.components[c].mean);
+            // Solve L y = point - mean by forward substitution; the Mahalanobis distance is
+            // |y|^2, summed in `joints`.
+            joints.fill(0.0);
+            for i in 0..dim {
+                let (before, y) = solved.split_at_mut(i * n);
+                let y = &mut y[..n];
+                // L's row times the y so far, from -0.0 as `Iterator::sum` starts.
+                y.fill(-0.0);
+                for (j, y_j) in before.chunks_exact(n).enumerate() {
+                    let l = factor[i * dim + j];
+                    y.iter_mut().zip(y_j).for_each(|(dot, y_j)| *dot += l * y_j);
+                }
+                let (m, l) = (mean[i], factor[i * dim + i]);
+                let x = &columns[i * n..(i + 1) * n];
+                for ((y, x), distance) in y.iter_mut().zip(x).zip(joints.iter_mut()) {
+                    *y = (x - m - *y) / l;
+                    *distance += *y * *y;
+                }
             }
-            let max = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            row.iter_mut().for_each(|r| *r = exp(*r - max));
-            let sum: f64 = row.iter().sum();
-            row.iter_mut().for_each(|r| *r /= sum);
+            let log_norm = self.log_norms[c];
+            joints.iter_mut().for_each(|j| *j = log_norm - 0.5 * *j);
+        }
+        largest.fill(f64::NEG_INFINITY);
+        for joints in joints.chunks_exact(n) {
+            largest.iter_mut().zip(joints).for_each(|(max, j)| *max = max.max(*j));
+        }
+        sums.fill(-0.0);
+        for joints in joints.chunks_exact_mut(n) {
+            for ((j, max), sum) in joints.iter_mut().zip(&*largest).zip(sums.iter_mut()) {
+                *j = exp(*j - max);
+                *sum += *j;
+            }
+        }
+        for (c, joints) in joints.chunks_exact_mut(n).enumerate() {
+            joints.iter_mut().zip(&*sums).for_each(|(j, sum)| *j /= sum);
+            let column = responsibilities[c..].iter_mut().step_by(k);
+            column.zip(&*joints).for_each(|(r, j)| *r = *j);
+        }
+        let mut total = 0.0;
+        for (max, sum) in largest.iter().zip(&*sums) {
             total += max + sum.ln();
         }
-        (total, responsibilities)
+        total
     }
 
     /// The first `leading` coordinates of a draw from component `k`: the component's marginal
@@ -134,16 +160,17 @@ impl Mixture {
             row[label] = 1.0;
         }
         let mut mixture = maximise(data, dim, k, &responsibilities)?;
+        let mut e = EStep::new(data, dim, k);
         let mut previous = f64::NEG_INFINITY;
         for _ in 0..MAX_ITERATIONS {
-            let (log_likelihood, next) = mixture.expect(data);
+            let log_likelihood = mixture.expect(&mut e, &mut responsibilities);
             if (log_likelihood - previous).abs() < TOLERANCE * n as f64 {
                 return Some((mixture, log_likelihood));
             }
             previous = log_likelihood;
-            mixture = maximise(data, dim, k, &next)?;
+            mixture = maximise(data, dim, k, &responsibilities)?;
         }
-        let (log_likelihood, _) = mixture.expect(data);
+        let log_likelihood = mixture.expect(&mut e, &mut responsibilities);
         Some((mixture, log_likelihood))
     }
 
@@ -162,6 +189,42 @@ impl Mixture {
             }
         }
         best.map(|(_, mixture)| mixture)
+    }
+}
+
+/// The points of a fit coordinate by coordinate, and the buffers of [`Mixture::expect`], kept
+/// for all its iterations. Each holds a value per point, point p of row r at r * n + p.
+struct EStep {
+    n: usize,
+    /// A row per coordinate.
+    columns: Vec<f64>,
+    /// A row per component: ln(weight * density), then e^(that - the point's largest), then the
+    /// responsibility.
+    joints: Vec<f64>,
+    /// A row per coordinate: the forward substitution's y.
+    solved: Vec<f64>,
+    /// Every point's largest log joint, and the sum of its exponentials.
+    largest: Vec<f64>,
+    sums: Vec<f64>,
+}
+
+impl EStep {
+    fn new(data: &[f64], dim: usize, k: usize) -> Self {
+        let n = data.len() / dim;
+        let mut columns = vec![0.0; dim * n];
+        for (p, point) in data.chunks_exact(dim).enumerate() {
+            for (i, &x) in point.iter().enumerate() {
+                columns[i * n + p] = x;
+            }
+        }
+        Self {
+            n,
+            columns,
+            joints: vec![0.0; k * n],
+            solved: vec![0.0; dim * n],
+            largest: vec![0.0; n],
+            sums: vec![0.0; n],
+        }
     }
 }
 
