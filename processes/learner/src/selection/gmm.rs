@@ -332,7 +332,7 @@ fn maximise_in<const D: usize>(data: &[f64], dim: usize, k: usize, responsibilit
     let mut masses = vec![-0.0; k];
     let mut means = vec![0.0; k * dim];
     for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
-        for ((mass, mean), r) in masses.iter_mut().zip(means.chunks_exact_mut(dim)).zip(row) {
+        for ((mass, mean), &r) in masses.iter_mut().zip(means.chunks_exact_mut(dim)).zip(row) {
             *mass += r;
             mean.iter_mut().zip(point).for_each(|(m, x)| *m += r * x);
         }
@@ -344,15 +344,17 @@ fn maximise_in<const D: usize>(data: &[f64], dim: usize, k: usize, responsibilit
     }
     let mut covariances = vec![0.0; k * dim * dim];
     let mut centred = vec![0.0; dim];
+    // Each responsibility by value, which no store can alias, and `0..i + 1` rather than `0..=i`:
+    // so the compiler unrolls these loops and keeps r * centred[i] for every j.
     for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
         let sums = covariances.chunks_exact_mut(dim * dim).zip(means.chunks_exact(dim));
-        for ((covariance, mean), r) in sums.zip(row) {
+        for ((covariance, mean), &r) in sums.zip(row) {
             centred
                 .iter_mut()
                 .zip(point.iter().zip(mean))
                 .for_each(|(d, (x, m))| *d = x - m);
             for i in 0..dim {
-                for j in 0..=i {
+                for j in 0..i + 1 {
                     covariance[i * dim + j] += r * centred[i] * centred[j];
                 }
             }
