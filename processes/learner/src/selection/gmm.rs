@@ -48,9 +48,43 @@ impl Mixture {
     /// component has that dimension, a positive finite weight and a positive-definite
     /// covariance.
     pub(crate) fn new(dim: usize, components: Vec<Component>) -> Option<Self> {
-        let mut factors = Vec::with_capacity(components.len());
-        let mut log_norms = Vec::with_capacity(components.len());
-        for component in &components {
+        if components.is_empty() {
+            return None;
+        }
+        let k = components.len();
+        let mut mixture = Self {
+            dim,
+            components,
+            factors: vec![vec![0.0; dim * dim]; k],
+            log_norms: vec![0.0; k],
+        };
+        mixture.factorise()?;
+        Some(mixture)
+    }
+
+    /// `k` components of zero weight, mean and covariance, not yet factorised: buffers for
+    /// [`Self::maximise`] to fill, and refill at every iteration of a fit.
+    fn zeroed(dim: usize, k: usize) -> Self {
+        let component = Component {
+            weight: 0.0,
+            mean: vec![0.0; dim],
+            covariance: vec![0.0; dim * dim],
+        };
+        Self {
+            dim,
+            components: vec![component; k],
+            factors: vec![vec![0.0; dim * dim]; k],
+            log_norms: vec![0.0; k],
+        }
+    }
+
+    /// The Cholesky factors and log norms of the components, into their buffers; `None` unless
+    /// every component has the mixture's dimension, a positive finite weight and a
+    /// positive-definite covariance.
+    fn factorise(&mut self) -> Option<()> {
+        let dim = self.dim;
+        let factors = self.factors.iter_mut().zip(&mut self.log_norms);
+        for (component, (factor, log_norm)) in self.components.iter().zip(factors) {
             let valid = component.mean.len() == dim
                 && component.covariance.len() == dim * dim
                 && component.weight > 0.0
@@ -59,17 +93,11 @@ impl Mixture {
             if !valid {
                 return None;
             }
-            let factor = cholesky(&component.covariance, dim)?;
+            cholesky(&component.covariance, dim, factor)?;
             let log_det: f64 = (0..dim).map(|i| factor[i * dim + i].ln()).sum::<f64>() * 2.0;
-            log_norms.push(component.weight.ln() - 0.5 * (dim as f64 * (2.0 * std::f64::consts::PI).ln() + log_det));
-            factors.push(factor);
+            *log_norm = component.weight.ln() - 0.5 * (dim as f64 * (2.0 * std::f64::consts::PI).ln() + log_det);
         }
-        (!components.is_empty()).then_some(Self {
-            dim,
-            components,
-            factors,
-            log_norms,
-        })
+        Some(())
     }
 
     /// The components.
@@ -138,6 +166,76 @@ impl Mixture {
         total
     }
 
+    /// The M step: weights, means and regularised covariances from the responsibilities (row
+    /// by row, one per component), then the factors; `None` as [`Self::factorise`]. One pass
+    /// over the points makes every component's sums, each still added in point order as a pass
+    /// per component would; the covariances take a second pass, about the final means.
+    fn maximise(&mut self, data: &[f64], responsibilities: &[f64]) -> Option<()> {
+        // The dimension a constant for ALP-GMM's points (a context of 1 to 3 coordinates and its
+        // ALP), so that the compiler unrolls the loops over coordinates; the arithmetic is the
+        // same.
+        match self.dim {
+            2 => self.maximise_in::<2>(data, responsibilities),
+            3 => self.maximise_in::<3>(data, responsibilities),
+            4 => self.maximise_in::<4>(data, responsibilities),
+            _ => self.maximise_in::<0>(data, responsibilities),
+        }
+    }
+
+    /// [`Self::maximise`] for points of `D` coordinates, or of [`Self::dim`] when `D` is 0.
+    fn maximise_in<const D: usize>(&mut self, data: &[f64], responsibilities: &[f64]) -> Option<()> {
+        let (dim, k) = (if D == 0 { self.dim } else { D }, self.components.len());
+        let n = data.len() / dim;
+        // Masses from -0.0, where `Iterator::sum` (a pass per component) starts.
+        let mut masses = vec![-0.0; k];
+        let mut means = vec![0.0; k * dim];
+        for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
+            for ((mass, mean), &r) in masses.iter_mut().zip(means.chunks_exact_mut(dim)).zip(row) {
+                *mass += r;
+                mean.iter_mut().zip(point).for_each(|(m, x)| *m += r * x);
+            }
+        }
+        for (mass, mean) in masses.iter_mut().zip(means.chunks_exact_mut(dim)) {
+            // scikit-learn's guard against a component that owns no point.
+            *mass += 10.0 * f64::EPSILON;
+            mean.iter_mut().for_each(|m| *m /= *mass);
+        }
+        let mut covariances = vec![0.0; k * dim * dim];
+        let mut centred = vec![0.0; dim];
+        // Each responsibility by value, which no store can alias, and `0..i + 1` rather than
+        // `0..=i`: so the compiler unrolls these loops and keeps r * centred[i] for every j.
+        for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
+            let sums = covariances.chunks_exact_mut(dim * dim).zip(means.chunks_exact(dim));
+            for ((covariance, mean), &r) in sums.zip(row) {
+                centred
+                    .iter_mut()
+                    .zip(point.iter().zip(mean))
+                    .for_each(|(d, (x, m))| *d = x - m);
+                for i in 0..dim {
+                    for j in 0..i + 1 {
+                        covariance[i * dim + j] += r * centred[i] * centred[j];
+                    }
+                }
+            }
+        }
+        let sums = masses
+            .iter()
+            .zip(means.chunks_exact(dim))
+            .zip(covariances.chunks_exact(dim * dim));
+        for (((&mass, mean), sum), component) in sums.zip(&mut self.components) {
+            component.weight = mass / n as f64;
+            component.mean.copy_from_slice(mean);
+            for i in 0..dim {
+                for j in 0..=i {
+                    let value = sum[i * dim + j] / mass + if i == j { REGULARISATION } else { 0.0 };
+                    component.covariance[i * dim + j] = value;
+                    component.covariance[j * dim + i] = value;
+                }
+            }
+        }
+        self.factorise()
+    }
+
     /// The first `leading` coordinates of a draw from component `k`: the component's marginal
     /// over them, whose Cholesky factor is the leading block of the full one. Draws `leading`
     /// standard normals.
@@ -159,7 +257,8 @@ impl Mixture {
         for (row, &label) in responsibilities.chunks_mut(k).zip(&labels) {
             row[label] = 1.0;
         }
-        let mut mixture = maximise(data, dim, k, &responsibilities)?;
+        let mut mixture = Self::zeroed(dim, k);
+        mixture.maximise(data, &responsibilities)?;
         let mut e = EStep::new(data, dim, k);
         let mut previous = f64::NEG_INFINITY;
         for _ in 0..MAX_ITERATIONS {
@@ -168,7 +267,7 @@ impl Mixture {
                 return Some((mixture, log_likelihood));
             }
             previous = log_likelihood;
-            mixture = maximise(data, dim, k, &responsibilities)?;
+            mixture.maximise(data, &responsibilities)?;
         }
         let log_likelihood = mixture.expect(&mut e, &mut responsibilities);
         Some((mixture, log_likelihood))
@@ -309,83 +408,10 @@ fn kmeans(data: &[f64], dim: usize, mut centres: Vec<Vec<f64>>) -> Vec<usize> {
     labels
 }
 
-/// The M step: weights, means and regularised covariances from the responsibilities (row by
-/// row, one per component). One pass over the points makes every component's sums, each still
-/// added in point order as a pass per component would; the covariances take a second pass,
-/// about the final means.
-fn maximise(data: &[f64], dim: usize, k: usize, responsibilities: &[f64]) -> Option<Mixture> {
-    // The dimension a constant for ALP-GMM's points (a context of 1 to 3 coordinates and its
-    // ALP), so that the compiler unrolls the loops over coordinates; the arithmetic is the same.
-    match dim {
-        2 => maximise_in::<2>(data, dim, k, responsibilities),
-        3 => maximise_in::<3>(data, dim, k, responsibilities),
-        4 => maximise_in::<4>(data, dim, k, responsibilities),
-        _ => maximise_in::<0>(data, dim, k, responsibilities),
-    }
-}
-
-/// [`maximise`] for points of `D` coordinates, or of `dim` when `D` is 0.
-fn maximise_in<const D: usize>(data: &[f64], dim: usize, k: usize, responsibilities: &[f64]) -> Option<Mixture> {
-    let dim = if D == 0 { dim } else { D };
-    let n = data.len() / dim;
-    // Masses from -0.0, where `Iterator::sum` (a pass per component) starts.
-    let mut masses = vec![-0.0; k];
-    let mut means = vec![0.0; k * dim];
-    for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
-        for ((mass, mean), &r) in masses.iter_mut().zip(means.chunks_exact_mut(dim)).zip(row) {
-            *mass += r;
-            mean.iter_mut().zip(point).for_each(|(m, x)| *m += r * x);
-        }
-    }
-    for (mass, mean) in masses.iter_mut().zip(means.chunks_exact_mut(dim)) {
-        // scikit-learn's guard against a component that owns no point.
-        *mass += 10.0 * f64::EPSILON;
-        mean.iter_mut().for_each(|m| *m /= *mass);
-    }
-    let mut covariances = vec![0.0; k * dim * dim];
-    let mut centred = vec![0.0; dim];
-    // Each responsibility by value, which no store can alias, and `0..i + 1` rather than `0..=i`:
-    // so the compiler unrolls these loops and keeps r * centred[i] for every j.
-    for (point, row) in data.chunks_exact(dim).zip(responsibilities.chunks_exact(k)) {
-        let sums = covariances.chunks_exact_mut(dim * dim).zip(means.chunks_exact(dim));
-        for ((covariance, mean), &r) in sums.zip(row) {
-            centred
-                .iter_mut()
-                .zip(point.iter().zip(mean))
-                .for_each(|(d, (x, m))| *d = x - m);
-            for i in 0..dim {
-                for j in 0..i + 1 {
-                    covariance[i * dim + j] += r * centred[i] * centred[j];
-                }
-            }
-        }
-    }
-    let components = masses
-        .into_iter()
-        .zip(means.chunks_exact(dim))
-        .zip(covariances.chunks_exact_mut(dim * dim))
-        .map(|((mass, mean), covariance)| {
-            for i in 0..dim {
-                for j in 0..=i {
-                    let value = covariance[i * dim + j] / mass + if i == j { REGULARISATION } else { 0.0 };
-                    covariance[i * dim + j] = value;
-                    covariance[j * dim + i] = value;
-                }
-            }
-            Component {
-                weight: mass / n as f64,
-                mean: mean.to_vec(),
-                covariance: covariance.to_vec(),
-            }
-        })
-        .collect();
-    Mixture::new(dim, components)
-}
-
-/// The lower Cholesky factor of the symmetric `dim` x `dim` matrix `a` (row by row), or `None`
-/// when it is not positive definite.
-fn cholesky(a: &[f64], dim: usize) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; dim * dim];
+/// The lower Cholesky factor of the symmetric `dim` x `dim` matrix `a` (row by row) into the
+/// lower triangle of `l` (its upper one stays as it is, zero), or `None` when `a` is not
+/// positive definite.
+fn cholesky(a: &[f64], dim: usize, l: &mut [f64]) -> Option<()> {
     for i in 0..dim {
         for j in 0..=i {
             let dot: f64 = (0..j).map(|m| l[i * dim + m] * l[j * dim + m]).sum();
@@ -400,7 +426,7 @@ fn cholesky(a: &[f64], dim: usize) -> Option<Vec<f64>> {
             }
         }
     }
-    Some(l)
+    Some(())
 }
 
 #[cfg(test)]
@@ -553,7 +579,8 @@ mod tests {
     #[test]
     fn cholesky_factors_reproduce_the_matrix() {
         let a = [4.0, 2.0, 0.4, 2.0, 5.0, 1.0, 0.4, 1.0, 3.0];
-        let l = cholesky(&a, 3).unwrap();
+        let mut l = [0.0; 9];
+        cholesky(&a, 3, &mut l).unwrap();
         for i in 0..3 {
             for j in 0..3 {
                 let product: f64 = (0..3).map(|m| l[i * 3 + m] * l[j * 3 + m]).sum();
