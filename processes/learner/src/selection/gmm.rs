@@ -576,6 +576,137 @@ mod tests {
         assert!(Mixture::new(3, vec![bad]).is_none());
     }
 
+    /// [`Mixture::fit`] as first written, a point and a component at a time, for the fast one to
+    /// match bit for bit: its components and log-likelihood.
+    fn reference_fit(data: &[f64], dim: usize, k: usize, rng: &mut dyn RngCore) -> Option<(Vec<Component>, f64)> {
+        let n = data.len() / dim;
+        let x = |p: usize, i: usize| data[p * dim + i];
+        let point = |p: usize| &data[p * dim..(p + 1) * dim];
+        let nearest = |p: usize, centres: &[Vec<f64>]| {
+            let d = |c: usize| distance2(point(p), &centres[c]);
+            (0..centres.len()).fold(0, |best, c| if d(c) < d(best) { c } else { best })
+        };
+        let mut centres = kmeans_plus_plus(data, dim, k, rng)?;
+        let mut labels: Vec<usize> = (0..n).map(|p| nearest(p, &centres)).collect();
+        for _ in 0..MAX_ITERATIONS {
+            for (c, centre) in centres.iter_mut().enumerate() {
+                let members: Vec<usize> = (0..n).filter(|&p| labels[p] == c).collect();
+                if !members.is_empty() {
+                    let sum = |i| members.iter().fold(0.0, |sum, &p| sum + x(p, i));
+                    *centre = (0..dim).map(|i| sum(i) / members.len() as f64).collect();
+                }
+            }
+            let next: Vec<usize> = (0..n).map(|p| nearest(p, &centres)).collect();
+            if next == labels {
+                break;
+            }
+            labels = next;
+        }
+        let mut r: Vec<Vec<f64>> = labels
+            .iter()
+            .map(|&label| (0..k).map(|c| if c == label { 1.0 } else { 0.0 }).collect())
+            .collect();
+        let maximise = |r: &[Vec<f64>]| {
+            let component = |c: usize| {
+                let mass = r.iter().map(|row| row[c]).sum::<f64>() + 10.0 * f64::EPSILON;
+                let mean: Vec<f64> = (0..dim)
+                    .map(|i| (0..n).fold(0.0, |m, p| m + r[p][c] * x(p, i)) / mass)
+                    .collect();
+                let mut covariance = vec![0.0; dim * dim];
+                for i in 0..dim {
+                    for j in 0..=i {
+                        let d = |p: usize, i: usize| x(p, i) - mean[i];
+                        let sum = (0..n).fold(0.0, |s, p| s + r[p][c] * d(p, i) * d(p, j));
+                        covariance[i * dim + j] = sum / mass + if i == j { REGULARISATION } else { 0.0 };
+                        covariance[j * dim + i] = covariance[i * dim + j];
+                    }
+                }
+                let weight = mass / n as f64;
+                Component {
+                    weight,
+                    mean,
+                    covariance,
+                }
+            };
+            Mixture::new(dim, (0..k).map(component).collect())
+        };
+        let expect = |mixture: &Mixture, r: &mut [Vec<f64>]| {
+            let mut total = 0.0;
+            for (p, row) in r.iter_mut().enumerate() {
+                for (c, joint) in row.iter_mut().enumerate() {
+                    let (l, mean) = (&mixture.factors[c], &mixture.components[c].mean);
+                    let (mut y, mut distance) = (vec![0.0; dim], 0.0);
+                    for i in 0..dim {
+                        let dot: f64 = (0..i).map(|j| l[i * dim + j] * y[j]).sum();
+                        y[i] = (x(p, i) - mean[i] - dot) / l[i * dim + i];
+                        distance += y[i] * y[i];
+                    }
+                    *joint = mixture.log_norms[c] - 0.5 * distance;
+                }
+                let max = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                row.iter_mut().for_each(|r| *r = (*r - max).exp());
+                let sum: f64 = row.iter().sum();
+                row.iter_mut().for_each(|r| *r /= sum);
+                total += max + sum.ln();
+            }
+            total
+        };
+        let mut mixture = maximise(&r)?;
+        let mut previous = f64::NEG_INFINITY;
+        for _ in 0..MAX_ITERATIONS {
+            let log_likelihood = expect(&mixture, &mut r);
+            if (log_likelihood - previous).abs() < TOLERANCE * n as f64 {
+                return Some((mixture.components, log_likelihood));
+            }
+            previous = log_likelihood;
+            mixture = maximise(&r)?;
+        }
+        let log_likelihood = expect(&mixture, &mut r);
+        Some((mixture.components, log_likelihood))
+    }
+
+    #[test]
+    fn fits_are_bit_identical_to_the_point_at_a_time_reference() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (means, sds, counts) = well_separated();
+        let mut sets = vec![(sample(&means, &sds, &counts, &mut rng), 3)];
+        // Every dimension with a constant M step, and one without.
+        for dim in 2..=5 {
+            sets.push(((0..150 * dim).map(|_| rng.random()).collect(), dim));
+        }
+        // Tight clusters, where most exponentials underflow; repeated points, where large k fail.
+        sets.push((sample(&means, &[1e-3; 3], &[50, 40, 30], &mut rng), 3));
+        sets.push((
+            [[0.1, 0.2, 0.3], [0.9, 0.8, 0.7], [0.5, 0.5, 0.0]].repeat(30).concat(),
+            3,
+        ));
+        let bits = |(components, log_likelihood): (Vec<Component>, f64)| {
+            let values = components
+                .into_iter()
+                .flat_map(|c| [vec![c.weight], c.mean, c.covariance].concat());
+            values.chain([log_likelihood]).map(f64::to_bits).collect::<Vec<_>>()
+        };
+        for (set, (data, dim)) in sets.iter().enumerate() {
+            for k in 1..=6 {
+                let seed = 10 * set as u64 + k as u64;
+                let fit = Mixture::fit(data, *dim, k, &mut ChaCha8Rng::seed_from_u64(seed));
+                let reference = reference_fit(data, *dim, k, &mut ChaCha8Rng::seed_from_u64(seed));
+                let fit = fit.map(|(mixture, log_likelihood)| (mixture.components, log_likelihood));
+                assert_eq!(fit.map(bits), reference.map(bits), "set {set}, k = {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_shortcuts_of_exp_return_its_bits() {
+        let edges = [0.0, -0.0, 1e-300, -1e-300, -745.133, -745.134, -746.0, -1e300];
+        let around_the_underflow = (0..1500).map(|i| -750.0 + 0.01 * i as f64);
+        for x in edges.into_iter().chain(around_the_underflow).chain([f64::NEG_INFINITY]) {
+            assert_eq!(exp(x).to_bits(), x.exp().to_bits(), "{x}");
+        }
+        assert!(exp(f64::NAN).is_nan());
+    }
+
     #[test]
     fn cholesky_factors_reproduce_the_matrix() {
         let a = [4.0, 2.0, 0.4, 2.0, 5.0, 1.0, 0.4, 1.0, 3.0];
