@@ -51,28 +51,28 @@ impl Mixture {
         if components.is_empty() {
             return None;
         }
-        let k = components.len();
-        let mut mixture = Self {
-            dim,
-            components,
-            factors: vec![vec![0.0; dim * dim]; k],
-            log_norms: vec![0.0; k],
-        };
+        let mut mixture = Self::unfactorised(dim, components);
         mixture.factorise()?;
         Some(mixture)
     }
 
-    /// `k` components of zero weight, mean and covariance, not yet factorised: buffers for
-    /// [`Self::maximise`] to fill, and refill at every iteration of a fit.
+    /// `k` components of zero weight, mean and covariance: buffers for [`Self::maximise`] to
+    /// fill, and refill at every iteration of a fit.
     fn zeroed(dim: usize, k: usize) -> Self {
         let component = Component {
             weight: 0.0,
             mean: vec![0.0; dim],
             covariance: vec![0.0; dim * dim],
         };
+        Self::unfactorised(dim, vec![component; k])
+    }
+
+    /// `components` with zeroed factors and log norms, for [`Self::factorise`] to fill.
+    fn unfactorised(dim: usize, components: Vec<Component>) -> Self {
+        let k = components.len();
         Self {
             dim,
-            components: vec![component; k],
+            components,
             factors: vec![vec![0.0; dim * dim]; k],
             log_norms: vec![0.0; k],
         }
