@@ -51,10 +51,10 @@ use super::error::{
 };
 
 /// The largest factor by which one step on the path may raise or lower eta.
-const ETA_STEP_FACTOR: f64 = 8.0;
+pub(super) const ETA_STEP_FACTOR: f64 = 8.0;
 
 /// Step halvings of one backtracking line search before the point counts as optimal.
-const MAX_HALVINGS: usize = 40;
+pub(super) const MAX_HALVINGS: usize = 40;
 
 /// The largest change of a sample's log-weight `(R~_i - q_i^T u) / eta` through u that a step
 /// may try: where the weights sit on too few samples to span every direction of u, the Newton
@@ -62,10 +62,10 @@ const MAX_HALVINGS: usize = 40;
 /// log-weights by up to a few hundred (when eta falls by 8 on a steep path), so a smaller bound
 /// slowed those solves down, sometimes past the iteration cap; the line search shortens what is
 /// too long.
-const MAX_LOG_WEIGHT_CHANGE: f64 = 1000.0;
+pub(super) const MAX_LOG_WEIGHT_CHANGE: f64 = 1000.0;
 
 /// The Newton decrement of u, in units of eta, above which eta waits for u (see [`Step::new`]).
-const CENTRING: f64 = 0.1;
+pub(super) const CENTRING: f64 = 0.1;
 
 /// The default `eta_min`, relative to the returns' standard deviation: within the paper's
 /// 1e-6..1e-4, and large enough that the log-weights keep 10 significant digits there.
@@ -78,7 +78,7 @@ pub const ETA_MIN_RANGE: (f64, f64) = (1e-8, 1.0);
 
 /// The rounding of a standardised residual: the log-weights `residual / eta~`, and with them the
 /// gradient, are known to about `ROUNDING / eta~`.
-const ROUNDING: f64 = 1e-15;
+pub(super) const ROUNDING: f64 = 1e-15;
 
 /// Accepted [`DualOptions::tolerance`]: below 1e-14 rounding can keep the gradient above it.
 pub const TOLERANCE_RANGE: (f64, f64) = (1e-14, 1e-3);
@@ -289,13 +289,13 @@ pub(crate) fn check_eta_min(eta_min: f64) -> Result<(), InvalidValue> {
     check_range("eta_min", eta_min, ETA_MIN_RANGE)
 }
 
-fn check_options(options: &DualOptions) -> Result<(), InvalidValue> {
+pub(super) fn check_options(options: &DualOptions) -> Result<(), InvalidValue> {
     check_range("tolerance", options.tolerance, TOLERANCE_RANGE)?;
     check_at_least_one("max_iterations", options.max_iterations)
 }
 
 /// Consistent, finite data (perhaps empty: each caller has its own error for that).
-fn check_data(phi: &DMatrix<f64>, returns: &[f64]) -> Result<(), InvalidValue> {
+pub(super) fn check_data(phi: &DMatrix<f64>, returns: &[f64]) -> Result<(), InvalidValue> {
     check_len(
         "the number of phi rows",
         phi.nrows(),
@@ -307,15 +307,15 @@ fn check_data(phi: &DMatrix<f64>, returns: &[f64]) -> Result<(), InvalidValue> {
 }
 
 /// Softmax weights of `r / eta`, computed after subtracting `max r`.
-struct Softmax {
+pub(super) struct Softmax {
     /// `(r_i - max r) / eta` (<= 0).
-    shifted: DVector<f64>,
+    pub(super) shifted: DVector<f64>,
     /// The weights.
-    p: DVector<f64>,
+    pub(super) p: DVector<f64>,
 }
 
 impl Softmax {
-    fn new(n: usize) -> Self {
+    pub(super) fn new(n: usize) -> Self {
         Self {
             shifted: DVector::zeros(n),
             p: DVector::zeros(n),
@@ -325,7 +325,7 @@ impl Softmax {
     /// Fills the weights of `residuals / eta`; returns `max r` and `log((1/N) sum exp(shifted))`,
     /// so that `eta LSE(r / eta) = max r + eta log_mean` without multiplying a huge `max r / eta`
     /// back by a tiny eta.
-    fn compute(&mut self, residuals: &DVector<f64>, eta: f64) -> (f64, f64) {
+    pub(super) fn compute(&mut self, residuals: &DVector<f64>, eta: f64) -> (f64, f64) {
         let max_r = residuals.max();
         for ((a, p), r) in self.shifted.iter_mut().zip(self.p.iter_mut()).zip(residuals.iter()) {
             *a = (r - max_r) / eta;
@@ -337,7 +337,7 @@ impl Softmax {
     }
 
     /// `sum_i p_i a_i`, skipping `p_i = 0` terms (whose `a_i` may be -inf).
-    fn mean_shifted(&self) -> f64 {
+    pub(super) fn mean_shifted(&self) -> f64 {
         self.p
             .iter()
             .zip(self.shifted.iter())
@@ -347,56 +347,43 @@ impl Softmax {
     }
 
     /// `KL(p || uniform) = sum_i p_i a_i - log_mean`.
-    fn kl(&self, log_mean: f64) -> f64 {
+    pub(super) fn kl(&self, log_mean: f64) -> f64 {
         self.mean_shifted() - log_mean
     }
 }
 
 /// The dual on standardised returns in an orthonormal basis of the centred features.
-struct Standardised {
-    epsilon: f64,
+pub(super) struct Standardised {
+    pub(super) epsilon: f64,
     /// `(R - m) / s`.
-    returns: DVector<f64>,
+    pub(super) returns: DVector<f64>,
     /// N x k, orthogonal columns with mean 0 and root mean square 1 spanning the centred
     /// features' columns.
-    basis: DMatrix<f64>,
+    pub(super) basis: DMatrix<f64>,
     /// m.
-    mean: f64,
+    pub(super) mean: f64,
     /// s.
-    scale: f64,
+    pub(super) scale: f64,
     /// n_phi x k: `v = s to_v u` is the minimum-norm v whose centred baseline is `s basis u`.
-    to_v: DMatrix<f64>,
+    pub(super) to_v: DMatrix<f64>,
 }
 
 impl Standardised {
     /// `None` when the returns are all equal to rounding.
-    fn new(phi: &DMatrix<f64>, returns: &[f64], epsilon: f64) -> Option<Self> {
-        let n = returns.len();
-        // Dividing by the largest magnitude first keeps squares finite for any finite returns.
-        let largest = returns.iter().fold(0.0f64, |m, r| m.max(r.abs()));
-        if largest == 0.0 {
-            return None;
-        }
-        let unit = DVector::from_iterator(n, returns.iter().map(|r| r / largest));
-        let unit_mean = unit.mean();
-        let centred = unit.add_scalar(-unit_mean);
-        let unit_std = (centred.norm_squared() / n as f64).sqrt();
-        // Entries are in [-1, 1], each rounded by up to one ulp: a smaller spread is rounding.
-        if unit_std <= 4.0 * f64::EPSILON {
-            return None;
-        }
+    pub(super) fn new(phi: &DMatrix<f64>, returns: &[f64], epsilon: f64) -> Option<Self> {
+        let (returns, mean, scale) = standardise(returns)?;
         let (basis, to_v) = centred_basis(phi);
         Some(Self {
             epsilon,
-            returns: centred / unit_std,
+            returns,
             basis,
-            mean: unit_mean * largest,
-            scale: unit_std * largest,
+            mean,
+            scale,
             to_v,
         })
     }
 
-    fn rank(&self) -> usize {
+    pub(super) fn rank(&self) -> usize {
         self.basis.ncols()
     }
 
@@ -451,29 +438,22 @@ impl Standardised {
     /// holds its evaluation.
     fn search(&self, point: &Point, step: &Step, scratch: &mut Scratch) -> Option<Point> {
         let slope = point.gradient_eta * (step.eta - point.eta) + point.gradient_u.dot(&step.u);
-        let resolution = 1e-14 * (1.0 + point.value.abs());
         let stretch = (&self.basis * &step.u).amax() / point.eta;
-        let mut fraction = (MAX_LOG_WEIGHT_CHANGE / stretch).min(1.0);
-        for _ in 0..MAX_HALVINGS {
+        let first = (MAX_LOG_WEIGHT_CHANGE / stretch).min(1.0);
+        backtrack(point.value, slope, first, |fraction| {
             let eta = if fraction == 1.0 {
                 step.eta
             } else {
                 point.eta + fraction * (step.eta - point.eta)
             };
             let trial = self.evaluate(eta, &point.u + &step.u * fraction, scratch);
-            let sufficient = trial.value <= point.value + 1e-4 * fraction * slope;
-            let unresolved = -fraction * slope <= resolution && trial.value <= point.value + resolution;
-            if sufficient || unresolved {
-                return Some(trial);
-            }
-            fraction /= 2.0;
-        }
-        None
+            (trial.value, trial)
+        })
     }
 
     /// The least-squares baseline, and the eta at which the weights of its residuals `e` would
     /// have KL = epsilon to second order (`KL ~ Var(e) / (2 eta^2)`).
-    fn start(&self, eta_min: f64) -> (f64, DVector<f64>) {
+    pub(super) fn start(&self, eta_min: f64) -> (f64, DVector<f64>) {
         let n = self.returns.len() as f64;
         let u = self.basis.tr_mul(&self.returns) / n;
         let residuals = &self.returns - &self.basis * &u;
@@ -481,7 +461,7 @@ impl Standardised {
         ((spread / (2.0 * self.epsilon).sqrt()).max(eta_min), u)
     }
 
-    fn evaluate(&self, eta: f64, u: DVector<f64>, scratch: &mut Scratch) -> Point {
+    pub(super) fn evaluate(&self, eta: f64, u: DVector<f64>, scratch: &mut Scratch) -> Point {
         scratch.residuals.copy_from(&self.returns);
         scratch.residuals.gemv(-1.0, &self.basis, &u, 1.0);
         let (max_r, log_mean) = scratch.softmax.compute(&scratch.residuals, eta);
@@ -494,6 +474,46 @@ impl Standardised {
             u,
         }
     }
+}
+
+/// `(R - m) / s`, m and s: the returns standardised by their mean and population standard
+/// deviation, or `None` when they are all equal to rounding.
+pub(super) fn standardise(returns: &[f64]) -> Option<(DVector<f64>, f64, f64)> {
+    let n = returns.len();
+    // Dividing by the largest magnitude first keeps squares finite for any finite returns.
+    let largest = returns.iter().fold(0.0f64, |m, r| m.max(r.abs()));
+    if largest == 0.0 {
+        return None;
+    }
+    let unit = DVector::from_iterator(n, returns.iter().map(|r| r / largest));
+    let unit_mean = unit.mean();
+    let centred = unit.add_scalar(-unit_mean);
+    let unit_std = (centred.norm_squared() / n as f64).sqrt();
+    // Entries are in [-1, 1], each rounded by up to one ulp: a smaller spread is rounding.
+    if unit_std <= 4.0 * f64::EPSILON {
+        return None;
+    }
+    Some((centred / unit_std, unit_mean * largest, unit_std * largest))
+}
+
+/// A backtracking line search: `trial(fraction)` evaluates the point a `fraction` of the way
+/// along a step whose directional derivative (the step's `slope`) is taken at a point of value
+/// `value`, starting at `first` and halving up to [`MAX_HALVINGS`] times. Returns the first trial
+/// that decreases the value sufficiently (Armijo), or does not increase it when the decrease is
+/// below what the value can resolve.
+pub(super) fn backtrack<P>(value: f64, slope: f64, first: f64, mut trial: impl FnMut(f64) -> (f64, P)) -> Option<P> {
+    let resolution = 1e-14 * (1.0 + value.abs());
+    let mut fraction = first;
+    for _ in 0..MAX_HALVINGS {
+        let (trial_value, point) = trial(fraction);
+        let sufficient = trial_value <= value + 1e-4 * fraction * slope;
+        let unresolved = -fraction * slope <= resolution && trial_value <= value + resolution;
+        if sufficient || unresolved {
+            return Some(point);
+        }
+        fraction /= 2.0;
+    }
+    None
 }
 
 /// An orthogonal basis of the column space of `phi - 1 phi_bar^T`, scaled to root mean square 1
@@ -524,17 +544,17 @@ fn centred_basis(phi: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
 }
 
 /// Buffers of one solve, reused by every evaluation.
-struct Scratch {
-    residuals: DVector<f64>,
-    softmax: Softmax,
+pub(super) struct Scratch {
+    pub(super) residuals: DVector<f64>,
+    pub(super) softmax: Softmax,
     /// `basis^T p`.
-    matched: DVector<f64>,
+    pub(super) matched: DVector<f64>,
     /// `sqrt(p_i) ([A_i, q_i] - their weighted mean)`, N x (1 + k).
     centred: DMatrix<f64>,
 }
 
 impl Scratch {
-    fn new(n: usize, k: usize) -> Self {
+    pub(super) fn new(n: usize, k: usize) -> Self {
         Self {
             residuals: DVector::zeros(n),
             softmax: Softmax::new(n),
@@ -544,7 +564,7 @@ impl Scratch {
     }
 
     /// `(1/eta) Cov_p([A, q])` at the point last evaluated.
-    fn hessian(&mut self, basis: &DMatrix<f64>, eta: f64) -> DMatrix<f64> {
+    pub(super) fn hessian(&mut self, basis: &DMatrix<f64>, eta: f64) -> DMatrix<f64> {
         let p = &self.softmax.p;
         let mean_a = self.softmax.mean_shifted();
         let k = self.matched.len();
@@ -564,14 +584,14 @@ impl Scratch {
 }
 
 /// One evaluated point of the standardised dual.
-struct Point {
-    eta: f64,
-    u: DVector<f64>,
-    value: f64,
+pub(super) struct Point {
+    pub(super) eta: f64,
+    pub(super) u: DVector<f64>,
+    pub(super) value: f64,
     /// `eps - KL`.
-    gradient_eta: f64,
+    pub(super) gradient_eta: f64,
     /// `-basis^T p`.
-    gradient_u: DVector<f64>,
+    pub(super) gradient_u: DVector<f64>,
 }
 
 impl Point {
@@ -640,7 +660,7 @@ impl Step {
 /// The Cholesky factor of `H`, with `1e-12 scale` added to the diagonal, and more, tenfold, until
 /// `H` is positive definite with a finite factor (a Hessian whose weights sit on too few samples
 /// to span every direction); `scale` is the Hessian's natural size, `1/eta`.
-fn factor_regularised(hessian: DMatrix<f64>, scale: f64) -> Option<Cholesky<f64, Dyn>> {
+pub(super) fn factor_regularised(hessian: DMatrix<f64>, scale: f64) -> Option<Cholesky<f64, Dyn>> {
     let mut shift = 0.0;
     for _ in 0..30 {
         let mut shifted = hessian.clone();
@@ -667,4 +687,4 @@ struct Newton {
 }
 
 #[cfg(test)]
-mod tests;
+pub(super) mod tests;
