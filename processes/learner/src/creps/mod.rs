@@ -50,6 +50,7 @@
 pub mod dual;
 mod error;
 mod features;
+pub mod joint;
 mod memory;
 mod policy;
 mod snapshot;
@@ -64,6 +65,7 @@ pub use error::{
     FeatureMapValidateError, InvalidValue, PolicyCreateError, PolicyFitError,
 };
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
+pub use joint::{ContextTerm, JointDualSolution, evaluate_joint_dual, solve_joint_dual};
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
 pub use snapshot::{PolicySnapshot, PolicySnapshotRestoreError, RestoredPolicy};

@@ -14,17 +14,17 @@ fn polynomial_features(x: &[f64], degree: i32) -> DMatrix<f64> {
 }
 
 /// Rollouts and a policy of one of the two scales.
-struct DataSet {
-    features: FeatureMap,
-    contexts: Vec<Vec<f64>>,
+pub(crate) struct DataSet {
+    pub(crate) features: FeatureMap,
+    pub(crate) contexts: Vec<Vec<f64>>,
     thetas: Vec<Vec<f64>>,
-    returns: Vec<f64>,
-    epsilon: f64,
+    pub(crate) returns: Vec<f64>,
+    pub(crate) epsilon: f64,
     policy: LinearGaussianPolicy,
 }
 
 impl DataSet {
-    fn phi(&self) -> DMatrix<f64> {
+    pub(crate) fn phi(&self) -> DMatrix<f64> {
         let rows: Vec<_> = self
             .contexts
             .iter()
@@ -58,7 +58,7 @@ impl DataSet {
 /// [-5, -3]^2, epsilon 0.5; returns `-||landing - target||^2` in m^2 with a landing error linear
 /// in theta plus a context-dependent bias, on an exploration scale that varies per data set
 /// (from the start of learning to near convergence).
-fn throwing(seed: u64) -> DataSet {
+pub(crate) fn throwing(seed: u64) -> DataSet {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let spread = 10f64.powf(rng.random_range(-3.0..-0.8));
     let gains = DMatrix::from_fn(2, 21, |_, _| rng.sample::<f64, _>(StandardNormal));
@@ -87,7 +87,7 @@ fn throwing(seed: u64) -> DataSet {
 
 /// The Section 5.1 scale: N 50, 20 parameters, quadratic features of grid contexts in
 /// [-1, 1]^2, epsilon 2, exploration on a scale that varies per data set.
-fn function(seed: u64) -> DataSet {
+pub(crate) fn function(seed: u64) -> DataSet {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let a = DMatrix::from_fn(2, 20, |_, _| rng.random_range(0.0..1.0));
     let spread = 10f64.powf(rng.random_range(-2.0..0.0));
@@ -100,7 +100,7 @@ fn function(seed: u64) -> DataSet {
 /// The first update of every Section 5.1 run: one rollout of the initial policy (W = 0, Sigma
 /// = I) at each of the 25 grid contexts, as the initial sweep of D-UCB or round robin gives. Each
 /// context has a single sample, so the greedy limit of the weights is a degenerate linear program.
-fn sweep(seed: u64) -> DataSet {
+pub(crate) fn sweep(seed: u64) -> DataSet {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let a = DMatrix::from_fn(2, 20, |_, _| rng.random_range(0.0..1.0));
     let grid = linspace(-1.0, 1.0, 5);
