@@ -345,3 +345,57 @@ fn an_environment_other_than_the_problems_is_refused_before_any_rollout() {
     assert_eq!(learner.stats(), &Default::default(), "nothing was performed");
     assert!(learner.episodes().is_empty());
 }
+
+/// Self-paced (SPRL): every update moves the context distribution with the policy, within both KL
+/// bounds; on the contextual function, whose value grows with s0 + s1 (its optimum is sum s), the
+/// distribution first moves towards the corner (1, 1), where the returns are highest.
+#[test]
+fn self_paced_moves_its_contexts_towards_high_returns_within_both_bounds() {
+    for seed in 0..3 {
+        // 20 updates: all before the default offset, so alpha is 0 throughout.
+        let (mut learner, mut function) = function_learner(Method::SelfPaced, seed, 1, 500);
+        acps_learner::run_in_process(&mut learner, &mut function).unwrap();
+        assert_eq!(learner.updates().len(), 20);
+        for record in learner.updates() {
+            let report = &record.report;
+            let context = report
+                .context
+                .as_ref()
+                .expect("a paced update reports its context side");
+            assert_eq!(report.rejected, None, "seed {seed}");
+            assert_eq!(context.alpha, 0.0);
+            assert!(report.kl <= report.epsilon + 1e-8 && context.kl <= report.epsilon + 1e-8);
+            assert!(context.nu.is_some_and(|nu| nu >= 0.0));
+        }
+        let level = |episodes: &[acps_learner::Episode]| {
+            episodes.iter().map(|e| e.context.iter().sum::<f64>()).sum::<f64>() / episodes.len() as f64
+        };
+        let episodes = learner.episodes();
+        let (first, last) = (level(&episodes[..100]), level(&episodes[400..]));
+        assert!(
+            last > first + 0.5 && last > 1.0,
+            "seed {seed}: mean s0 + s1 {first} -> {last}"
+        );
+    }
+}
+
+#[test]
+fn self_paced_needs_a_policy() {
+    use acps_models::learning_model::{LearningModel, LearningModelConfig};
+    let noiseless = LearningModelConfig {
+        sigma_r: 0.0,
+        sigma_b: 0.0,
+    };
+    let model = LearningModel::new(noiseless, 0).unwrap();
+    let problem = model.problem();
+    let selector = SelectorConfig::from(Method::SelfPaced).build(&problem).unwrap();
+    let config = LearnerConfig {
+        creps: None,
+        ..LearnerConfig::default()
+    };
+    let error = Learner::new(config, problem, selector).err().unwrap().to_string();
+    assert!(
+        error.contains("no policy parameters") && error.contains("self-paced"),
+        "{error}"
+    );
+}

@@ -4,7 +4,7 @@
 
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
-use acps_learner::selection::{AbsoluteProgressConfig, AlpGmmConfig, EmaRates, RetireConfig};
+use acps_learner::selection::{AbsoluteProgressConfig, AlpGmmConfig, EmaRates, RetireConfig, SelfPacedConfig};
 use acps_learner::{BanditConfig, Learner, LearnerConfig, Method, SelectorConfig, run_in_process};
 use acps_models::contextual_function::ContextualFunction;
 use acps_models::learning_model::{LearningModel, LearningModelConfig};
@@ -62,7 +62,7 @@ enum Setup {
 }
 
 /// `method`'s selector for runs of a few hundred episodes: ALP-GMM fits every 50 (snapped to the
-/// training contexts when `snap`), and retirement, when on, settles after 4 visits with a wide
+/// training contexts when `snap`), self-paced pulls towards its target after 4 updates, and retirement, when on, settles after 4 visits with a wide
 /// band, so that contexts do retire within the run.
 fn selector(method: Method, retire: bool, snap: bool) -> SelectorConfig {
     let retire = retire.then_some(RetireConfig {
@@ -79,6 +79,12 @@ fn selector(method: Method, retire: bool, snap: bool) -> SelectorConfig {
             },
             snap,
         },
+        // The pull towards the target starts within the run's 12 updates.
+        SelectorConfig::SelfPaced(_) => SelfPacedConfig {
+            offset: 4,
+            ..SelfPacedConfig::default()
+        }
+        .into(),
         SelectorConfig::Bandit(bandit) => BanditConfig { retire, ..bandit }.into(),
         SelectorConfig::AbsoluteProgress(_) => AbsoluteProgressConfig {
             retire,
@@ -254,6 +260,7 @@ fn resumed_function_runs_are_bit_identical_for_every_selector() {
         (Method::SaggRiac, false),
         (Method::AbsoluteProgress, false),
         (Method::AlpGmm, false),
+        (Method::SelfPaced, false),
         (Method::MonotonicProgress, true),
         (Method::AbsoluteProgress, true),
     ];

@@ -123,6 +123,15 @@ pub enum LearnerCreateError {
         /// The number of policy parameters.
         n_theta: usize,
     },
+    /// The selector's context distribution moves with the policy (self-paced), but the
+    /// problem has no policy parameters.
+    #[error(
+        "problem '{problem}' has no policy parameters (theta0 is empty), so it cannot use a self-paced selector, which C-REPS moves with the policy"
+    )]
+    PacedWithoutPolicy {
+        /// The problem's name.
+        problem: String,
+    },
     /// C-REPS refuses its configuration for this problem.
     #[error(transparent)]
     CReps(#[from] CRepsCreateError),
@@ -491,7 +500,7 @@ impl Learner {
     pub fn new(
         config: LearnerConfig,
         problem: Problem,
-        selector: Box<dyn ContextSelector>,
+        mut selector: Box<dyn ContextSelector>,
     ) -> Result<Self, LearnerCreateError> {
         let counts = [
             ("episodes", config.episodes),
@@ -533,6 +542,9 @@ impl Learner {
                 });
             }
         };
+        if policy.is_none() && selector.paced().is_some() {
+            return Err(LearnerCreateError::PacedWithoutPolicy { problem: name() });
+        }
         let mut learner = Self {
             selection_rng: ChaCha8Rng::seed_from_u64(derive_seed(config.seed, Stream::Selection, 0)),
             exploration_rng: ChaCha8Rng::seed_from_u64(derive_seed(config.seed, Stream::Exploration, 0)),
@@ -845,10 +857,15 @@ impl Learner {
         self.train_consumed += 1;
         let reward = if outcome.is_ok() {
             self.lowest_reward = Some(self.lowest_reward.map_or(outcome.reward, |low| low.min(outcome.reward)));
-            let report = self
-                .policy
-                .as_mut()
-                .and_then(|p| p.record(bucket, &task.context, &task.theta, outcome.reward));
+            let report = self.policy.as_mut().and_then(|p| {
+                p.record_paced(
+                    bucket,
+                    &task.context,
+                    &task.theta,
+                    outcome.reward,
+                    self.selector.paced(),
+                )
+            });
             if let Some(report) = report {
                 match report.rejected {
                     None => self.stats.updates += 1,

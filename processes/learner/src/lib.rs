@@ -5,12 +5,13 @@
 //! - [`learner`]: the deterministic ask/tell core, [`Learner`] and [`LearnerConfig`].
 //! - [`method`]: the methods by name ([`Method`]) and their configurations ([`SelectorConfig`]:
 //!   baselines, D-UCB with an intrinsic reward, SAGG-RIAC, and beyond the paper absolute
-//!   progress, ALP-GMM and the retirement of solved contexts).
+//!   progress, ALP-GMM, self-paced and the retirement of solved contexts).
 //! - [`selection`]: the context selectors themselves (D-UCB, intrinsic rewards, baselines,
-//!   SAGG-RIAC; paper Sections 2.2 and 3; absolute progress, ALP-GMM) and the
+//!   SAGG-RIAC; paper Sections 2.2 and 3; absolute progress, ALP-GMM, self-paced) and the
 //!   [`ContextSelector`](selection::ContextSelector) trait for selectors of your own.
 //! - [`creps`]: contextual relative entropy policy search (paper Appendix A): the upper-level
-//!   policy, its sample memory and its update.
+//!   policy, its sample memory and its update; and SPRL's joint update of the policy with a
+//!   context distribution.
 //! - [`checkpoint`]: a learner's state in a file, to resume a run bit for bit.
 //!
 //! Every fallible operation has an error type of its own, named after the object and the

@@ -3,8 +3,8 @@
 
 use crate::selection::{
     AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, ContextSelector, DUcbConfig,
-    FirstVisit, IntrinsicReward, RetireConfig, RoundRobin, SaggRiac, SaggRiacConfig, SelectorCreateError,
-    UniformContinuous, UniformDiscrete,
+    FirstVisit, IntrinsicReward, RetireConfig, RoundRobin, SaggRiac, SaggRiacConfig, SelectorCreateError, SelfPaced,
+    SelfPacedConfig, UniformContinuous, UniformDiscrete,
 };
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
@@ -37,11 +37,14 @@ pub enum Method {
     AbsoluteProgress,
     /// ALP-GMM over the continuous space (beyond the paper).
     AlpGmm,
+    /// Self-paced contextual RL: a Gaussian over the continuous space moved by C-REPS itself
+    /// (beyond the paper).
+    SelfPaced,
 }
 
 impl Method {
     /// Every method, in the order of the paper's figures.
-    pub const ALL: [Method; 11] = [
+    pub const ALL: [Method; 12] = [
         Method::RoundRobin,
         Method::Random,
         Method::RandomContinuous,
@@ -53,6 +56,7 @@ impl Method {
         Method::SaggRiac,
         Method::AbsoluteProgress,
         Method::AlpGmm,
+        Method::SelfPaced,
     ];
 
     /// The command-line and summary name.
@@ -69,6 +73,7 @@ impl Method {
             Method::SaggRiac => "sagg-riac",
             Method::AbsoluteProgress => "absolute-progress",
             Method::AlpGmm => "alp-gmm",
+            Method::SelfPaced => "self-paced",
         }
     }
 
@@ -93,7 +98,7 @@ impl fmt::Display for Method {
 /// A name that [`Method::from_str`] does not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, alp-gmm"
+    "unknown method '{0}'; known methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, alp-gmm, self-paced"
 )]
 pub struct MethodParseError(pub String);
 
@@ -244,6 +249,8 @@ pub enum SelectorConfig {
         /// those (as SAGG-RIAC does).
         snap: bool,
     },
+    /// Self-paced contextual RL over the continuous space; needs a policy (C-REPS) to move it.
+    SelfPaced(SelfPacedConfig),
 }
 
 impl Default for SelectorConfig {
@@ -284,6 +291,12 @@ impl From<AlpGmmConfig> for SelectorConfig {
     }
 }
 
+impl From<SelfPacedConfig> for SelectorConfig {
+    fn from(config: SelfPacedConfig) -> Self {
+        Self::SelfPaced(config)
+    }
+}
+
 impl From<Method> for SelectorConfig {
     /// The method with default parameters: [`BanditConfig::new`] for the D-UCB methods, and the
     /// `Default` of the others' configurations.
@@ -296,6 +309,7 @@ impl From<Method> for SelectorConfig {
             Method::SaggRiac => SaggRiacConfig::default().into(),
             Method::AbsoluteProgress => AbsoluteProgressConfig::default().into(),
             Method::AlpGmm => AlpGmmConfig::default().into(),
+            Method::SelfPaced => SelfPacedConfig::default().into(),
             Method::BestReward | Method::Diversity | Method::OneStepProgress | Method::MonotonicProgress => {
                 let reward = method
                     .intrinsic_reward()
@@ -328,6 +342,7 @@ impl SelectorConfig {
             Self::SaggRiac(_) => Method::SaggRiac,
             Self::AbsoluteProgress(_) => Method::AbsoluteProgress,
             Self::AlpGmm { .. } => Method::AlpGmm,
+            Self::SelfPaced(_) => Method::SelfPaced,
         }
     }
 
@@ -336,12 +351,12 @@ impl SelectorConfig {
     pub fn draws_from_space(&self) -> bool {
         matches!(
             self,
-            Self::Baseline(Baseline::RandomContinuous) | Self::AlpGmm { snap: false, .. }
+            Self::Baseline(Baseline::RandomContinuous) | Self::AlpGmm { snap: false, .. } | Self::SelfPaced(_)
         )
     }
 
     /// Build the selector for `problem`: over its training contexts, or its context space for
-    /// random (continuous), SAGG-RIAC and ALP-GMM.
+    /// random (continuous), SAGG-RIAC, ALP-GMM and self-paced.
     pub fn build(&self, problem: &Problem) -> Result<Box<dyn ContextSelector>, SelectorCreateError> {
         let contexts = problem.training_contexts.clone();
         Ok(match self {
@@ -368,6 +383,7 @@ impl SelectorConfig {
                 snap.then_some(contexts),
                 config.clone(),
             )?),
+            Self::SelfPaced(config) => Box::new(SelfPaced::new(problem.space.clone(), config.clone())?),
         })
     }
 }

@@ -1,7 +1,7 @@
 //! Checkpoint files: a learner's snapshot and its environment's state, so that a run can be
 //! resumed after it was stopped (even by `kill -9`) and end bit for bit as if it never was.
 //!
-//! # Format (version 4)
+//! # Format (version 5)
 //! A 48-byte header, all integers little-endian, then the payload:
 //!
 //! | offset | bytes | field |
@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 /// The first eight bytes of every checkpoint file.
 pub const MAGIC: [u8; 8] = *b"ACPSCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 48;
 

@@ -43,6 +43,8 @@ impl MemoryConfig {
 /// One stored rollout.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Sample {
+    /// The context itself, for updates that also move a context distribution (SPRL).
+    pub context: Vec<f64>,
     pub features: DVector<f64>,
     pub theta: DVector<f64>,
     pub reward: f64,
@@ -109,9 +111,9 @@ impl Memory {
     }
 
     /// Whether `self` (a saved memory) can replace `fresh`, a memory built from the same
-    /// configuration: the same kind and size, and samples of `n_phi` features and `n_theta`
-    /// parameters. Says why not.
-    pub fn check_fits(&self, fresh: &Memory, n_phi: usize, n_theta: usize) -> Result<(), String> {
+    /// configuration: the same kind and size, and samples of `context_dim` coordinates, `n_phi`
+    /// features and `n_theta` parameters. Says why not.
+    pub fn check_fits(&self, fresh: &Memory, context_dim: usize, n_phi: usize, n_theta: usize) -> Result<(), String> {
         match (self, fresh) {
             (Memory::Window { capacity, samples }, Memory::Window { capacity: expected, .. }) => {
                 if capacity != expected || samples.len() > *capacity {
@@ -143,10 +145,10 @@ impl Memory {
         }
         if self
             .samples()
-            .any(|s| s.features.len() != n_phi || s.theta.len() != n_theta)
+            .any(|s| s.context.len() != context_dim || s.features.len() != n_phi || s.theta.len() != n_theta)
         {
             return Err(format!(
-                "a sample that does not have {n_phi} features and {n_theta} parameters"
+                "a sample that does not have {context_dim} context coordinates, {n_phi} features and {n_theta} parameters"
             ));
         }
         Ok(())
@@ -160,6 +162,7 @@ mod tests {
     /// A sample whose single feature tags it with `id`.
     fn sample(id: f64, reward: f64) -> Sample {
         Sample {
+            context: vec![id],
             features: DVector::from_element(1, id),
             theta: DVector::zeros(1),
             reward,

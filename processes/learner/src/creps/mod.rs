@@ -56,6 +56,8 @@ mod policy;
 mod snapshot;
 mod update;
 
+pub(crate) use policy::{bound_by_kl, mean_gaussian_kl};
+
 pub use dual::{
     DEFAULT_ETA_MIN, DualOptions, DualSolution, DualValue, ETA_MIN_RANGE, TOLERANCE_RANGE, effective_sample_size,
     evaluate_dual, feature_matching_residual, kl_to_uniform, solve_dual,
@@ -69,7 +71,7 @@ pub use joint::{ContextTerm, JointDualSolution, evaluate_joint_dual, solve_joint
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
 pub use snapshot::{PolicySnapshot, PolicySnapshotRestoreError, RestoredPolicy};
-pub use update::{Batch, Rejection, UpdateReport, UpdateSettings, update};
+pub use update::{Batch, ContextReport, Rejection, UpdateReport, UpdateSettings, update, update_paced};
 
 use nalgebra::{DMatrix, DVector};
 use rand::RngCore;
@@ -185,6 +187,32 @@ pub struct CRepsState {
     dropped: usize,
 }
 
+/// A context distribution that moves with the policy, in one dual (SPRL, Klink et al. 2019):
+/// [`CReps::record_paced`] asks it for the context side of every update and hands it the context
+/// weights to refit itself with. The self-paced selector implements it; a learner core drives it
+/// through [`ContextSelector::paced`](crate::selection::ContextSelector::paced).
+pub trait PacedContexts {
+    /// The context side of the update on the rollouts in memory, whose contexts are
+    /// `contexts` (in memory order): `alpha`, relative to the returns' standard deviation, and
+    /// `ln mu(c_i) - ln q(c_i)` per context, finite. Called once per update, in update order.
+    fn terms(&mut self, contexts: &[&[f64]]) -> PacedTerms;
+
+    /// Refit the distribution to `contexts` weighted by `weights` (which sum to 1), moving it by
+    /// at most `epsilon` (the update's KL bound) from where it is. Called after every update that
+    /// was not rejected.
+    fn refit(&mut self, contexts: &[&[f64]], weights: &[f64], epsilon: f64);
+}
+
+/// What [`PacedContexts::terms`] returns.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PacedTerms {
+    /// The weight of the new distribution's KL to the target, relative to the returns'
+    /// standard deviation, >= 0.
+    pub alpha: f64,
+    /// `ln mu(c_i) - ln q(c_i)` per context: target over current density.
+    pub log_ratio: Vec<f64>,
+}
+
 /// A C-REPS learner: a contextual Gaussian policy, its sample memory and its update schedule.
 #[derive(Clone, Debug)]
 pub struct CReps {
@@ -268,6 +296,23 @@ impl CReps {
     /// # Panics
     /// If `task >= n_tasks`, `context.len() != context_dim` or `theta.len() != n_theta`.
     pub fn record(&mut self, task: usize, context: &[f64], theta: &[f64], reward: f64) -> Option<UpdateReport> {
+        self.record_paced(task, context, theta, reward, None)
+    }
+
+    /// [`record`](CReps::record), with the updates it triggers moving `paced` together with the
+    /// policy ([`update_paced`]) when it is given.
+    ///
+    /// # Panics
+    /// As [`record`](CReps::record); and if `paced` returns log-ratios of another length than
+    /// the memory's or values out of range (a bug of the implementation).
+    pub fn record_paced(
+        &mut self,
+        task: usize,
+        context: &[f64],
+        theta: &[f64],
+        reward: f64,
+        paced: Option<&mut dyn PacedContexts>,
+    ) -> Option<UpdateReport> {
         assert!(
             task < self.n_tasks,
             "task {task} out of range, n_tasks is {}",
@@ -290,6 +335,7 @@ impl CReps {
             return None;
         }
         let sample = Sample {
+            context: context.to_vec(),
             features,
             theta: DVector::from_column_slice(theta),
             reward,
@@ -300,7 +346,7 @@ impl CReps {
             return None;
         }
         self.since_update = 0;
-        Some(self.update())
+        Some(self.update(paced))
     }
 
     /// The current policy.
@@ -361,7 +407,7 @@ impl CReps {
         }
         state
             .memory
-            .check_fits(&self.memory, n_phi, n_theta)
+            .check_fits(&self.memory, self.context_dim, n_phi, n_theta)
             .map_err(CRepsRestoreError::Memory)?;
         if state.since_update >= self.config.update_every {
             return Err(CRepsRestoreError::Schedule {
@@ -397,17 +443,35 @@ impl CReps {
         }
     }
 
-    /// One C-REPS update on everything in memory.
-    fn update(&mut self) -> UpdateReport {
+    /// One C-REPS update on everything in memory, moving `paced` with the policy when given.
+    fn update(&mut self, paced: Option<&mut dyn PacedContexts>) -> UpdateReport {
         let samples: Vec<&Sample> = self.memory.samples().collect();
         let features = stack_rows(samples.iter().map(|s| &s.features), self.policy.n_features());
         let thetas = stack_rows(samples.iter().map(|s| &s.theta), self.policy.n_params());
         let returns: Vec<f64> = samples.iter().map(|s| s.reward).collect();
         // The memory holds finite samples of this policy's widths and the settings were checked
-        // by `new`, so the update cannot fail.
+        // by `new`, so the update cannot fail (a paced distribution's terms are its own bugs).
         let batch = Batch::of_valid(features, thetas, returns);
-        let (policy, report) = update(&self.policy, &batch, &self.update_settings())
-            .expect("the memory fits the policy and the settings were checked");
+        let settings = self.update_settings();
+        let (policy, report) = match paced {
+            None => update(&self.policy, &batch, &settings)
+                .expect("the memory fits the policy and the settings were checked"),
+            Some(paced) => {
+                let contexts: Vec<&[f64]> = samples.iter().map(|s| s.context.as_slice()).collect();
+                let terms = paced.terms(&contexts);
+                let term = ContextTerm {
+                    log_ratio: &terms.log_ratio,
+                    alpha: terms.alpha,
+                    epsilon: settings.epsilon,
+                };
+                let (policy, report, weights) = update_paced(&self.policy, &batch, &term, &settings)
+                    .unwrap_or_else(|e| panic!("a paced distribution's terms are out of range: {e}"));
+                if report.rejected.is_none() {
+                    paced.refit(&contexts, &weights, settings.epsilon);
+                }
+                (policy, report)
+            }
+        };
         self.policy = policy;
         report
     }

@@ -212,6 +212,136 @@ impl LinearGaussianPolicy {
     }
 }
 
+/// The largest pull `nu` of a bounded fit towards the old distribution: the new one then moves
+/// a millionth of the way from it.
+pub(crate) const MAX_NU: f64 = 1e6;
+
+/// The smallest `nu >= 0` (to 60 bisection steps) at which `kl(nu) <= epsilon`, for a KL that
+/// falls as nu pulls the new distribution towards the old: 0 when the unregularised fit is within
+/// the bound, [`MAX_NU`] when even that is not. Deterministic: a fixed sequence of trials.
+pub(crate) fn bound_by_kl(mut kl: impl FnMut(f64) -> f64, epsilon: f64) -> f64 {
+    let within = |value: f64| value <= epsilon;
+    if within(kl(0.0)) {
+        return 0.0;
+    }
+    let mut high = 1.0;
+    while !within(kl(high)) {
+        if high >= MAX_NU {
+            return MAX_NU;
+        }
+        high *= 10.0;
+    }
+    let mut low = if high == 1.0 { 0.0 } else { high / 10.0 };
+    for _ in 0..60 {
+        let middle = 0.5 * (low + high);
+        if within(kl(middle)) {
+            high = middle;
+        } else {
+            low = middle;
+        }
+    }
+    high
+}
+
+/// The mean over the rows of `mean_shifts` (`mu_new - mu_old`, one per row) of
+/// `KL(N(mu_old, old) || N(mu_new, new))`; infinite when either covariance is not positive
+/// definite.
+pub(crate) fn mean_gaussian_kl(old: &DMatrix<f64>, new: &DMatrix<f64>, mean_shifts: &DMatrix<f64>) -> f64 {
+    let (Some(old_factor), Some(new_factor)) = (Cholesky::new(old.clone()), Cholesky::new(new.clone())) else {
+        return f64::INFINITY;
+    };
+    let log_det = |f: &Cholesky<f64, nalgebra::Dyn>| f.l_dirty().diagonal().iter().map(|d| 2.0 * d.ln()).sum::<f64>();
+    let trace = new_factor.solve(old).trace();
+    let n = mean_shifts.nrows().max(1) as f64;
+    let whitened = new_factor
+        .l_dirty()
+        .solve_lower_triangular(&mean_shifts.transpose())
+        .expect("a Cholesky factor has a positive diagonal");
+    let value =
+        0.5 * (trace + whitened.norm_squared() / n - old.nrows() as f64 + log_det(&new_factor) - log_det(&old_factor));
+    if value.is_finite() {
+        value.max(0.0)
+    } else {
+        f64::INFINITY
+    }
+}
+
+impl LinearGaussianPolicy {
+    /// Weighted maximum likelihood bounded by KL (the M-step of SPRL, Klink et al. 2019): the
+    /// fit to the rollouts weighted by `weights` (which sum to 1) pulled towards this policy by
+    /// the smallest `nu` at which the mean over the rollouts' contexts of
+    /// `KL(this policy || the new one)` is at most `epsilon`. With nu, the mean is the ridge
+    /// regression on the rollouts (weights d_i) and on this policy's means at their contexts
+    /// (weights nu / N), and the covariance `(S + nu (Sigma + D)) / (1 + nu)`, S the weighted
+    /// residuals' and D the mean shifts' second moments. Returns the new policy and nu.
+    pub(crate) fn fit_bounded(
+        &self,
+        features: &DMatrix<f64>,
+        thetas: &DMatrix<f64>,
+        weights: &[f64],
+        ridge: f64,
+        epsilon: f64,
+    ) -> Result<(Self, f64), Rejection> {
+        let old_means = features * &self.weights;
+        let kl = |nu: f64| match self.fit_towards(features, thetas, weights, ridge, nu, &old_means) {
+            Ok(pulled) => mean_gaussian_kl(&self.covariance, &pulled.covariance, &pulled.shifts),
+            Err(_) => f64::INFINITY,
+        };
+        let nu = bound_by_kl(kl, epsilon);
+        let pulled = self.fit_towards(features, thetas, weights, ridge, nu, &old_means)?;
+        let policy =
+            Self::new(pulled.weights, pulled.covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)?;
+        Ok((policy, nu))
+    }
+
+    /// The fit pulled towards this policy by `nu`.
+    fn fit_towards(
+        &self,
+        features: &DMatrix<f64>,
+        thetas: &DMatrix<f64>,
+        weights: &[f64],
+        ridge: f64,
+        nu: f64,
+        old_means: &DMatrix<f64>,
+    ) -> Result<Pulled, Rejection> {
+        let n = weights.len() as f64;
+        let d = DVector::from_column_slice(weights);
+        let pulled = d.add_scalar(nu / n);
+        let mut normal_matrix = features.tr_mul(&scale_rows(features, &pulled));
+        for i in 0..normal_matrix.nrows() {
+            normal_matrix[(i, i)] += ridge;
+        }
+        let targets = scale_rows(thetas, &d) + old_means * (nu / n);
+        let new_weights = Cholesky::new(normal_matrix)
+            .ok_or(Rejection::SingularRegression)?
+            .solve(&features.tr_mul(&targets));
+        if !new_weights.iter().all(|w| w.is_finite()) {
+            return Err(Rejection::MeanNotFinite);
+        }
+        let new_means = features * &new_weights;
+        let residuals = thetas - &new_means;
+        let shifts = new_means - old_means;
+        let spread = residuals.tr_mul(&scale_rows(&residuals, &d));
+        let covariance = (spread + (&self.covariance + shifts.tr_mul(&shifts) / n) * nu) / (d.sum() + nu);
+        if !covariance.iter().all(|c| c.is_finite()) {
+            return Err(Rejection::CovarianceNotFinite);
+        }
+        Ok(Pulled {
+            weights: new_weights,
+            shifts,
+            covariance,
+        })
+    }
+}
+
+/// A fit pulled towards the old policy: W, the mean shifts at the rollouts' contexts (one row
+/// each) and the covariance.
+struct Pulled {
+    weights: DMatrix<f64>,
+    shifts: DMatrix<f64>,
+    covariance: DMatrix<f64>,
+}
+
 /// `diag(d) m`.
 fn scale_rows(m: &DMatrix<f64>, d: &DVector<f64>) -> DMatrix<f64> {
     let mut scaled = m.clone();

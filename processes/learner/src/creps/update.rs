@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::dual::{DualOptions, effective_sample_size, solve_valid};
 use super::error::{BatchCreateError, CRepsUpdateError, check_finite, check_len, check_non_negative, check_positive};
+use super::joint::{ContextTerm, solve_joint_valid};
 use super::{FeatureMap, LinearGaussianPolicy};
 
 /// The settings of one update.
@@ -99,6 +100,29 @@ pub struct UpdateReport {
     pub trace_sigma: f64,
     /// Why the update was rejected; `None` when the new policy was applied.
     pub rejected: Option<Rejection>,
+    /// What the update did to the context distribution, for an update with one
+    /// ([`update_paced`]); `None` for plain C-REPS.
+    #[serde(default)]
+    pub context: Option<ContextReport>,
+}
+
+/// The context side of an [`update_paced`] (SPRL).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ContextReport {
+    /// The weight of the new context distribution's KL to the target, relative to the returns'
+    /// standard deviation.
+    pub alpha: f64,
+    /// The context weights' temperature, in the returns' units.
+    pub eta: f64,
+    /// Whether it sits on its lower bound, so the context KL bound was slack.
+    pub eta_at_bound: bool,
+    /// `KL(w || uniform)` of the context weights.
+    pub kl: f64,
+    /// The effective sample size of the context weights.
+    pub ess: f64,
+    /// How far the policy's fit was pulled back towards the old policy to keep its mean KL
+    /// within epsilon (0: not at all); `None` when the update was rejected before the fit.
+    pub nu: Option<f64>,
 }
 
 /// Rollouts to update on, one row each: features `phi(s_i)`, parameters `theta_i`, returns
@@ -213,6 +237,93 @@ pub fn update(
     batch: &Batch,
     settings: &UpdateSettings,
 ) -> Result<(LinearGaussianPolicy, UpdateReport), CRepsUpdateError> {
+    check_update(policy, batch, settings)?;
+    let dual = solve_valid(
+        &batch.features,
+        &batch.returns,
+        settings.epsilon,
+        settings.eta_min,
+        &settings.dual,
+    )?;
+    let solved = Solved {
+        eta: dual.eta,
+        eta_at_bound: dual.eta_at_bound,
+        kl: dual.kl,
+        weights: dual.weights.as_slice(),
+        objective: dual.objective,
+        optimality: dual.optimality,
+        iterations: dual.iterations,
+        converged: dual.converged,
+    };
+    let fitter = |weights: &[f64]| policy.fit_weighted(&batch.features, &batch.thetas, weights, settings.ridge);
+    Ok(fit(policy, batch, settings, &solved, fitter, None))
+}
+
+/// One update of `policy` together with a context distribution (SPRL, Klink et al. 2019): the
+/// joint dual ([`solve_joint_dual`](super::solve_joint_dual)) with `context` weights the rollouts
+/// for the policy and their contexts for the distribution. As in the original, the policy's fit
+/// is bounded too: weighted maximum likelihood pulled back towards `policy` until the mean KL
+/// from it over the rollouts' contexts is at most epsilon (without that bound, weights that match
+/// the features of a context distribution moving away from the rollouts' make the covariance
+/// grow without end). Returns the
+/// policy to continue with, the report (with its [`ContextReport`]) and the context weights
+/// (which sum to 1), for the caller to refit its distribution with when the update is not
+/// rejected.
+pub fn update_paced(
+    policy: &LinearGaussianPolicy,
+    batch: &Batch,
+    context: &ContextTerm,
+    settings: &UpdateSettings,
+) -> Result<(LinearGaussianPolicy, UpdateReport, Vec<f64>), CRepsUpdateError> {
+    check_update(policy, batch, settings)?;
+    let joint = solve_joint_valid(
+        &batch.features,
+        &batch.returns,
+        context,
+        settings.epsilon,
+        settings.eta_min,
+        &settings.dual,
+    )?;
+    let solved = Solved {
+        eta: joint.eta,
+        eta_at_bound: joint.eta_at_bound,
+        kl: joint.kl,
+        weights: joint.weights.as_slice(),
+        objective: joint.objective,
+        optimality: joint.optimality,
+        iterations: joint.iterations,
+        converged: joint.converged,
+    };
+    let mut nu = None;
+    let fitter = |weights: &[f64]| {
+        let (next, pull) = policy.fit_bounded(
+            &batch.features,
+            &batch.thetas,
+            weights,
+            settings.ridge,
+            settings.epsilon,
+        )?;
+        nu = Some(pull);
+        Ok(next)
+    };
+    let (next, mut report) = fit(policy, batch, settings, &solved, fitter, None);
+    report.context = Some(ContextReport {
+        alpha: context.alpha,
+        eta: joint.eta_context,
+        eta_at_bound: joint.eta_context_at_bound,
+        kl: joint.context_kl,
+        ess: effective_sample_size(joint.context_weights.as_slice()),
+        nu,
+    });
+    Ok((next, report, joint.context_weights.as_slice().to_vec()))
+}
+
+/// The settings in range and a batch of the policy's widths.
+fn check_update(
+    policy: &LinearGaussianPolicy,
+    batch: &Batch,
+    settings: &UpdateSettings,
+) -> Result<(), CRepsUpdateError> {
     check_positive("epsilon", settings.epsilon)?;
     check_non_negative("ridge", settings.ridge)?;
     check_len(
@@ -227,19 +338,36 @@ pub fn update(
         "the policy's n_theta",
         policy.n_params(),
     )?;
-    let dual = solve_valid(
-        &batch.features,
-        &batch.returns,
-        settings.epsilon,
-        settings.eta_min,
-        &settings.dual,
-    )?;
+    Ok(())
+}
+
+/// What a dual solve gave the policy's fit, whichever dual it was.
+struct Solved<'a> {
+    eta: f64,
+    eta_at_bound: bool,
+    kl: f64,
+    weights: &'a [f64],
+    objective: f64,
+    optimality: f64,
+    iterations: usize,
+    converged: bool,
+}
+
+/// Fit the policy to the weighted rollouts with `fitter` (or reject the update) and report.
+fn fit(
+    policy: &LinearGaussianPolicy,
+    batch: &Batch,
+    settings: &UpdateSettings,
+    dual: &Solved,
+    fitter: impl FnOnce(&[f64]) -> Result<LinearGaussianPolicy, Rejection>,
+    context: Option<ContextReport>,
+) -> (LinearGaussianPolicy, UpdateReport) {
     let fitted = if batch.len() < 2 {
         Err(Rejection::TooFewSamples)
     } else if !dual.converged {
         Err(Rejection::DualNotSolved)
     } else {
-        policy.fit_weighted(&batch.features, &batch.thetas, dual.weights.as_slice(), settings.ridge)
+        fitter(dual.weights)
     };
     let (next, rejected) = match fitted {
         Ok(next) => (next, None),
@@ -251,13 +379,14 @@ pub fn update(
         eta: dual.eta,
         eta_at_bound: dual.eta_at_bound,
         kl: dual.kl,
-        ess: effective_sample_size(dual.weights.as_slice()),
+        ess: effective_sample_size(dual.weights),
         dual: dual.objective,
         optimality: dual.optimality,
         iterations: dual.iterations,
         logdet_sigma: next.log_det_covariance(),
         trace_sigma: next.covariance().trace(),
         rejected,
+        context,
     };
-    Ok((next, report))
+    (next, report)
 }

@@ -100,6 +100,16 @@ pub enum SelectorCreateError {
         /// The smallest one accepted with this `max_components`.
         fewest: usize,
     },
+    /// A self-paced parameter outside its range.
+    #[error("self-paced {name} must be in {range}, got {value}")]
+    SelfPaced {
+        /// The parameter: `zeta`, `max_alpha` or `min_std`.
+        name: &'static str,
+        /// The offending value.
+        value: f64,
+        /// The accepted range.
+        range: String,
+    },
 }
 
 /// Why [`ContextSelector::restore_state`](super::ContextSelector::restore_state) refuses a saved
@@ -149,6 +159,9 @@ pub enum SelectorRestoreError {
     /// ALP-GMM history or mixture that does not fit this selector; says why.
     #[error("selector state: ALP-GMM: {0}")]
     AlpGmm(String),
+    /// A self-paced context distribution that does not fit this selector; says why.
+    #[error("selector state: self-paced: {0}")]
+    SelfPaced(String),
     /// A state a selector defined outside this crate refuses; its message says why.
     #[error("selector state: {0}")]
     Custom(String),

@@ -29,6 +29,7 @@ mod neighbours;
 mod progress;
 mod retire;
 mod sagg_riac;
+mod self_paced;
 mod validate;
 
 pub use absolute_progress::{AbsoluteProgress, AbsoluteProgressConfig, AbsoluteProgressState};
@@ -46,7 +47,9 @@ pub use intrinsic::{
 pub use progress::{EmaRates, ReturnAverages};
 pub use retire::{RetireConfig, Retirement, RetirementState};
 pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig, SaggRiacState};
+pub use self_paced::{MAX_DRAWS, SelfPaced, SelfPacedConfig, SelfPacedState};
 
+use crate::creps::PacedContexts;
 use rand::RngCore;
 use serde::{Deserialize, Serialize};
 
@@ -81,6 +84,13 @@ pub trait ContextSelector: Send {
     /// whether the baseline rollouts are worth running.
     fn wants_initial_returns(&self) -> bool {
         false
+    }
+
+    /// The context distribution C-REPS moves together with the policy, for a selector that has
+    /// one (SPRL): the learner then runs every C-REPS update through
+    /// [`CReps::record_paced`](crate::creps::CReps::record_paced).
+    fn paced(&mut self) -> Option<&mut dyn PacedContexts> {
+        None
     }
 
     /// Everything about this selector that changes while it runs, for a checkpoint. Whatever
@@ -124,6 +134,8 @@ pub enum SelectorState {
     /// [`AlpGmm`]: the contexts seen with their returns, the points of the next fit and the
     /// mixture of the last.
     AlpGmm(AlpGmmState),
+    /// [`SelfPaced`]: the context distribution and the number of updates.
+    SelfPaced(SelfPacedState),
     /// A selector defined elsewhere, in an encoding of its own.
     Custom(Vec<u8>),
 }
@@ -139,6 +151,7 @@ impl SelectorState {
             SelectorState::SaggRiac(_) => "SAGG-RIAC",
             SelectorState::AbsoluteProgress(_) => "absolute progress",
             SelectorState::AlpGmm(_) => "ALP-GMM",
+            SelectorState::SelfPaced(_) => "self-paced",
             SelectorState::Custom(_) => "custom",
         }
     }

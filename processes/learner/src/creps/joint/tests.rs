@@ -593,3 +593,35 @@ fn realistic_data_sets_converge() {
         }
     }
 }
+
+/// A context distribution that can hardly move (a tiny context KL bound, alpha 0) leaves the
+/// features matched to the samples' mean: the joint dual's policy weights become C-REPS'.
+#[test]
+fn a_frozen_context_distribution_gives_the_c_reps_weights() {
+    for seed in 0..4 {
+        let (phi, returns, log_ratio) = small(seed, 60);
+        let plain = crate::creps::solve_dual(&phi, &returns, 0.5, DEFAULT_ETA_MIN, &defaults()).unwrap();
+        let frozen = ContextTerm {
+            log_ratio: &log_ratio,
+            alpha: 0.0,
+            epsilon: 1e-5,
+        };
+        let joint = solve_joint_dual(&phi, &returns, &frozen, 0.5, DEFAULT_ETA_MIN, &defaults()).unwrap();
+        assert!(
+            joint.converged,
+            "seed {seed}: {} iterations, optimality {}",
+            joint.iterations, joint.optimality
+        );
+        let gap = (&joint.weights - &plain.weights).amax();
+        // The context weights may still move by KL 1e-5, so by about sqrt(2e-5) relative.
+        assert!(
+            gap < 3e-2 * plain.weights.amax(),
+            "seed {seed}: weights differ by {gap}"
+        );
+        assert!((joint.eta - plain.eta).abs() < 3e-2 * plain.eta, "seed {seed}");
+        // A free context distribution with alpha 0 moves the weights elsewhere.
+        let free = ContextTerm { epsilon: 0.5, ..frozen };
+        let moved = solve_joint_dual(&phi, &returns, &free, 0.5, DEFAULT_ETA_MIN, &defaults()).unwrap();
+        assert!((&moved.weights - &plain.weights).amax() > 10.0 * gap, "seed {seed}");
+    }
+}
