@@ -154,7 +154,8 @@ pub struct ExperimentFile {
     pub in_flight: Option<usize>,
     /// Run only this method (repeatable): round-robin, random, random-continuous, corners,
     /// best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, or beyond the
-    /// paper absolute-progress or alp-gmm [default: the methods of the paper's figure].
+    /// paper absolute-progress, alp-gmm or self-paced [default: the methods of the paper's
+    /// figure].
     #[arg(long = "method", value_name = "METHOD")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub methods: Option<Vec<Method>>,
@@ -222,6 +223,16 @@ pub struct ExperimentFile {
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub snap: Option<bool>,
+    /// self-paced: alpha KL(q || target) as a share of the returns' standard deviation, in
+    /// (0, 100] [default: 0.5].
+    #[arg(long, value_name = "SHARE", allow_hyphen_values = true, value_parser = parse_option::<f64>("zeta"))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zeta: Option<f64>,
+    /// self-paced: C-REPS updates before its context distribution is pulled towards the target
+    /// (0..=1000000) [default: 20].
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("alpha_offset"))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_offset: Option<usize>,
     /// toy only: use the learning factors of the paper's Fig. 3 in every run instead of a random
     /// permutation per run [default: false].
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
@@ -342,7 +353,7 @@ const KEYS: &[Key] = &[
     },
     Key {
         name: "methods",
-        accepted: "a non-empty list of distinct methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, alp-gmm",
+        accepted: "a non-empty list of distinct methods: round-robin, random, random-continuous, corners, best-reward, diversity, one-step-progress, monotonic-progress, sagg-riac, absolute-progress, alp-gmm, self-paced",
         applies: ALL,
     },
     Key {
@@ -408,6 +419,16 @@ const KEYS: &[Key] = &[
     Key {
         name: "snap",
         accepted: "true or false",
+        applies: ALL,
+    },
+    Key {
+        name: "zeta",
+        accepted: "a number in (0, 100] (alpha KL(q || target) as a share of the returns' standard deviation)",
+        applies: ALL,
+    },
+    Key {
+        name: "alpha_offset",
+        accepted: "an integer in 0..=1000000 (C-REPS updates before the pull towards the target)",
         applies: ALL,
     },
     Key {
@@ -524,6 +545,8 @@ const METHOD_KEYS: &[(&str, &[Method])] = &[
     ("fit_rate", &[Method::AlpGmm]),
     ("max_components", &[Method::AlpGmm]),
     ("snap", &[Method::AlpGmm]),
+    ("zeta", &[Method::SelfPaced]),
+    ("alpha_offset", &[Method::SelfPaced]),
 ];
 
 fn key(name: &str) -> &'static Key {
@@ -736,6 +759,8 @@ impl Plan {
             fit_rate: settings.fit_rate,
             max_components: settings.max_components,
             snap: settings.snap,
+            zeta: settings.zeta,
+            alpha_offset: settings.alpha_offset,
         };
         let defaults = Options::default();
         let options = Options {
@@ -870,6 +895,8 @@ impl Plan {
             fit_rate: recorded["alp_gmm"]["fit_rate"].as_u64().map(|n| n as usize),
             max_components: recorded["alp_gmm"]["max_components"].as_u64().map(|n| n as usize),
             snap: recorded["alp_gmm"]["snap"].as_bool(),
+            zeta: recorded["self_paced"]["zeta"].as_f64(),
+            alpha_offset: recorded["self_paced"]["offset"].as_u64().map(|n| n as usize),
             fig3_learning_factors: (paper == Some(Toy)).then(|| self.settings.fig3_learning_factors == Some(true)),
             problem: match &self.subject {
                 Subject::File(checked) => Some(checked.resolved.clone()),
@@ -974,6 +1001,8 @@ impl ExperimentFile {
             fit_rate: s.fit_rate.or(base.fit_rate),
             max_components: s.max_components.or(base.max_components),
             snap: s.snap.or(base.snap),
+            zeta: s.zeta.or(base.zeta),
+            alpha_offset: s.alpha_offset.or(base.alpha_offset),
             fig3_learning_factors: s.fig3_learning_factors.or(base.fig3_learning_factors),
             problem: s.problem.or(base.problem),
         }
@@ -1089,6 +1118,12 @@ impl ExperimentFile {
             let fewest = AlpGmmConfig::POINTS_PER_COMPONENT * components;
             let accepted = (fewest..=AlpGmmConfig::MAX_FIT_RATE).contains(&fit_rate);
             in_range("fit_rate", accepted, fit_rate.to_string())?;
+        }
+        if let Some(zeta) = self.zeta {
+            in_range("zeta", zeta > 0.0 && zeta <= 100.0, format!("{zeta:?}"))?;
+        }
+        if let Some(offset) = self.alpha_offset {
+            in_range("alpha_offset", offset <= 1_000_000, offset.to_string())?;
         }
         Ok(())
     }
@@ -1245,6 +1280,8 @@ mod tests {
             fit_rate: Some(300),
             max_components: Some(5),
             snap: Some(true),
+            zeta: Some(1.0),
+            alpha_offset: Some(3),
             fig3_learning_factors: Some(true),
             problem: Some(ProblemFile::default()),
         };
@@ -1521,6 +1558,18 @@ mod tests {
             ),
             ("methods = [\"alp-gmm\"]\nmax_components = 1\n", "got 1"),
             (
+                "methods = [\"random\"]\nzeta = 0.5\n",
+                "e.toml:3: zeta applies only when methods lists self-paced",
+            ),
+            (
+                "methods = [\"self-paced\"]\nzeta = 0.0\n",
+                "e.toml:3: zeta must be a number in (0, 100] (alpha KL(q || target) as a share of the returns' standard deviation), got 0.0",
+            ),
+            (
+                "methods = [\"self-paced\"]\nalpha_offset = -1\n",
+                "e.toml:3: alpha_offset must be an integer in 0..=1000000",
+            ),
+            (
                 "methods = [\"alp-gmm\"]\nsnap = 1\n",
                 "e.toml:3: snap must be true or false, got 1",
             ),
@@ -1579,7 +1628,12 @@ mod tests {
         use acps_learner::SelectorConfig as S;
         let every = ExperimentFile {
             experiment: Some(Function),
-            methods: Some(vec![Method::AbsoluteProgress, Method::AlpGmm, Method::Diversity]),
+            methods: Some(vec![
+                Method::AbsoluteProgress,
+                Method::AlpGmm,
+                Method::Diversity,
+                Method::SelfPaced,
+            ]),
             retire: Some(true),
             random_share: Some(0.3),
             ema_fast: Some(0.4),
@@ -1587,6 +1641,8 @@ mod tests {
             fit_rate: Some(120),
             max_components: Some(4),
             snap: Some(true),
+            zeta: Some(2.5),
+            alpha_offset: Some(7),
             ..Default::default()
         };
         let plan = Plan::new(None, &every).unwrap();
@@ -1595,6 +1651,7 @@ mod tests {
             S::AbsoluteProgress(progress),
             S::AlpGmm { config, snap },
             S::Bandit(bandit),
+            S::SelfPaced(paced),
         ] = job.experiment.methods.as_slice()
         else {
             panic!("{:?}", job.experiment.methods)
@@ -1608,6 +1665,7 @@ mod tests {
             (config.fit_rate, config.max_components, config.random_share, *snap),
             (120, 4, 0.3, true)
         );
+        assert_eq!((paced.zeta, paced.offset), (2.5, 7));
         let resolved = plan.resolved();
         assert_eq!(
             ExperimentFile {

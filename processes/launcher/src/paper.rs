@@ -7,6 +7,7 @@ use crate::experiment::{Experiment, Instance, RunResult, mean};
 use acps_learner::creps::{CRepsConfig, MemoryConfig};
 use acps_learner::selection::{
     AbsoluteProgressConfig, AlpGmmConfig, DUcbConfig, EmaRates, FirstVisit, RetireConfig, SaggRiacConfig,
+    SelfPacedConfig,
 };
 use acps_learner::{BanditConfig, LearnerConfig, Method, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
@@ -82,6 +83,10 @@ pub struct Overrides {
     pub max_components: Option<usize>,
     /// alp-gmm: snap its contexts to the training contexts.
     pub snap: Option<bool>,
+    /// self-paced: alpha KL(q || target) as a share of the returns' standard deviation.
+    pub zeta: Option<f64>,
+    /// self-paced: C-REPS updates before the pull towards the target.
+    pub alpha_offset: Option<usize>,
 }
 
 /// The learning factors of the paper's Fig. 3 (context 3 learns fastest, its neighbour 4 hardly
@@ -132,13 +137,18 @@ impl Options {
                     },
                     snap: o.snap.unwrap_or(snap),
                 },
+                SelectorConfig::SelfPaced(defaults) => SelectorConfig::SelfPaced(SelfPacedConfig {
+                    zeta: o.zeta.unwrap_or(defaults.zeta),
+                    offset: o.alpha_offset.unwrap_or(defaults.offset),
+                    ..defaults
+                }),
                 other => other,
             })
             .collect()
     }
 
     /// `settings` with the settings of the teachers beyond the paper: `retire` always (null
-    /// when off), `absolute_progress` and `alp_gmm` when `methods` has them.
+    /// when off), `absolute_progress`, `alp_gmm` and `self_paced` when `methods` has them.
     pub(crate) fn with_teachers(
         &self,
         mut settings: serde_json::Value,
@@ -157,6 +167,9 @@ impl Options {
                     let mut recorded = json!(config);
                     recorded["snap"] = json!(snap);
                     map.insert("alp_gmm".into(), recorded);
+                }
+                SelectorConfig::SelfPaced(config) => {
+                    map.insert("self_paced".into(), json!(config));
                 }
                 _ => {}
             }

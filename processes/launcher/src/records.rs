@@ -6,10 +6,12 @@
 //!   of every method (arm empty for contexts drawn from the continuous space, reward empty for a
 //!   failed rollout);
 //! - `updates.csv`: `method,run,update,episode,samples,eta,eta_at_bound,kl,epsilon,ess,dual,
-//!   optimality,iterations,logdet_sigma,trace_sigma,rejected`, one row per C-REPS update of every
-//!   run (the fields of [`UpdateReport`](acps_learner::creps::UpdateReport); `episode` is the
-//!   training episodes consumed when it ran, `rejected` the reason's name or empty when the update
-//!   was applied; only the header for problems without a policy);
+//!   optimality,iterations,logdet_sigma,trace_sigma,rejected,alpha,context_eta,context_kl,
+//!   context_ess,nu`, one row per C-REPS update of every run (the fields of
+//!   [`UpdateReport`](acps_learner::creps::UpdateReport); `episode` is the training episodes
+//!   consumed when it ran, `rejected` the reason's name or empty when the update was applied; the
+//!   last five are its [`ContextReport`](acps_learner::creps::ContextReport), empty but for
+//!   self-paced; only the header for problems without a policy);
 //! - `policies/METHOD-runR.json`: the final C-REPS policy of every run with what `acps evaluate`
 //!   needs to rebuild its problem and environment.
 //!
@@ -286,7 +288,7 @@ fn selections_csv(summary: &Summary) -> String {
 }
 
 /// The header of `updates.csv`.
-pub const UPDATES_HEADER: &str = "method,run,update,episode,samples,eta,eta_at_bound,kl,epsilon,ess,dual,optimality,iterations,logdet_sigma,trace_sigma,rejected";
+pub const UPDATES_HEADER: &str = "method,run,update,episode,samples,eta,eta_at_bound,kl,epsilon,ess,dual,optimality,iterations,logdet_sigma,trace_sigma,rejected,alpha,context_eta,context_kl,context_ess,nu";
 
 fn updates_csv(summary: &Summary) -> String {
     let mut csv = format!("{UPDATES_HEADER}\n");
@@ -294,9 +296,10 @@ fn updates_csv(summary: &Summary) -> String {
         for (index, run) in runs.iter().enumerate() {
             for (update, record) in run.updates.iter().enumerate() {
                 let r = &record.report;
+                let c = r.context.as_ref();
                 writeln!(
                     csv,
-                    "{method},{index},{update},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{method},{index},{update},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                     record.episode,
                     r.samples,
                     r.eta,
@@ -309,7 +312,12 @@ fn updates_csv(summary: &Summary) -> String {
                     r.iterations,
                     r.logdet_sigma,
                     r.trace_sigma,
-                    r.rejected.map_or("", Rejection::name)
+                    r.rejected.map_or("", Rejection::name),
+                    field(c.map(|c| c.alpha)),
+                    field(c.map(|c| c.eta)),
+                    field(c.map(|c| c.kl)),
+                    field(c.map(|c| c.ess)),
+                    field(c.and_then(|c| c.nu)),
                 )
                 .expect("writing to a string");
             }
