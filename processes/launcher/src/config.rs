@@ -224,12 +224,12 @@ pub struct ExperimentFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub snap: Option<bool>,
     /// self-paced: alpha KL(q || target) as a share of the returns' standard deviation, in
-    /// (0, 100] [default: 0.5].
+    /// (0, 100] [default: 8].
     #[arg(long, value_name = "SHARE", allow_hyphen_values = true, value_parser = parse_option::<f64>("zeta"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub zeta: Option<f64>,
     /// self-paced: C-REPS updates before its context distribution is pulled towards the target
-    /// (0..=1000000) [default: 20].
+    /// (0..=1000000) [default: 60].
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("alpha_offset"))]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alpha_offset: Option<usize>,

@@ -216,54 +216,100 @@ impl LinearGaussianPolicy {
 /// a millionth of the way from it.
 pub(crate) const MAX_NU: f64 = 1e6;
 
-/// The smallest `nu >= 0` (to 60 bisection steps) at which `kl(nu) <= epsilon`, for a KL that
-/// falls as nu pulls the new distribution towards the old: 0 when the unregularised fit is within
-/// the bound, [`MAX_NU`] when even that is not. Deterministic: a fixed sequence of trials.
+/// Most trials of [`bound_by_kl`] within its bracket.
+const MAX_TRIALS: usize = 60;
+
+/// The smallest `nu >= 0` at which `kl(nu) <= epsilon`, for a KL that falls as nu pulls the new
+/// distribution towards the old: 0 when the unregularised fit is within the bound, [`MAX_NU`]
+/// when even that is not. After bracketing nu between powers of ten, the Illinois variant of
+/// false position narrows the bracket until the KL is within 1e-6 epsilon below the bound or
+/// the bracket within 1e-9 of its upper end (bisecting where the KL is infinite); the upper end,
+/// where the bound holds, is returned. Deterministic: a fixed sequence of trials.
 pub(crate) fn bound_by_kl(mut kl: impl FnMut(f64) -> f64, epsilon: f64) -> f64 {
-    let within = |value: f64| value <= epsilon;
-    if within(kl(0.0)) {
+    let excess = |value: f64| value - epsilon;
+    let at_zero = excess(kl(0.0));
+    if at_zero <= 0.0 {
         return 0.0;
     }
+    let (mut low, mut low_excess) = (0.0, at_zero);
     let mut high = 1.0;
-    while !within(kl(high)) {
+    let mut high_excess = excess(kl(high));
+    while high_excess > 0.0 {
         if high >= MAX_NU {
             return MAX_NU;
         }
+        (low, low_excess) = (high, high_excess);
         high *= 10.0;
+        high_excess = excess(kl(high));
     }
-    let mut low = if high == 1.0 { 0.0 } else { high / 10.0 };
-    for _ in 0..60 {
-        let middle = 0.5 * (low + high);
-        if within(kl(middle)) {
-            high = middle;
+    // False position uses weights that start as the ends' excesses; the other end's weight is
+    // halved when the same end moves twice (Illinois), while the stopping test uses the true
+    // excess of the upper end.
+    let (mut low_weight, mut high_weight) = (low_excess, high_excess);
+    let mut last_high = None;
+    for _ in 0..MAX_TRIALS {
+        if high_excess > -1e-6 * epsilon || high - low <= 1e-9 * high {
+            break;
+        }
+        let trial = if low_weight.is_finite() {
+            (low * high_weight - high * low_weight) / (high_weight - low_weight)
         } else {
-            low = middle;
+            0.5 * (low + high)
+        };
+        let trial_excess = excess(kl(trial));
+        if trial_excess <= 0.0 {
+            (high, high_excess, high_weight) = (trial, trial_excess, trial_excess);
+            if last_high == Some(true) {
+                low_weight /= 2.0;
+            }
+            last_high = Some(true);
+        } else {
+            (low, low_weight) = (trial, trial_excess);
+            if last_high == Some(false) {
+                high_weight /= 2.0;
+            }
+            last_high = Some(false);
         }
     }
     high
 }
 
-/// The mean over the rows of `mean_shifts` (`mu_new - mu_old`, one per row) of
-/// `KL(N(mu_old, old) || N(mu_new, new))`; infinite when either covariance is not positive
-/// definite.
-pub(crate) fn mean_gaussian_kl(old: &DMatrix<f64>, new: &DMatrix<f64>, mean_shifts: &DMatrix<f64>) -> f64 {
-    let (Some(old_factor), Some(new_factor)) = (Cholesky::new(old.clone()), Cholesky::new(new.clone())) else {
-        return f64::INFINITY;
-    };
-    let log_det = |f: &Cholesky<f64, nalgebra::Dyn>| f.l_dirty().diagonal().iter().map(|d| 2.0 * d.ln()).sum::<f64>();
-    let trace = new_factor.solve(old).trace();
-    let n = mean_shifts.nrows().max(1) as f64;
-    let whitened = new_factor
-        .l_dirty()
-        .solve_lower_triangular(&mean_shifts.transpose())
-        .expect("a Cholesky factor has a positive diagonal");
-    let value =
-        0.5 * (trace + whitened.norm_squared() / n - old.nrows() as f64 + log_det(&new_factor) - log_det(&old_factor));
-    if value.is_finite() {
-        value.max(0.0)
-    } else {
-        f64::INFINITY
+/// `KL(N(mu_old, old) || N(mu_new, new))` for a fixed `old`, averaged over mean shifts
+/// `mu_new - mu_old` given by their second moment `M` (the mean of their outer products):
+/// `(tr(new^-1 (old + M)) - k + ln|new| - ln|old|) / 2`.
+pub(crate) struct GaussianKl {
+    old: DMatrix<f64>,
+    old_log_det: f64,
+}
+
+impl GaussianKl {
+    /// `None` when `old` is not positive definite.
+    pub(crate) fn new(old: &DMatrix<f64>) -> Option<Self> {
+        let factor = Cholesky::new(old.clone())?;
+        Some(Self {
+            old: old.clone(),
+            old_log_det: log_det(&factor),
+        })
     }
+
+    /// The KL to `new` with shifts of second moment `shift_moment`; infinite when `new` is not
+    /// positive definite.
+    pub(crate) fn to(&self, new: &DMatrix<f64>, shift_moment: &DMatrix<f64>) -> f64 {
+        let Some(factor) = Cholesky::new(new.clone()) else {
+            return f64::INFINITY;
+        };
+        let trace = factor.solve(&(&self.old + shift_moment)).trace();
+        let value = 0.5 * (trace - self.old.nrows() as f64 + log_det(&factor) - self.old_log_det);
+        if value.is_finite() {
+            value.max(0.0)
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+fn log_det(factor: &Cholesky<f64, nalgebra::Dyn>) -> f64 {
+    factor.l_dirty().diagonal().iter().map(|d| 2.0 * d.ln()).sum()
 }
 
 impl LinearGaussianPolicy {
@@ -274,6 +320,10 @@ impl LinearGaussianPolicy {
     /// regression on the rollouts (weights d_i) and on this policy's means at their contexts
     /// (weights nu / N), and the covariance `(S + nu (Sigma + D)) / (1 + nu)`, S the weighted
     /// residuals' and D the mean shifts' second moments. Returns the new policy and nu.
+    ///
+    /// The search for nu works on second moments of the rollouts (n_phi and n_theta wide, not N
+    /// long), so each trial costs a few small factorisations; the fit itself is then made from
+    /// the rollouts.
     pub(crate) fn fit_bounded(
         &self,
         features: &DMatrix<f64>,
@@ -282,64 +332,70 @@ impl LinearGaussianPolicy {
         ridge: f64,
         epsilon: f64,
     ) -> Result<(Self, f64), Rejection> {
-        let old_means = features * &self.weights;
-        let kl = |nu: f64| match self.fit_towards(features, thetas, weights, ridge, nu, &old_means) {
-            Ok(pulled) => mean_gaussian_kl(&self.covariance, &pulled.covariance, &pulled.shifts),
-            Err(_) => f64::INFINITY,
+        let d = DVector::from_column_slice(weights);
+        let n = weights.len() as f64;
+        let weighted_features = scale_rows(features, &d);
+        let weighted_gram = features.tr_mul(&weighted_features);
+        let gram = features.tr_mul(features) / n;
+        let cross = weighted_features.tr_mul(thetas);
+        let second = thetas.tr_mul(&scale_rows(thetas, &d));
+        let old_cross = &gram * &self.weights;
+        let kl_from = GaussianKl::new(&self.covariance);
+        let kl = |nu: f64| {
+            let Some(kl_from) = &kl_from else {
+                return f64::INFINITY;
+            };
+            let mut normal_matrix = &weighted_gram + &gram * nu;
+            for i in 0..normal_matrix.nrows() {
+                normal_matrix[(i, i)] += ridge;
+            }
+            let Some(factor) = Cholesky::new(normal_matrix) else {
+                return f64::INFINITY;
+            };
+            let w = factor.solve(&(&cross + &old_cross * nu));
+            let spread = &second - w.tr_mul(&cross) - cross.tr_mul(&w) + w.tr_mul(&(&weighted_gram * &w));
+            let shift = &w - &self.weights;
+            let moment = shift.tr_mul(&(&gram * &shift));
+            let covariance = (spread + (&self.covariance + &moment) * nu) / (d.sum() + nu);
+            kl_from.to(&covariance, &moment)
         };
         let nu = bound_by_kl(kl, epsilon);
-        let pulled = self.fit_towards(features, thetas, weights, ridge, nu, &old_means)?;
-        let policy =
-            Self::new(pulled.weights, pulled.covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)?;
-        Ok((policy, nu))
+        Ok((self.fit_towards(features, thetas, &d, ridge, nu)?, nu))
     }
 
-    /// The fit pulled towards this policy by `nu`.
+    /// The fit pulled towards this policy by `nu`, from the rollouts.
     fn fit_towards(
         &self,
         features: &DMatrix<f64>,
         thetas: &DMatrix<f64>,
-        weights: &[f64],
+        d: &DVector<f64>,
         ridge: f64,
         nu: f64,
-        old_means: &DMatrix<f64>,
-    ) -> Result<Pulled, Rejection> {
-        let n = weights.len() as f64;
-        let d = DVector::from_column_slice(weights);
+    ) -> Result<Self, Rejection> {
+        let n = d.len() as f64;
+        let old_means = features * &self.weights;
         let pulled = d.add_scalar(nu / n);
         let mut normal_matrix = features.tr_mul(&scale_rows(features, &pulled));
         for i in 0..normal_matrix.nrows() {
             normal_matrix[(i, i)] += ridge;
         }
-        let targets = scale_rows(thetas, &d) + old_means * (nu / n);
-        let new_weights = Cholesky::new(normal_matrix)
+        let targets = scale_rows(thetas, d) + &old_means * (nu / n);
+        let weights = Cholesky::new(normal_matrix)
             .ok_or(Rejection::SingularRegression)?
             .solve(&features.tr_mul(&targets));
-        if !new_weights.iter().all(|w| w.is_finite()) {
+        if !weights.iter().all(|w| w.is_finite()) {
             return Err(Rejection::MeanNotFinite);
         }
-        let new_means = features * &new_weights;
+        let new_means = features * &weights;
         let residuals = thetas - &new_means;
         let shifts = new_means - old_means;
-        let spread = residuals.tr_mul(&scale_rows(&residuals, &d));
+        let spread = residuals.tr_mul(&scale_rows(&residuals, d));
         let covariance = (spread + (&self.covariance + shifts.tr_mul(&shifts) / n) * nu) / (d.sum() + nu);
         if !covariance.iter().all(|c| c.is_finite()) {
             return Err(Rejection::CovarianceNotFinite);
         }
-        Ok(Pulled {
-            weights: new_weights,
-            shifts,
-            covariance,
-        })
+        Self::new(weights, covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)
     }
-}
-
-/// A fit pulled towards the old policy: W, the mean shifts at the rollouts' contexts (one row
-/// each) and the covariance.
-struct Pulled {
-    weights: DMatrix<f64>,
-    shifts: DMatrix<f64>,
-    covariance: DMatrix<f64>,
 }
 
 /// `diag(d) m`.
@@ -498,5 +554,60 @@ mod tests {
         let policy = bad(singular.clone()).unwrap();
         let factor = policy.sampling_factor();
         assert!((factor * factor.transpose() - singular).amax() < 1e-12);
+    }
+
+    #[test]
+    fn bound_by_kl_finds_the_smallest_pull_within_the_bound() {
+        // KL(nu) = 4 / (1 + nu)^2 is 1 at nu = 1.
+        let nu = bound_by_kl(|nu| 4.0 / (1.0 + nu).powi(2), 1.0);
+        assert!((1.0..1.0 + 1e-5).contains(&nu), "{nu}");
+        // Within the bound unregularised, out of it for every nu, infinite near 0.
+        assert_eq!(bound_by_kl(|nu| 0.5 / (1.0 + nu), 1.0), 0.0);
+        assert_eq!(bound_by_kl(|_| 2.0, 1.0), MAX_NU);
+        let kinked = |nu: f64| if nu < 3.0 { f64::INFINITY } else { 100.0 / nu.powi(2) };
+        let nu = bound_by_kl(kinked, 1.0);
+        assert!((10.0..10.0 + 1e-4).contains(&nu), "{nu}");
+    }
+
+    /// The mean over the rows of `KL(old(.|phi_i) || new(.|phi_i))`, row by row.
+    fn mean_kl(old: &LinearGaussianPolicy, new: &LinearGaussianPolicy, features: &DMatrix<f64>) -> f64 {
+        let k = old.n_params() as f64;
+        let new_factor = Cholesky::new(new.covariance().clone()).unwrap();
+        let trace = new_factor.solve(old.covariance()).trace();
+        let log_det = |m: &DMatrix<f64>| m.clone().cholesky().unwrap().determinant().ln();
+        let mut total = 0.0;
+        for row in features.row_iter() {
+            let phi = row.transpose();
+            let shift = new.mean(&phi) - old.mean(&phi);
+            let mahalanobis = shift.dot(&new_factor.solve(&shift));
+            total += 0.5 * (trace + mahalanobis - k + log_det(new.covariance()) - log_det(old.covariance()));
+        }
+        total / features.nrows() as f64
+    }
+
+    #[test]
+    fn bounded_fits_move_the_policy_by_at_most_epsilon() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let (_, features) = design(&FeatureMap::Quadratic, 40);
+        let old = policy(3, 2);
+        let thetas = DMatrix::from_fn(40, 2, |i, j| {
+            2.0 + features[(i, 1)] * (j as f64 + 1.0) + rng.random::<f64>() * 0.1
+        });
+        let mut weights: Vec<f64> = (0..40).map(|i| ((i as f64) / 8.0).exp()).collect();
+        let total: f64 = weights.iter().sum();
+        weights.iter_mut().for_each(|w| *w /= total);
+        for epsilon in [0.05, 0.5, 2.0] {
+            let (new, nu) = old.fit_bounded(&features, &thetas, &weights, 1e-6, epsilon).unwrap();
+            let kl = mean_kl(&old, &new, &features);
+            assert!(
+                nu > 0.0 && kl <= epsilon * (1.0 + 1e-9) && kl > 0.99 * epsilon,
+                "epsilon {epsilon}: nu {nu}, KL {kl}"
+            );
+        }
+        // A bound that does not bind leaves the weighted maximum-likelihood mean.
+        let (free, nu) = old.fit_bounded(&features, &thetas, &weights, 1e-6, 1e6).unwrap();
+        let unbounded = old.fit_weighted(&features, &thetas, &weights, 1e-6).unwrap();
+        assert_eq!(nu, 0.0);
+        assert!((free.weights() - unbounded.weights()).amax() < 1e-9);
     }
 }

@@ -30,7 +30,7 @@
 use super::geometry::project;
 use super::validate::check_space;
 use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
-use crate::creps::{PacedContexts, PacedTerms, bound_by_kl, mean_gaussian_kl};
+use crate::creps::{GaussianKl, PacedContexts, PacedTerms, bound_by_kl};
 use acps_shared::ContextSpace;
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 use rand::RngCore;
@@ -44,9 +44,9 @@ pub const MAX_DRAWS: usize = 100;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SelfPacedConfig {
-    /// C-REPS updates with alpha = 0 before q is pulled towards the target (20).
+    /// C-REPS updates with alpha = 0 before q is pulled towards the target (60).
     pub offset: usize,
-    /// `alpha KL(q || mu)` as a share of the returns' standard deviation, in (0, 100] (0.5).
+    /// `alpha KL(q || mu)` as a share of the returns' standard deviation, in (0, 100] (8).
     pub zeta: f64,
     /// The largest alpha, relative to the returns' standard deviation, in (0, 1e6] (1e3): the
     /// alpha used when the estimated KL is not positive.
@@ -59,8 +59,8 @@ pub struct SelfPacedConfig {
 impl Default for SelfPacedConfig {
     fn default() -> Self {
         Self {
-            offset: 20,
-            zeta: 0.5,
+            offset: 60,
+            zeta: 8.0,
             max_alpha: 1e3,
             min_std: 0.02,
         }
@@ -315,15 +315,19 @@ impl PacedContexts for SelfPaced {
     /// with the variance floor applied: `m' = (sum w c + nu m) / (1 + nu)`,
     /// `Sigma' = (sum w (c - m')(c - m')^T + nu (Sigma + (m - m')(m - m')^T)) / (1 + nu)`.
     fn refit(&mut self, contexts: &[&[f64]], weights: &[f64], epsilon: f64) {
-        let kl = |nu: f64| match self.towards(contexts, weights, nu) {
+        let Some(fit) = WeightedMoments::new(contexts, weights) else {
+            return;
+        };
+        let kl_from = GaussianKl::new(&self.covariance).expect("q's covariance has a factor");
+        let kl = |nu: f64| match self.towards(&fit, nu) {
             Some(refit) => {
-                let shift = DMatrix::from_row_slice(1, refit.mean.len(), (refit.mean - &self.mean).as_slice());
-                mean_gaussian_kl(&self.covariance, &refit.covariance, &shift)
+                let shift = refit.mean - &self.mean;
+                kl_from.to(&refit.covariance, &(&shift * shift.transpose()))
             }
             None => f64::INFINITY,
         };
         let nu = bound_by_kl(kl, epsilon);
-        if let Some(refit) = self.towards(contexts, weights, nu) {
+        if let Some(refit) = self.towards(&fit, nu) {
             self.mean = refit.mean;
             self.covariance = refit.covariance;
             self.factor = refit.factor;
@@ -331,27 +335,45 @@ impl PacedContexts for SelfPaced {
     }
 }
 
-impl SelfPaced {
-    /// The refit pulled towards q by `nu`, floored, with its factor; `None` if not finite.
-    fn towards(&self, contexts: &[&[f64]], weights: &[f64], nu: f64) -> Option<Refit> {
-        let dim = self.mean.len();
-        let mut mean = &self.mean * nu;
+/// The weighted contexts' total weight, mean and second moment about that mean: all a refit
+/// needs of them, whatever its pull.
+struct WeightedMoments {
+    total: f64,
+    mean: DVector<f64>,
+    spread: DMatrix<f64>,
+}
+
+impl WeightedMoments {
+    /// `None` without weight or with non-finite moments.
+    fn new(contexts: &[&[f64]], weights: &[f64]) -> Option<Self> {
+        let dim = contexts.first()?.len();
+        let total: f64 = weights.iter().sum();
+        let mut mean = DVector::zeros(dim);
         for (c, w) in contexts.iter().zip(weights) {
-            mean.axpy(*w, &DVector::from_column_slice(c), 1.0);
+            mean.axpy(*w / total, &DVector::from_column_slice(c), 1.0);
         }
-        let total = weights.iter().sum::<f64>() + nu;
-        mean /= total;
-        let shift = &self.mean - &mean;
-        let mut covariance = (&self.covariance + &shift * shift.transpose()) * nu;
+        let mut spread = DMatrix::zeros(dim, dim);
         for (c, w) in contexts.iter().zip(weights) {
             let centred = DVector::from_column_slice(c) - &mean;
-            covariance.ger(*w, &centred, &centred, 1.0);
+            spread.ger(*w / total, &centred, &centred, 1.0);
         }
-        covariance /= total;
+        let finite = total > 0.0 && mean.iter().chain(spread.iter()).all(|x| x.is_finite());
+        finite.then_some(Self { total, mean, spread })
+    }
+}
+
+impl SelfPaced {
+    /// The refit pulled towards q by `nu`, floored, with its factor; `None` if not finite.
+    fn towards(&self, fit: &WeightedMoments, nu: f64) -> Option<Refit> {
+        let total = fit.total + nu;
+        let mean = (&fit.mean * fit.total + &self.mean * nu) / total;
+        let (to_fit, to_old) = (&fit.mean - &mean, &self.mean - &mean);
+        let covariance = ((&fit.spread + &to_fit * to_fit.transpose()) * fit.total
+            + (&self.covariance + &to_old * to_old.transpose()) * nu)
+            / total;
         if !mean.iter().chain(covariance.iter()).all(|x| x.is_finite()) {
             return None;
         }
-        debug_assert_eq!(covariance.nrows(), dim);
         self.floored(covariance).map(|(covariance, factor)| Refit {
             mean,
             covariance,
@@ -474,8 +496,10 @@ mod tests {
             let mut bounded = unit_square();
             let start = unit_square();
             bounded.refit(&far, &[0.5, 0.5], epsilon);
-            let shift = DMatrix::from_row_slice(1, 2, (&bounded.mean - &start.mean).as_slice());
-            let kl = mean_gaussian_kl(&start.covariance, &bounded.covariance, &shift);
+            let shift = &bounded.mean - &start.mean;
+            let kl = GaussianKl::new(&start.covariance)
+                .unwrap()
+                .to(&bounded.covariance, &(&shift * shift.transpose()));
             assert!(kl <= epsilon && kl > 0.9 * epsilon, "epsilon {epsilon}: KL {kl}");
             // Part of the way: between the start and the free fit.
             assert!(bounded.mean()[0] > start.mean()[0] && bounded.mean()[0] < free.mean()[0]);
