@@ -283,28 +283,35 @@ fn hessian_matches_central_differences_of_the_gradient() {
     let eta = 0.7;
     problem.evaluate(eta, u.clone(), &mut scratch);
     let hessian = scratch.hessian(&problem.basis, eta);
-    let gradient = |eta: f64, u: DVector<f64>, scratch: &mut Scratch| {
-        let point = problem.evaluate(eta, u, scratch);
+    let x = DVector::from_fn(1 + k, |i, _| if i == 0 { eta } else { u[i - 1] });
+    let gradient = |x: &DVector<f64>| {
+        let point = problem.evaluate(x[0], x.rows(1, k).into_owned(), &mut scratch);
         let mut g = DVector::zeros(1 + k);
         g[0] = point.gradient_eta;
         g.rows_mut(1, k).copy_from(&point.gradient_u);
         g
     };
+    assert_hessian_matches(&x, gradient, &hessian, "");
+}
+
+/// Every column of `hessian` equals the central difference (step 1e-6) of `gradient` at `x`, to
+/// 1e-6 relative; `label` starts the failure message.
+pub(crate) fn assert_hessian_matches(
+    x: &DVector<f64>,
+    mut gradient: impl FnMut(&DVector<f64>) -> DVector<f64>,
+    hessian: &DMatrix<f64>,
+    label: &str,
+) {
     let h = 1e-6;
-    for i in 0..=k {
-        let (mut up, mut down) = ((eta, u.clone()), (eta, u.clone()));
-        if i == 0 {
-            up.0 += h;
-            down.0 -= h;
-        } else {
-            up.1[i - 1] += h;
-            down.1[i - 1] -= h;
-        }
-        let column = (gradient(up.0, up.1, &mut scratch) - gradient(down.0, down.1, &mut scratch)) / (2.0 * h);
-        for j in 0..=k {
+    for i in 0..x.len() {
+        let (mut up, mut down) = (x.clone(), x.clone());
+        up[i] += h;
+        down[i] -= h;
+        let column = (gradient(&up) - gradient(&down)) / (2.0 * h);
+        for j in 0..x.len() {
             assert!(
                 (column[j] - hessian[(j, i)]).abs() < 1e-6 * (1.0 + column[j].abs()),
-                "H[{j}, {i}]: {} vs numeric {}",
+                "{label}H[{j}, {i}]: {} vs numeric {}",
                 hessian[(j, i)],
                 column[j]
             );

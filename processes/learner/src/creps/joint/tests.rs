@@ -1,5 +1,5 @@
 use super::*;
-use crate::creps::dual::tests::{DataSet, function, sweep, throwing};
+use crate::creps::dual::tests::{DataSet, assert_hessian_matches, function, sweep, throwing};
 use crate::creps::{DEFAULT_ETA_MIN, DualSolveError};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -177,34 +177,16 @@ fn hessian_matches_central_differences_of_the_gradient() {
         let temperatures = [0.7, 0.4];
         let point = problem.evaluate(temperatures, u.clone(), &mut scratch);
         let hessian = problem.hessian(&point, &mut scratch);
-        let mut gradient = |t: [f64; 2], u: DVector<f64>| {
-            let point = problem.evaluate(t, u, &mut scratch);
+        let x = DVector::from_fn(2 + k, |i, _| if i < 2 { temperatures[i] } else { u[i - 2] });
+        let gradient = |x: &DVector<f64>| {
+            let point = problem.evaluate([x[0], x[1]], x.rows(2, k).into_owned(), &mut scratch);
             let mut g = DVector::zeros(2 + k);
             g[0] = point.gradient_temperatures[0];
             g[1] = point.gradient_temperatures[1];
             g.rows_mut(2, k).copy_from(&point.gradient_u);
             g
         };
-        let h = 1e-6;
-        for i in 0..2 + k {
-            let (mut up, mut down) = ((temperatures, u.clone()), (temperatures, u.clone()));
-            if i < 2 {
-                up.0[i] += h;
-                down.0[i] -= h;
-            } else {
-                up.1[i - 2] += h;
-                down.1[i - 2] -= h;
-            }
-            let column = (gradient(up.0, up.1) - gradient(down.0, down.1)) / (2.0 * h);
-            for j in 0..2 + k {
-                assert!(
-                    (column[j] - hessian[(j, i)]).abs() < 1e-6 * (1.0 + column[j].abs()),
-                    "alpha {alpha}: H[{j}, {i}]: {} vs numeric {}",
-                    hessian[(j, i)],
-                    column[j]
-                );
-            }
-        }
+        assert_hessian_matches(&x, gradient, &hessian, &format!("alpha {alpha}: "));
     }
 }
 
