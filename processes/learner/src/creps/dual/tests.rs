@@ -250,25 +250,11 @@ fn gradient_matches_central_differences() {
         let mut rng = ChaCha8Rng::seed_from_u64(100 + seed);
         let eta = rng.random_range(0.2..3.0);
         let v: Vec<f64> = (0..6).map(|_| rng.random_range(-2.0..2.0)).collect();
-        let at = |eta: f64, v: &[f64]| evaluate_dual(&phi, &data.returns, 0.7, eta, v).unwrap();
-        let analytic = at(eta, &v).gradient;
-        let h = 1e-6;
-        for i in 0..7 {
-            let (up, down) = if i == 0 {
-                (at(eta + h, &v).value, at(eta - h, &v).value)
-            } else {
-                let (mut up, mut down) = (v.clone(), v.clone());
-                up[i - 1] += h;
-                down[i - 1] -= h;
-                (at(eta, &up).value, at(eta, &down).value)
-            };
-            let numeric = (up - down) / (2.0 * h);
-            assert!(
-                (numeric - analytic[i]).abs() < 1e-6 * (1.0 + numeric.abs()),
-                "seed {seed}, component {i}: analytic {} vs numeric {numeric}",
-                analytic[i]
-            );
-        }
+        let x = DVector::from_fn(7, |i, _| if i == 0 { eta } else { v[i - 1] });
+        let at = |x: &DVector<f64>| evaluate_dual(&phi, &data.returns, 0.7, x[0], &x.as_slice()[1..]).unwrap();
+        let value = |x: &DVector<f64>| DVector::from_element(1, at(x).value);
+        let gradient = DMatrix::from_row_slice(1, x.len(), at(&x).gradient.as_slice());
+        assert_derivatives_match(&x, value, &gradient, &format!("seed {seed}: "));
     }
 }
 
@@ -291,15 +277,16 @@ fn hessian_matches_central_differences_of_the_gradient() {
         g.rows_mut(1, k).copy_from(&point.gradient_u);
         g
     };
-    assert_hessian_matches(&x, gradient, &hessian, "");
+    assert_derivatives_match(&x, gradient, &hessian, "");
 }
 
-/// Every column of `hessian` equals the central difference (step 1e-6) of `gradient` at `x`, to
-/// 1e-6 relative; `label` starts the failure message.
-pub(crate) fn assert_hessian_matches(
+/// Every column of `jacobian` equals the central difference (step 1e-6) of `f` at `x`, to 1e-6
+/// relative: a gradient (one row) of a value, or a Hessian of a gradient. `label` starts the
+/// failure message.
+pub(crate) fn assert_derivatives_match(
     x: &DVector<f64>,
-    mut gradient: impl FnMut(&DVector<f64>) -> DVector<f64>,
-    hessian: &DMatrix<f64>,
+    mut f: impl FnMut(&DVector<f64>) -> DVector<f64>,
+    jacobian: &DMatrix<f64>,
     label: &str,
 ) {
     let h = 1e-6;
@@ -307,12 +294,12 @@ pub(crate) fn assert_hessian_matches(
         let (mut up, mut down) = (x.clone(), x.clone());
         up[i] += h;
         down[i] -= h;
-        let column = (gradient(&up) - gradient(&down)) / (2.0 * h);
-        for j in 0..x.len() {
+        let column = (f(&up) - f(&down)) / (2.0 * h);
+        for j in 0..column.len() {
             assert!(
-                (column[j] - hessian[(j, i)]).abs() < 1e-6 * (1.0 + column[j].abs()),
-                "{label}H[{j}, {i}]: {} vs numeric {}",
-                hessian[(j, i)],
+                (column[j] - jacobian[(j, i)]).abs() < 1e-6 * (1.0 + column[j].abs()),
+                "{label}[{j}, {i}]: analytic {} vs numeric {}",
+                jacobian[(j, i)],
                 column[j]
             );
         }
