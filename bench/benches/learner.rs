@@ -2,8 +2,9 @@
 //! 21 parameters, 6 polar-quadratic features, epsilon 0.5) and at the Section 5.1 scale (N = 50,
 //! 20 parameters, 6 quadratic features, epsilon 2), and one step (choose and observe) of the
 //! context selectors: D-UCB over K = 81 arms, with and without retirement, absolute progress over
-//! K = 81, and ALP-GMM between its refits, with a refit measured on its own. The learner must
-//! stay far below the time of the rollouts it serves.
+//! K = 81, and ALP-GMM between its refits, with a refit measured on its own; self-paced's step, and
+//! its update (the joint dual and both bounded fits) beside plain C-REPS' at the PA-10 scale. The
+//! learner must stay far below the time of the rollouts it serves.
 //!
 //! Before measuring, the Newton steps per update of 200 seeded data sets of each scale are
 //! printed.
@@ -11,7 +12,7 @@
 use acps_learner::creps::{CReps, CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{
     AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, Choice, ContextSelector,
-    DUcbConfig, FirstVisit, IntrinsicReward, RetireConfig,
+    DUcbConfig, FirstVisit, IntrinsicReward, RetireConfig, SelfPaced, SelfPacedConfig,
 };
 use acps_shared::ContextSpace;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
@@ -261,5 +262,30 @@ fn alp_gmm(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, creps_update, selector_steps, alp_gmm);
+/// Self-paced over the grid's target box, pulled towards its target from the first update: one
+/// PA-10-scale update that moves it with the policy (compare `creps_update_n300_theta21_phi6`),
+/// and one step between updates.
+fn self_paced(c: &mut Criterion) {
+    let space = ContextSpace::new_box(vec![-5.0, -5.0], vec![-3.0, -3.0]).unwrap();
+    let config = SelfPacedConfig {
+        offset: 0,
+        ..SelfPacedConfig::default()
+    };
+    let pacer = SelfPaced::new(space, config).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    c.bench_function("creps_update_paced_n300_theta21_phi6", |b| {
+        b.iter_batched(
+            || (throwing_before_update(&mut rng), pacer.clone()),
+            |((mut creps, s, theta, r), mut pacer)| black_box(creps.record_paced(0, &s, &theta, r, Some(&mut pacer))),
+            BatchSize::SmallInput,
+        )
+    });
+    let mut selector = pacer;
+    let mut reward_rng = ChaCha8Rng::seed_from_u64(1);
+    c.bench_function("self_paced_step_choose_and_observe", |b| {
+        b.iter(|| black_box(step(&mut selector, &mut rng, &mut reward_rng, &grid_return(0)).arm))
+    });
+}
+
+criterion_group!(benches, creps_update, selector_steps, alp_gmm, self_paced);
 criterion_main!(benches);
