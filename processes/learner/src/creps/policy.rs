@@ -308,7 +308,8 @@ impl GaussianKl {
     }
 }
 
-fn log_det(factor: &Cholesky<f64, nalgebra::Dyn>) -> f64 {
+/// `ln det` of the matrix a Cholesky factor factors.
+pub(crate) fn log_det(factor: &Cholesky<f64, nalgebra::Dyn>) -> f64 {
     factor.l_dirty().diagonal().iter().map(|d| 2.0 * d.ln()).sum()
 }
 
@@ -322,8 +323,8 @@ impl LinearGaussianPolicy {
     /// residuals' and D the mean shifts' second moments. Returns the new policy and nu.
     ///
     /// The search for nu works on second moments of the rollouts (n_phi and n_theta wide, not N
-    /// long), so each trial costs a few small factorisations; the fit itself is then made from
-    /// the rollouts.
+    /// long), so each trial costs a few small factorisations; the covariance of the fit is then
+    /// made from the rollouts' residuals.
     pub(crate) fn fit_bounded(
         &self,
         features: &DMatrix<f64>,
@@ -340,19 +341,20 @@ impl LinearGaussianPolicy {
         let cross = weighted_features.tr_mul(thetas);
         let second = thetas.tr_mul(&scale_rows(thetas, &d));
         let old_cross = &gram * &self.weights;
-        let kl_from = GaussianKl::new(&self.covariance);
-        let kl = |nu: f64| {
-            let Some(kl_from) = &kl_from else {
-                return f64::INFINITY;
-            };
+        // The ridge regression on the rollouts (weights d_i) and on this policy's means at their
+        // contexts (weights nu / N), from the second moments: one small solve per trial.
+        let mean_at = |nu: f64| {
             let mut normal_matrix = &weighted_gram + &gram * nu;
             for i in 0..normal_matrix.nrows() {
                 normal_matrix[(i, i)] += ridge;
             }
-            let Some(factor) = Cholesky::new(normal_matrix) else {
+            Cholesky::new(normal_matrix).map(|factor| factor.solve(&(&cross + &old_cross * nu)))
+        };
+        let kl_from = GaussianKl::new(&self.covariance);
+        let kl = |nu: f64| {
+            let (Some(kl_from), Some(w)) = (&kl_from, mean_at(nu)) else {
                 return f64::INFINITY;
             };
-            let w = factor.solve(&(&cross + &old_cross * nu));
             let spread = &second - w.tr_mul(&cross) - cross.tr_mul(&w) + w.tr_mul(&(&weighted_gram * &w));
             let shift = &w - &self.weights;
             let moment = shift.tr_mul(&(&gram * &shift));
@@ -360,41 +362,23 @@ impl LinearGaussianPolicy {
             kl_from.to(&covariance, &moment)
         };
         let nu = bound_by_kl(kl, epsilon);
-        Ok((self.fit_towards(features, thetas, &d, ridge, nu)?, nu))
-    }
-
-    /// The fit pulled towards this policy by `nu`, from the rollouts.
-    fn fit_towards(
-        &self,
-        features: &DMatrix<f64>,
-        thetas: &DMatrix<f64>,
-        d: &DVector<f64>,
-        ridge: f64,
-        nu: f64,
-    ) -> Result<Self, Rejection> {
-        let n = d.len() as f64;
-        let old_means = features * &self.weights;
-        let pulled = d.add_scalar(nu / n);
-        let mut normal_matrix = features.tr_mul(&scale_rows(features, &pulled));
-        for i in 0..normal_matrix.nrows() {
-            normal_matrix[(i, i)] += ridge;
-        }
-        let targets = scale_rows(thetas, d) + &old_means * (nu / n);
-        let weights = Cholesky::new(normal_matrix)
-            .ok_or(Rejection::SingularRegression)?
-            .solve(&features.tr_mul(&targets));
+        // The covariance from the rollouts' residuals themselves: the moments' difference of
+        // large terms would round away a small spread.
+        let weights = mean_at(nu).ok_or(Rejection::SingularRegression)?;
         if !weights.iter().all(|w| w.is_finite()) {
             return Err(Rejection::MeanNotFinite);
         }
+        let old_means = features * &self.weights;
         let new_means = features * &weights;
         let residuals = thetas - &new_means;
         let shifts = new_means - old_means;
-        let spread = residuals.tr_mul(&scale_rows(&residuals, d));
+        let spread = residuals.tr_mul(&scale_rows(&residuals, &d));
         let covariance = (spread + (&self.covariance + shifts.tr_mul(&shifts) / n) * nu) / (d.sum() + nu);
         if !covariance.iter().all(|c| c.is_finite()) {
             return Err(Rejection::CovarianceNotFinite);
         }
-        Self::new(weights, covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)
+        let policy = Self::new(weights, covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)?;
+        Ok((policy, nu))
     }
 }
 

@@ -265,10 +265,9 @@ pub fn update(
 /// is bounded too: weighted maximum likelihood pulled back towards `policy` until the mean KL
 /// from it over the rollouts' contexts is at most epsilon (without that bound, weights that match
 /// the features of a context distribution moving away from the rollouts' make the covariance
-/// grow without end). Returns the
-/// policy to continue with, the report (with its [`ContextReport`]) and the context weights
-/// (which sum to 1), for the caller to refit its distribution with when the update is not
-/// rejected.
+/// grow without end). Returns the policy to continue with, the report (with its
+/// [`ContextReport`]) and the context weights (which sum to 1), for the caller to refit its
+/// distribution with when the update is not rejected.
 pub fn update_paced(
     policy: &LinearGaussianPolicy,
     batch: &Batch,

@@ -30,7 +30,7 @@
 use super::geometry::project;
 use super::validate::check_space;
 use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
-use crate::creps::{GaussianKl, PacedContexts, PacedTerms, bound_by_kl};
+use crate::creps::{GaussianKl, PacedContexts, PacedTerms, bound_by_kl, log_det};
 use acps_shared::ContextSpace;
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 use rand::RngCore;
@@ -187,17 +187,19 @@ impl SelfPaced {
         self.updates
     }
 
-    /// `ln q(c)`.
-    fn log_density(&self, context: &[f64]) -> f64 {
+    /// `ln q(c)` of each context.
+    fn log_densities<'a>(&'a self, contexts: &'a [&[f64]]) -> impl Iterator<Item = f64> + 'a {
         let dim = self.mean.len() as f64;
-        let centred = DVector::from_column_slice(context) - &self.mean;
-        let whitened = self
-            .factor
-            .l_dirty()
-            .solve_lower_triangular(&centred)
-            .expect("a Cholesky factor has a positive diagonal");
-        let log_det: f64 = self.factor.l_dirty().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
-        -0.5 * (dim * (2.0 * std::f64::consts::PI).ln() + log_det + whitened.norm_squared())
+        let normaliser = -0.5 * (dim * (2.0 * std::f64::consts::PI).ln() + log_det(&self.factor));
+        contexts.iter().map(move |c| {
+            let centred = DVector::from_column_slice(c) - &self.mean;
+            let whitened = self
+                .factor
+                .l_dirty()
+                .solve_lower_triangular(&centred)
+                .expect("a Cholesky factor has a positive diagonal");
+            normaliser - 0.5 * whitened.norm_squared()
+        })
     }
 
     /// The covariance with every variance raised to its floor, and its Cholesky factor. When a
@@ -295,7 +297,7 @@ impl ContextSelector for SelfPaced {
 
 impl PacedContexts for SelfPaced {
     fn terms(&mut self, contexts: &[&[f64]]) -> PacedTerms {
-        let log_ratio: Vec<f64> = contexts.iter().map(|c| self.log_target - self.log_density(c)).collect();
+        let log_ratio: Vec<f64> = self.log_densities(contexts).map(|q| self.log_target - q).collect();
         let alpha = if self.updates < self.config.offset {
             0.0
         } else {
@@ -429,7 +431,8 @@ mod tests {
         let det = s[(0, 0)] * s[(1, 1)] - s[(0, 1)] * s[(1, 0)];
         let quad = (s[(1, 1)] * dx * dx - 2.0 * s[(0, 1)] * dx * dy + s[(0, 0)] * dy * dy) / det;
         let expected = -(2.0 * std::f64::consts::PI).ln() - 0.5 * det.ln() - 0.5 * quad;
-        assert!((selector.log_density(&c) - expected).abs() < 1e-12);
+        let got = selector.log_densities(&[&c]).next().unwrap();
+        assert!((got - expected).abs() < 1e-12);
     }
 
     #[test]
