@@ -21,11 +21,13 @@ const HELLO_TIMEOUT: Duration = Duration::from_secs(2);
 const HELLO_RETRY: Duration = Duration::from_millis(100);
 /// Outcomes wait at most this long for more to share their message.
 const FLUSH_EVERY: Duration = Duration::from_millis(1);
-/// Tasks a relay keeps asked for or queued beyond twice what its workers hold.
-const SPARE: usize = 16;
 /// A relay asks for more once it lacks this many tasks (or a quarter of its target, if less):
 /// asking for each task its workers took made messages of a few tasks each way.
 const ASK_BATCH: usize = 64;
+/// The round trip to the learner assumed until one is measured.
+const FIRST_ROUND_TRIP: Duration = Duration::from_millis(1);
+/// How often the rate at which the workers take tasks is measured.
+const RATE_WINDOW: Duration = Duration::from_millis(5);
 
 /// How a relay behaves.
 #[derive(Debug, Clone)]
@@ -343,8 +345,9 @@ struct RelaySource {
     queued: usize,
     /// Tasks the host's workers hold, to re-issue locally when one of them dies.
     held: HashMap<(u32, u64), Task>,
-    /// Requests sent and not answered: what they serve and how many tasks they asked for.
-    requests: HashMap<u64, (Serves, usize)>,
+    /// Requests sent and not answered: what they serve, how many tasks they asked for, and when.
+    requests: HashMap<u64, (Serves, usize, Instant)>,
+    pace: Pace,
     next_request: u64,
     /// What the host's workers asked for.
     classes: Vec<Serves>,
@@ -362,6 +365,46 @@ struct RelaySource {
     publisher: zenoh::pubsub::Publisher<'static>,
     _down: zenoh::pubsub::Subscriber<()>,
     _token: zenoh::liveliness::LivelinessToken,
+}
+
+/// How many tasks a relay keeps asked for or queued: what its workers take in two round trips
+/// to the learner, and one batch more. The learner's answers then arrive before the workers
+/// need them, while no more tasks wait here than that: with the learner's tasks in flight
+/// bounded (each job's window), tasks queued here longer than needed are tasks its other
+/// workers lack, and outcomes that come later.
+struct Pace {
+    /// Tasks the workers took since `since`.
+    taken: usize,
+    since: Instant,
+    /// Tasks per second the workers take (moving average).
+    rate: f64,
+    /// Seconds from a request to its answer (moving average).
+    round_trip: f64,
+}
+
+impl Pace {
+    fn new(now: Instant) -> Self {
+        Self {
+            taken: 0,
+            since: now,
+            rate: 0.0,
+            round_trip: FIRST_ROUND_TRIP.as_secs_f64(),
+        }
+    }
+
+    /// The request sent at `sent` was answered at `now`.
+    fn answered(&mut self, sent: Instant, now: Instant) {
+        self.round_trip += ((now - sent).as_secs_f64() - self.round_trip) / 8.0;
+    }
+
+    fn target(&mut self, now: Instant) -> usize {
+        let elapsed = now - self.since;
+        if elapsed >= RATE_WINDOW {
+            self.rate += (self.taken as f64 / elapsed.as_secs_f64() - self.rate) / 4.0;
+            (self.taken, self.since) = (0, now);
+        }
+        (2.0 * self.rate * self.round_trip) as usize + ASK_BATCH
+    }
 }
 
 impl RelaySource {
@@ -415,6 +458,7 @@ impl RelaySource {
             queued: 0,
             held: HashMap::new(),
             requests: HashMap::new(),
+            pace: Pace::new(Instant::now()),
             next_request: 1,
             classes: Vec::new(),
             outgoing: Vec::new(),
@@ -438,8 +482,8 @@ impl RelaySource {
         let asked: usize = self
             .requests
             .values()
-            .filter(|(serves, _)| serves == class)
-            .map(|(_, want)| want)
+            .filter(|(serves, _, _)| serves == class)
+            .map(|(_, want, _)| want)
             .sum();
         let queued = match class {
             Serves::Any => self.queued,
@@ -460,7 +504,7 @@ impl RelaySource {
         let request = self.next_request;
         self.next_request += 1;
         if want > 0 {
-            self.requests.insert(request, (class, want));
+            self.requests.insert(request, (class, want, Instant::now()));
         }
         let message = Up::Request {
             instance: self.instance,
@@ -489,7 +533,9 @@ impl RelaySource {
     fn take(&mut self, message: Down) -> Result<(), SourceError> {
         match message {
             Down::Tasks { request, tasks } => {
-                self.requests.remove(&request);
+                if let Some((_, _, sent)) = self.requests.remove(&request) {
+                    self.pace.answered(sent, Instant::now());
+                }
                 for (job, task) in tasks {
                     let Some(queue) = self.queues.get_mut(job as usize) else {
                         return Err(format!(
@@ -538,6 +584,7 @@ impl TaskSource for RelaySource {
     fn ask(&mut self, job: usize) -> Option<Task> {
         let task = self.queues[job].pop_front()?;
         self.queued -= 1;
+        self.pace.taken += 1;
         self.held.insert((job as u32, task.id), task.clone());
         Some(task)
     }
@@ -605,9 +652,7 @@ impl TaskSource for RelaySource {
             };
             self.publisher.put(net::encode(&note)?).wait()?;
         }
-        // Keep twice what the workers hold asked for or queued, and a few more: the learner's
-        // answers then arrive before the workers need them.
-        let target = (2 * self.held.len() + SPARE).min(self.max_queue.max(1));
+        let target = self.pace.target(Instant::now()).min(self.max_queue.max(1));
         let ask_at = (target / 4).clamp(1, ASK_BATCH);
         for class in self.classes.clone() {
             let lacking = target.saturating_sub(self.supply(&class));
@@ -630,5 +675,41 @@ impl TaskSource for RelaySource {
         let mut inbox = self.inbox.lock().unwrap_or_else(|p| p.into_inner());
         let queued = inbox.messages.len();
         inbox.bell.may_sleep(queued)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_relay_keeps_what_its_workers_take_in_two_round_trips_and_one_batch() {
+        let start = Instant::now();
+        let mut pace = Pace::new(start);
+        assert_eq!(pace.target(start), ASK_BATCH, "nothing taken yet");
+        // Workers that take 100 tasks per millisecond, answers that take 2 ms.
+        let mut now = start;
+        for _ in 0..200 {
+            let sent = now;
+            now += RATE_WINDOW;
+            pace.taken += 500;
+            pace.answered(sent + RATE_WINDOW - Duration::from_millis(2), sent + RATE_WINDOW);
+            pace.target(now);
+        }
+        let expected = 2.0 * 100_000.0 * 0.002 + ASK_BATCH as f64;
+        let target = pace.target(now) as f64;
+        assert!(
+            (target - expected).abs() < 0.01 * expected,
+            "{target} against {expected}"
+        );
+        // Workers that stop taking: the target falls back towards one batch.
+        for _ in 0..200 {
+            now += RATE_WINDOW;
+            pace.target(now);
+        }
+        assert_eq!(pace.target(now), ASK_BATCH);
+        // A window not yet over leaves the estimate alone.
+        pace.taken += 1_000_000;
+        assert_eq!(pace.target(now + RATE_WINDOW / 2), ASK_BATCH);
     }
 }
