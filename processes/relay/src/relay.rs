@@ -368,10 +368,11 @@ struct RelaySource {
 }
 
 /// How many tasks a relay keeps asked for or queued: what its workers take in two round trips
-/// to the learner, and one batch more. The learner's answers then arrive before the workers
-/// need them, while no more tasks wait here than that: with the learner's tasks in flight
-/// bounded (each job's window), tasks queued here longer than needed are tasks its other
-/// workers lack, and outcomes that come later.
+/// to the learner, and one batch more. One round trip's worth hides the wait for an answer; the
+/// second and the batch let a relay whose workers ran dry (the rate it measures is then what it
+/// got) ask for more than it got, and recover. Deeper would hold back tasks that the learner,
+/// whose tasks in flight are bounded, could give elsewhere, and delay the outcomes its jobs
+/// wait for.
 struct Pace {
     /// Tasks the workers took since `since`.
     taken: usize,
