@@ -256,7 +256,7 @@ pub fn update(
         converged: dual.converged,
     };
     let fitter = |weights: &[f64]| policy.fit_weighted(&batch.features, &batch.thetas, weights, settings.ridge);
-    Ok(fit(policy, batch, settings, &solved, fitter, None))
+    Ok(fit(policy, batch, settings, &solved, fitter))
 }
 
 /// One update of `policy` together with a context distribution (SPRL, Klink et al. 2019): the
@@ -305,7 +305,7 @@ pub fn update_paced(
         nu = Some(pull);
         Ok(next)
     };
-    let (next, mut report) = fit(policy, batch, settings, &solved, fitter, None);
+    let (next, mut report) = fit(policy, batch, settings, &solved, fitter);
     report.context = Some(ContextReport {
         alpha: context.alpha,
         eta: joint.eta_context,
@@ -352,14 +352,14 @@ struct Solved<'a> {
     converged: bool,
 }
 
-/// Fit the policy to the weighted rollouts with `fitter` (or reject the update) and report.
+/// Fit the policy to the weighted rollouts with `fitter` (or reject the update) and report; a
+/// paced update adds its context report once its fit has told it nu.
 fn fit(
     policy: &LinearGaussianPolicy,
     batch: &Batch,
     settings: &UpdateSettings,
     dual: &Solved,
     fitter: impl FnOnce(&[f64]) -> Result<LinearGaussianPolicy, Rejection>,
-    context: Option<ContextReport>,
 ) -> (LinearGaussianPolicy, UpdateReport) {
     let fitted = if batch.len() < 2 {
         Err(Rejection::TooFewSamples)
@@ -385,7 +385,7 @@ fn fit(
         logdet_sigma: next.log_det_covariance(),
         trace_sigma: next.covariance().trace(),
         rejected,
-        context,
+        context: None,
     };
     (next, report)
 }
