@@ -355,7 +355,9 @@ impl LinearGaussianPolicy {
             let (Some(kl_from), Some(w)) = (&kl_from, mean_at(nu)) else {
                 return f64::INFINITY;
             };
-            let spread = &second - w.tr_mul(&cross) - cross.tr_mul(&w) + w.tr_mul(&(&weighted_gram * &w));
+            // W^T C's transpose is C^T W: one product.
+            let w_cross = w.tr_mul(&cross);
+            let spread = &second - &w_cross - w_cross.transpose() + w.tr_mul(&(&weighted_gram * &w));
             let shift = &w - &self.weights;
             let moment = shift.tr_mul(&(&gram * &shift));
             let covariance = (spread + (&self.covariance + &moment) * nu) / (d.sum() + nu);
