@@ -43,10 +43,11 @@ use std::time::{Duration, Instant};
 /// How long the server tells queued outcomes before it looks for requests again.
 const TELL_BUDGET: Duration = Duration::from_micros(50);
 
-/// A remote peer's answer waits until it carries this many tasks (or all it asked for) or has
-/// waited [`REMOTE_GATHER`]: a network message costs both ends tens of microseconds, and answering
-/// each freed task at once sent messages of 14-16 tasks that halved a relay's throughput.
-const REMOTE_BATCH: usize = 64;
+/// A remote peer's answer waits until it carries this many tasks (a relay's largest request, or
+/// all it asked for) or has waited [`REMOTE_GATHER`]: a network message costs both ends tens of
+/// microseconds, and answering each freed task at once sent messages of 14-16 tasks that halved
+/// a relay's throughput.
+const REMOTE_BATCH: usize = 128;
 
 /// How long a remote peer's answer may wait for [`REMOTE_BATCH`] tasks.
 const REMOTE_GATHER: Duration = Duration::from_micros(500);
@@ -161,6 +162,12 @@ pub trait TaskSource {
     /// server only while it waits, says whether it may (`false`: something came in meanwhile).
     fn may_wait(&mut self) -> bool {
         true
+    }
+
+    /// The server is about to wait: at most how long, for a source that must act by then (a
+    /// relay's outcomes are due); `None`: until the next heartbeat.
+    fn wait_at_most(&self) -> Option<Duration> {
+        None
     }
 }
 
@@ -777,7 +784,8 @@ pub(crate) fn serve<'r>(
             std::thread::yield_now();
         } else if source.may_wait() && remote.as_deref_mut().is_none_or(|remote| remote.may_wait()) {
             idle_since = None;
-            match listener.timed_wait(|_| {}, waker.until_heartbeat()) {
+            let wait = waker.until_heartbeat();
+            match listener.timed_wait(|_| {}, source.wait_at_most().map_or(wait, |most| most.min(wait))) {
                 // Any signal interrupts the wait, also SIGSTOP and SIGCONT (a paused and resumed
                 // run): the loop goes on, and only `stop`, which the host's Ctrl-C handler sets,
                 // ends it.

@@ -18,9 +18,9 @@ use std::time::Duration;
 pub const NET_PROTOCOL: u32 = 1;
 /// This build's version, which a relay and its learner must share.
 pub const BUILD: &str = env!("CARGO_PKG_VERSION");
-/// Most tasks one message carries: a message stays inside Zenoh's 64 KiB batch (a task of 64
-/// parameters is about 600 bytes).
-pub const MAX_NET_BATCH: usize = 64;
+/// Most tasks (or outcomes) one message carries: 128 PA-10 tasks (36 parameters, about 350 bytes
+/// each) fit one of Zenoh's 64 KiB batches; Zenoh splits larger messages.
+pub const MAX_NET_BATCH: usize = 128;
 /// The lease when none is given: a frozen or cut-off peer is noticed after this long.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(3);
 /// The accepted leases.

@@ -19,11 +19,15 @@ use zenoh::sample::SampleKind;
 const HELLO_TIMEOUT: Duration = Duration::from_secs(2);
 /// How often a relay asks again while no learner answers or the learner is between serves.
 const HELLO_RETRY: Duration = Duration::from_millis(100);
-/// Outcomes wait at most this long for more to share their message.
-const FLUSH_EVERY: Duration = Duration::from_millis(1);
-/// A relay asks for more once it lacks this many tasks (or a quarter of its target, if less):
-/// asking for each task its workers took made messages of a few tasks each way.
-const ASK_BATCH: usize = 64;
+/// Outcomes wait at most this long for more to share their message (or a request to ride on): a
+/// message wakes threads at both ends, which on 2 cores took the CPU the workers needed.
+const OUTCOMES_WAIT: Duration = Duration::from_millis(3);
+/// A relay asks in batches of what its workers take in this long (within [`MIN_BATCH`] and
+/// [`net::MAX_NET_BATCH`]): asking for each task its workers took made messages of a few tasks
+/// each way, and fixed batches of cheap tasks left slow ones hoarded at one relay.
+const BATCH_TIME: Duration = Duration::from_millis(5);
+/// The smallest batch, also the queue of a relay whose workers took nothing yet.
+const MIN_BATCH: usize = 16;
 /// The round trip to the learner assumed until one is measured.
 const FIRST_ROUND_TRIP: Duration = Duration::from_millis(1);
 /// How often the rate at which the workers take tasks is measured.
@@ -352,8 +356,9 @@ struct RelaySource {
     /// What the host's workers asked for.
     classes: Vec<Serves>,
     outgoing: Vec<NetOutcome>,
+    /// When the oldest of `outgoing` was told.
+    outgoing_since: Option<Instant>,
     notes: Vec<String>,
-    last_flush: Instant,
     done: bool,
     forwarded: u64,
     max_queue: usize,
@@ -398,13 +403,18 @@ impl Pace {
         self.round_trip += ((now - sent).as_secs_f64() - self.round_trip) / 8.0;
     }
 
+    /// The tasks the workers take in [`BATCH_TIME`], within [`MIN_BATCH`]..=[`net::MAX_NET_BATCH`].
+    fn batch(&self) -> usize {
+        ((self.rate * BATCH_TIME.as_secs_f64()) as usize).clamp(MIN_BATCH, net::MAX_NET_BATCH)
+    }
+
     fn target(&mut self, now: Instant) -> usize {
         let elapsed = now - self.since;
         if elapsed >= RATE_WINDOW {
             self.rate += (self.taken as f64 / elapsed.as_secs_f64() - self.rate) / 4.0;
             (self.taken, self.since) = (0, now);
         }
-        (2.0 * self.rate * self.round_trip) as usize + ASK_BATCH
+        (2.0 * self.rate * self.round_trip) as usize + self.batch()
     }
 }
 
@@ -463,8 +473,8 @@ impl RelaySource {
             next_request: 1,
             classes: Vec::new(),
             outgoing: Vec::new(),
+            outgoing_since: None,
             notes: Vec::new(),
-            last_flush: Instant::now(),
             done: false,
             forwarded: 0,
             max_queue,
@@ -519,8 +529,8 @@ impl RelaySource {
             slowest_rollout_us: status.slowest_rollout.as_micros().try_into().unwrap_or(u64::MAX),
             outcomes: std::mem::take(&mut self.outgoing),
         };
+        self.outgoing_since = None;
         self.publisher.put(net::encode(&message)?).wait()?;
-        self.last_flush = Instant::now();
         Ok(())
     }
 
@@ -603,6 +613,7 @@ impl TaskSource for RelaySource {
             queue.remove(at);
             self.queued -= 1;
         }
+        self.outgoing_since.get_or_insert_with(Instant::now);
         self.outgoing.push(NetOutcome::new(key.0, &outcome));
         self.forwarded += 1;
         true
@@ -654,22 +665,29 @@ impl TaskSource for RelaySource {
             self.publisher.put(net::encode(&note)?).wait()?;
         }
         let target = self.pace.target(Instant::now()).min(self.max_queue.max(1));
-        let ask_at = (target / 4).clamp(1, ASK_BATCH);
+        // Asking at half the target makes messages of about half of it.
+        let ask_at = (target / 2).clamp(1, self.pace.batch());
         for class in self.classes.clone() {
             let lacking = target.saturating_sub(self.supply(&class));
             if lacking >= ask_at {
                 self.send(lacking.min(net::MAX_NET_BATCH), class)?;
             }
         }
-        // An idle relay sends its outcomes at once unless its workers still hold four times as
-        // many tasks: they are busy for a while, and a message per few outcomes costs both ends
-        // more than the wait (at most FLUSH_EVERY).
-        let batched = idle && 4 * self.outgoing.len() >= self.held.len();
-        let due = self.outgoing.len() >= net::MAX_NET_BATCH || batched || self.last_flush.elapsed() >= FLUSH_EVERY;
+        // Outcomes ride on the next request, or go alone once a message is full, the oldest has
+        // waited OUTCOMES_WAIT, or the workers hold nothing more (no outcome will join them).
+        let waited = self
+            .outgoing_since
+            .is_some_and(|since| since.elapsed() >= OUTCOMES_WAIT);
+        let due = self.outgoing.len() >= net::MAX_NET_BATCH || waited || (idle && self.held.is_empty());
         if !self.outgoing.is_empty() && due {
             self.send(0, Serves::Any)?;
         }
         Ok(arrived)
+    }
+
+    fn wait_at_most(&self) -> Option<Duration> {
+        self.outgoing_since
+            .map(|since| OUTCOMES_WAIT.saturating_sub(since.elapsed()))
     }
 
     fn may_wait(&mut self) -> bool {
@@ -683,34 +701,45 @@ impl TaskSource for RelaySource {
 mod tests {
     use super::*;
 
+    /// A pace fed `windows` windows in which the workers take `per_ms` tasks per millisecond and
+    /// each answer takes `round_trip`.
+    fn paced(pace: &mut Pace, now: &mut Instant, windows: usize, per_ms: usize, round_trip: Duration) {
+        for _ in 0..windows {
+            let sent = *now;
+            *now += RATE_WINDOW;
+            pace.taken += per_ms * RATE_WINDOW.as_millis() as usize;
+            pace.answered(sent + RATE_WINDOW - round_trip, sent + RATE_WINDOW);
+            pace.target(*now);
+        }
+    }
+
     #[test]
     fn a_relay_keeps_what_its_workers_take_in_two_round_trips_and_one_batch() {
         let start = Instant::now();
         let mut pace = Pace::new(start);
-        assert_eq!(pace.target(start), ASK_BATCH, "nothing taken yet");
-        // Workers that take 100 tasks per millisecond, answers that take 2 ms.
+        assert_eq!(pace.target(start), MIN_BATCH, "nothing taken yet");
         let mut now = start;
-        for _ in 0..200 {
-            let sent = now;
-            now += RATE_WINDOW;
-            pace.taken += 500;
-            pace.answered(sent + RATE_WINDOW - Duration::from_millis(2), sent + RATE_WINDOW);
-            pace.target(now);
-        }
-        let expected = 2.0 * 100_000.0 * 0.002 + ASK_BATCH as f64;
+        // Cheap tasks, 100 per millisecond, and answers that take 2 ms: full batches.
+        paced(&mut pace, &mut now, 200, 100, Duration::from_millis(2));
+        assert_eq!(pace.batch(), net::MAX_NET_BATCH);
+        let expected = 2.0 * 100_000.0 * 0.002 + net::MAX_NET_BATCH as f64;
         let target = pace.target(now) as f64;
         assert!(
             (target - expected).abs() < 0.01 * expected,
             "{target} against {expected}"
         );
-        // Workers that stop taking: the target falls back towards one batch.
-        for _ in 0..200 {
-            now += RATE_WINDOW;
-            pace.target(now);
-        }
-        assert_eq!(pace.target(now), ASK_BATCH);
+        // 6 tasks per millisecond: a batch is what they take in BATCH_TIME.
+        paced(&mut pace, &mut now, 200, 6, Duration::from_millis(2));
+        assert!((29..=30).contains(&pace.batch()), "{}", pace.batch());
+        // Slow tasks, one per millisecond: the smallest batch, not 128 tasks hoarded here.
+        paced(&mut pace, &mut now, 200, 1, Duration::from_millis(2));
+        assert_eq!(pace.batch(), MIN_BATCH);
+        assert!(pace.target(now) <= MIN_BATCH + 4, "{}", pace.target(now));
+        // Workers that stop taking: the target falls back to the smallest batch.
+        paced(&mut pace, &mut now, 200, 0, Duration::from_millis(2));
+        assert_eq!(pace.target(now), MIN_BATCH);
         // A window not yet over leaves the estimate alone.
         pace.taken += 1_000_000;
-        assert_eq!(pace.target(now + RATE_WINDOW / 2), ASK_BATCH);
+        assert_eq!(pace.target(now + RATE_WINDOW / 2), MIN_BATCH);
     }
 }
