@@ -24,7 +24,7 @@ const HELLO_RETRY: Duration = Duration::from_millis(100);
 const OUTCOMES_WAIT: Duration = Duration::from_millis(3);
 /// A relay asks in batches of what its workers take in this long (within [`MIN_BATCH`] and
 /// [`net::MAX_NET_BATCH`]): asking for each task its workers took made messages of a few tasks
-/// each way, and fixed batches of cheap tasks left slow ones hoarded at one relay.
+/// each way, and a fixed batch sized for cheap tasks hoarded slow ones at one relay.
 const BATCH_TIME: Duration = Duration::from_millis(5);
 /// The smallest batch, also the queue of a relay whose workers took nothing yet.
 const MIN_BATCH: usize = 16;
