@@ -307,7 +307,8 @@ pub(crate) struct RelayArgs {
     #[arg(long, default_value_t = 60.0, allow_hyphen_values = true, value_parser = number("a number of seconds in 0..=86400", |x| (0.0..=86400.0).contains(&x)))]
     pub(crate) wait_for_learner: f64,
     /// Most tasks kept asked for or queued beyond what the workers hold (1..=4096): the relay
-    /// keeps what its workers take in two round trips to the learner and 64 more, up to this.
+    /// keeps what its workers take in two round trips to the learner and one batch (16..=128)
+    /// more, up to this.
     #[arg(long, default_value_t = 1024, allow_hyphen_values = true, value_parser = integer::<usize>(1, 4096))]
     pub(crate) queue: usize,
     #[command(flatten)]
