@@ -35,7 +35,7 @@ use acps_wire::wire::{
     Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, WireTask, WorkerMessage, check_task_sizes,
 };
 use iceoryx2::identifiers::UniqueClientId;
-use iceoryx2::port::listener::ListenerWaitError;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::time::{Duration, Instant};
@@ -784,8 +784,11 @@ pub(crate) fn serve<'r>(
             std::thread::yield_now();
         } else if source.may_wait() && remote.as_deref_mut().is_none_or(|remote| remote.may_wait()) {
             idle_since = None;
-            let wait = waker.until_heartbeat();
-            match listener.timed_wait(|_| {}, source.wait_at_most().map_or(wait, |most| most.min(wait))) {
+            let heartbeat = waker.until_heartbeat();
+            match wait(
+                &listener,
+                source.wait_at_most().map_or(heartbeat, |most| most.min(heartbeat)),
+            ) {
                 // Any signal interrupts the wait, also SIGSTOP and SIGCONT (a paused and resumed
                 // run): the loop goes on, and only `stop`, which the host's Ctrl-C handler sets,
                 // ends it.
@@ -794,6 +797,16 @@ pub(crate) fn serve<'r>(
             }
         }
     }
+}
+
+/// Wait for a notification on `listener` for at most `timeout`. A zero timeout returns at once:
+/// iceoryx2 makes it the socket's receive timeout, where 0 means for ever, and a relay whose
+/// outcomes were due just then slept until a worker spoke, so for ever once its learner was gone.
+fn wait(listener: &Listener<iceoryx2::prelude::ipc::Service>, timeout: Duration) -> Result<(), ListenerWaitError> {
+    if timeout.is_zero() {
+        return Ok(());
+    }
+    listener.timed_wait(|_| {}, timeout).map(|_| ())
 }
 
 /// Forget remote `peer`: re-issue the tasks it holds and drop its parked requests. Returns how
@@ -1095,4 +1108,29 @@ fn next_task(source: &mut dyn TaskSource, next_job: &mut usize, serves: &Serves)
         }
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::mpsc;
+
+    #[test]
+    fn a_wait_of_no_time_returns_at_once() {
+        let run = RunName::new(&format!("t{}-zero-wait", std::process::id())).unwrap();
+        let (done, returned) = mpsc::channel();
+        // No notification ever comes: a wait that blocked would end only with the test process.
+        let waiting = std::thread::spawn(move || {
+            let node = ipc::node(&run, "zero-wait").unwrap();
+            let services = ipc::open_services(&node).unwrap();
+            let listener = services.to_learner.listener_builder().create().unwrap();
+            wait(&listener, Duration::ZERO).unwrap();
+            done.send(()).unwrap();
+        });
+        assert!(
+            returned.recv_timeout(Duration::from_secs(60)).is_ok(),
+            "a zero timeout waited for a notification"
+        );
+        waiting.join().unwrap();
+    }
 }
