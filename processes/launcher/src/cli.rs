@@ -1,7 +1,7 @@
-//! The command line's arguments: what `acps --help` shows. `Cli::run` carries a command out
-//! ([`crate::commands`]).
+//! The command line's arguments: what `acps --help` shows; `crate::commands` carries a command
+//! out.
 
-use crate::config::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
+use acps_experiments::config::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
 use acps_fleet::processes::MAX_NICE;
 use acps_wire::ipc::{MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS};
 use clap::{Parser, Subcommand};
@@ -153,7 +153,7 @@ pub(crate) struct LearnArgs {
 
 impl LearnArgs {
     /// The `acps run` this stands for.
-    fn run_args(self) -> RunArgs {
+    pub(crate) fn run_args(self) -> RunArgs {
         let settings = ExperimentFile {
             experiment: Some(config::ExperimentName::Grid),
             sim: Some(self.sim),
@@ -417,39 +417,6 @@ pub(crate) const DEFAULT_WORKER_IN_FLIGHT: usize = 4;
 pub(crate) const DEFAULT_CHECKPOINT_EVERY: u64 = 10;
 
 impl Cli {
-    /// Carry out the command.
-    pub fn run(self) -> anyhow::Result<()> {
-        use crate::commands;
-        match self.command {
-            Command::Experiment(args) => commands::experiment(args),
-            Command::Learn(args) => commands::fleet(args.run_args()),
-            Command::Run(args) => commands::fleet(args),
-            Command::Worker(args) => commands::worker(args),
-            Command::Relay(args) => commands::relay(args),
-            Command::Bench(args) => commands::bench(args),
-            Command::Evaluate(args) => commands::evaluate(args),
-            Command::Compare(args) => {
-                let report = crate::compare::run(
-                    &args.dir,
-                    &args.with,
-                    args.baseline.as_deref(),
-                    args.levels.as_deref(),
-                    match (args.json, args.wide) {
-                        (true, _) => crate::compare::Layout::Json,
-                        (false, true) => crate::compare::Layout::Wide,
-                        (false, false) => crate::compare::Layout::Long,
-                    },
-                )?;
-                print!("{report}");
-                Ok(())
-            }
-            Command::Protocol => {
-                println!("{}", serde_json::to_string_pretty(&acps_wire::layout::describe())?);
-                Ok(())
-            }
-        }
-    }
-
     /// How many -v were given.
     pub fn verbosity(&self) -> u8 {
         self.verbose

@@ -1,12 +1,14 @@
 //! What each `acps` command does.
 
 use crate::bench::BenchEvent;
-use crate::checkpoints::Checkpoints;
-use crate::cli::{BenchArgs, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs};
-use crate::config::{self, Job, LoadedFile, Plan};
-use crate::experiment::{Experiment, Summary};
-use crate::progress::{Progress, ScoreFormat};
-use crate::workers::ModelFactory;
+use crate::cli::{
+    BenchArgs, Command, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs,
+};
+use acps_experiments::checkpoints::Checkpoints;
+use acps_experiments::config::{self, Job, LoadedFile, Plan};
+use acps_experiments::experiment::Experiment;
+use acps_experiments::summary::Summary;
+use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetBuilder, FleetProgress};
 use acps_relay::{Listener, NetOptions, RelayOptions};
 use acps_wire::ipc::{self, RunName};
@@ -112,8 +114,8 @@ fn stopped(
     // before the run starts or concern the checkpoints themselves.
     let fleet_failed = error.chain().any(|e| {
         matches!(
-            e.downcast_ref::<crate::experiment::RunError>(),
-            Some(crate::experiment::RunError::Fleet(_))
+            e.downcast_ref::<acps_experiments::experiment::RunError>(),
+            Some(acps_experiments::experiment::RunError::Fleet(_))
         )
     });
     match resume {
@@ -126,7 +128,7 @@ fn stopped(
 
 /// True when `error` is a run stopped by Ctrl-C.
 fn interrupted(error: &anyhow::Error) -> bool {
-    use crate::experiment::RunError;
+    use acps_experiments::experiment::RunError;
     use acps_fleet::FleetError;
     error.chain().any(|e| {
         matches!(
@@ -239,7 +241,7 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     prepare_outputs(&jobs)?;
     ctrlc::set_handler(|| STOP.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     for Job { experiment, dir, .. } in jobs {
-        let progress = Progress::of(&experiment, args.quiet);
+        let progress = experiment.progress(args.quiet);
         let checkpoints = checkpoints(&args, &dir);
         let outcome = experiment.run_until(&progress, checkpoints.as_ref(), &STOP);
         match &outcome {
@@ -332,7 +334,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
                 }
             }
         }
-        let progress = Progress::of(experiment, args.experiment.quiet);
+        let progress = experiment.progress(args.experiment.quiet);
         let checkpoints = checkpoints(&args.experiment, dir);
         let remote = listener.as_mut().map(|l| l as &mut dyn acps_fleet::Remote);
         let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), remote, |p| {
@@ -401,7 +403,7 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let json = serde_json::to_string_pretty(&serde_json::json!({ "rows": rows }))?;
     let path = args.out.join("bench.json");
     std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;
-    crate::plot::save_bench(&rows, &args.out)
+    acps_reports::plot::save_bench(&rows, &args.out)
         .map_err(|e| anyhow::anyhow!("drawing {}: {e}", args.out.join("bench.svg").display()))?;
     println!("-> {} and bench.svg / bench.png", path.display());
     if let Some(warning) = crate::bench::busy_warning(&rows) {
@@ -576,8 +578,13 @@ impl StartedWorkers {
         let workers = self.count();
         if workers > 0 {
             builder = match &self.worker_command {
-                Some(command) => builder.spawn_workers(workers, crate::workers::user_command(command.clone())),
-                None => builder.spawn_workers(workers, crate::workers::command(self.worker_in_flight, workers)),
+                Some(command) => {
+                    builder.spawn_workers(workers, acps_experiments::workers::user_command(command.clone()))
+                }
+                None => builder.spawn_workers(
+                    workers,
+                    acps_experiments::workers::command(self.worker_in_flight, workers),
+                ),
             };
             if let Some(nice) = self.worker_nice.worker_nice {
                 builder = builder.worker_niceness(nice);
@@ -589,7 +596,7 @@ impl StartedWorkers {
 
 pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     use crate::evaluate;
-    use crate::records::{SavedPolicy, policy_file};
+    use acps_experiments::records::{SavedPolicy, policy_file};
     let path = policy_file(&args.dir, args.method.as_deref(), args.run)?;
     let (saved, policy) = SavedPolicy::load(&path)?;
     if path != args.dir {
@@ -623,17 +630,49 @@ fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) ->
     summary
         .write(dir)
         .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
-    crate::records::write(summary, dir)?;
-    crate::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
+    acps_experiments::records::write(summary, dir)?;
+    acps_reports::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
     if !quiet {
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
-        let score = ScoreFormat::of(experiment);
+        let score = experiment.score_format();
         for (method, result) in &summary.methods {
             let line = score.final_line(result.final_mean, result.final_sem, summary.runs);
             println!("  {method:>20}: {line}");
         }
     }
     Ok(())
+}
+
+/// Carry out `command`.
+pub(crate) fn run(command: Command) -> anyhow::Result<()> {
+    match command {
+        Command::Experiment(args) => experiment(args),
+        Command::Learn(args) => fleet(args.run_args()),
+        Command::Run(args) => fleet(args),
+        Command::Worker(args) => worker(args),
+        Command::Relay(args) => relay(args),
+        Command::Bench(args) => bench(args),
+        Command::Evaluate(args) => evaluate(args),
+        Command::Compare(args) => {
+            let report = acps_reports::compare::run(
+                &args.dir,
+                &args.with,
+                args.baseline.as_deref(),
+                args.levels.as_deref(),
+                match (args.json, args.wide) {
+                    (true, _) => acps_reports::compare::Layout::Json,
+                    (false, true) => acps_reports::compare::Layout::Wide,
+                    (false, false) => acps_reports::compare::Layout::Long,
+                },
+            )?;
+            print!("{report}");
+            Ok(())
+        }
+        Command::Protocol => {
+            println!("{}", serde_json::to_string_pretty(&acps_wire::layout::describe())?);
+            Ok(())
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1,9 +1,9 @@
 //! `acps evaluate`: replay a learned policy greedily (its mean, exploration off) at chosen
 //! targets or at the problem's test contexts, in the environment the run learned in.
 
-use crate::experiment::Experiment;
-use crate::paper::{self, Options, Overrides, Sim};
-use crate::records::SavedPolicy;
+use acps_experiments::experiment::Experiment;
+use acps_experiments::paper::{self, Options, Overrides, Sim};
+use acps_experiments::records::SavedPolicy;
 use acps_learner::creps::RestoredPolicy;
 use acps_models::contextual_function;
 use acps_models::environment;
@@ -445,6 +445,6 @@ pub fn render(saved: &SavedPolicy, throw: &Throw, path: &Path) -> anyhow::Result
         "{} run {}: throw at ({:.3}, {:.3}), arm every 0.1 s, ball after release",
         saved.method, saved.run, throw.context[0], throw.context[1]
     );
-    crate::plot::save_throw(&Robot::pa10(), &trajectory, &title, path)
+    acps_reports::plot::save_throw(&Robot::pa10(), &trajectory, &title, path)
         .map_err(|e| anyhow::anyhow!("rendering {}: {e}", path.display()))
 }

@@ -1,9 +1,15 @@
-//! `acps`: the command line of Active Contextual Policy Search. Parse, then run the command
-//! (`acps::cli`, `acps::commands`).
+//! `acps`: the command line of Active Contextual Policy Search. Parse ([`cli`]), then carry
+//! the command out ([`commands`]) with the libraries: acps-experiments runs experiments and
+//! writes run directories, acps-reports draws and compares them.
 
-use acps::cli::Cli;
+mod bench;
+mod cli;
+mod commands;
+mod evaluate;
+
 use acps_wire::ipc;
 use clap::Parser;
+use cli::Cli;
 use std::process::ExitCode;
 
 /// Log to stderr at the level -v asks for, or as ACPS_LOG says; warnings by default.
@@ -38,12 +44,10 @@ fn init_logging(verbose: u8) {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(cli.verbosity());
-    match cli.run() {
+    match commands::run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(error) => match error.downcast_ref::<acps::commands::Stopped>() {
-            Some(
-                stopped @ (acps::commands::Stopped::Interrupted { .. } | acps::commands::Stopped::RelayInterrupted),
-            ) => {
+        Err(error) => match error.downcast_ref::<commands::Stopped>() {
+            Some(stopped @ (commands::Stopped::Interrupted { .. } | commands::Stopped::RelayInterrupted)) => {
                 eprintln!("{stopped}");
                 ExitCode::from(130)
             }

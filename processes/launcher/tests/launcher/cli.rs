@@ -63,7 +63,7 @@ fn toy_panel_writes_the_summary_contract() {
     // The Section 4 model has no policy: no C-REPS update, so no rows and no picture of them.
     assert_eq!(
         std::fs::read_to_string(dir.join("updates.csv")).unwrap(),
-        format!("{}\n", acps::records::UPDATES_HEADER)
+        format!("{}\n", acps_experiments::records::UPDATES_HEADER)
     );
     assert!(!dir.join("updates.png").exists());
     for picture in ["curves.svg", "selections.svg"] {

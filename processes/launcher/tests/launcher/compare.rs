@@ -2,7 +2,7 @@
 //! the test from the curves it wrote.
 
 use crate::{acps, succeeded, temp_dir};
-use acps::compare::{paired_t, wilcoxon};
+use acps_reports::compare::{paired_t, wilcoxon};
 use std::path::Path;
 
 /// Curves of three runs (seeds 0, 1, 2) evaluated at episodes 0, 100 and 200.

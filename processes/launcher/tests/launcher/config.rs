@@ -2,7 +2,7 @@
 //! refused with file, line and accepted range, and a run's resolved file re-runs it bit for bit.
 
 use crate::{acps, temp_dir};
-use acps::config::{ExperimentFile, ExperimentName, LoadedFile, Plan, SimName};
+use acps_experiments::config::{ExperimentFile, ExperimentName, LoadedFile, Plan, SimName};
 use std::path::{Path, PathBuf};
 
 fn succeeds(args: &[&str]) {

@@ -1,8 +1,8 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
 use crate::{assert_clean, run_name, succeeded, temp_dir, watched};
-use acps::paper::{self, Options, Sim};
-use acps::workers::ModelFactory;
+use acps_experiments::paper::{self, Options, Sim};
+use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetJob, FleetProgress, Liveness};
 use acps_learner::{Method, run_in_process};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
@@ -789,7 +789,7 @@ fn test_fleet(run: &RunName, start_with: usize) -> Fleet {
 
 /// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`) with
 /// [`served_and_in_process`]'s jobs and episodes.
-fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>, Vec<String>) {
+fn short_grid(in_flight: usize) -> (acps_experiments::experiment::Experiment, Vec<FleetJob>, Vec<String>) {
     let options = Options {
         runs: 2,
         episodes: Some(40),
@@ -804,7 +804,7 @@ fn short_grid(in_flight: usize) -> (acps::experiment::Experiment, Vec<FleetJob>,
 
 /// `experiment`'s jobs ready for a fleet, and each job's episodes when run in-process (as text:
 /// the bits, NaN included).
-fn served_and_in_process(experiment: &acps::experiment::Experiment) -> (Vec<FleetJob>, Vec<String>) {
+fn served_and_in_process(experiment: &acps_experiments::experiment::Experiment) -> (Vec<FleetJob>, Vec<String>) {
     let reference = experiment
         .jobs()
         .unwrap()
@@ -1325,7 +1325,9 @@ fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serv
         ..Options::default()
     };
     let experiment = paper::dims(9, &options);
-    let summary = experiment.run(&acps::progress::Progress::new("dims", 0, true)).unwrap();
+    let summary = experiment
+        .run(&acps_experiments::progress::Progress::new("dims", 0, true))
+        .unwrap();
     assert_eq!(summary.methods["random"].episodes, [0, 20]);
     let run = run_name("too-large");
     let mut fleet = test_fleet(&run, 0);

@@ -2,7 +2,7 @@
 //! fleet to workers the user provides (here processes/worker/examples/bowl.rs).
 
 use crate::{TempDir, acps, assert_clean, run_name, succeeded, temp_dir, watched};
-use acps::config::{ExperimentFile, LoadedFile, Plan};
+use acps_experiments::config::{ExperimentFile, LoadedFile, Plan};
 use acps_shared::EnvironmentSpec;
 use acps_wire::ipc;
 use std::path::{Path, PathBuf};

@@ -5,7 +5,7 @@
 
 use crate::problems::{self, LONG_BOWL, bowl_toml, bowl_worker};
 use crate::{run_name, succeeded, temp_dir};
-use acps::records::SavedPolicy;
+use acps_experiments::records::SavedPolicy;
 use acps_wire::ipc;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -102,7 +102,7 @@ fn the_csv_tables_repeat_summary_json() {
     }
 
     // An update every 50 rollouts, each solved to the optimum: KL = epsilon off the bound.
-    let updates = csv(&dir.join("updates.csv"), acps::records::UPDATES_HEADER);
+    let updates = csv(&dir.join("updates.csv"), acps_experiments::records::UPDATES_HEADER);
     assert_eq!(
         updates.len() as u64,
         m["updates"].as_u64().unwrap() + m["rejected_updates"].as_u64().unwrap()
@@ -110,7 +110,11 @@ fn the_csv_tables_repeat_summary_json() {
     assert_eq!(updates.len(), 4);
     let epsilon = s["settings"]["creps"]["epsilon"].as_f64().unwrap();
     for (k, row) in updates.iter().enumerate() {
-        let column = |name: &str| acps::records::UPDATES_HEADER.split(',').position(|h| h == name);
+        let column = |name: &str| {
+            acps_experiments::records::UPDATES_HEADER
+                .split(',')
+                .position(|h| h == name)
+        };
         let field = |name: &str| row[column(name).unwrap()].as_str();
         assert_eq!((field("method"), field("run")), ("monotonic-progress", "0"));
         assert_eq!(number(field("update")), k as f64);

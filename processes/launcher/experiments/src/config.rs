@@ -530,7 +530,7 @@ const KEYS: &[Key] = &[
 
 /// The value parser of the option of key `name`: a value that is not a `T` (a negative count, a
 /// word) is refused with what the key accepts, like an out-of-range one by [`Plan::new`].
-pub(crate) fn parse_option<T: std::str::FromStr>(
+pub fn parse_option<T: std::str::FromStr>(
     name: &'static str,
 ) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync + 'static {
     move |text: &str| text.parse().map_err(|_| format!("must be {}", key(name).accepted))

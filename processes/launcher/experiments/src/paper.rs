@@ -3,7 +3,8 @@
 //! `dartboard`, Fig. 10). Every setting the paper leaves open is recorded in the summary's
 //! `settings` and explained in docs/CHOICES.md.
 
-use crate::experiment::{Experiment, Instance, RunResult, mean};
+use crate::experiment::{Experiment, Instance};
+use crate::summary::{RunResult, mean};
 use acps_learner::creps::{CRepsConfig, MemoryConfig};
 use acps_learner::selection::{
     AbsoluteProgressConfig, AlpGmmConfig, DUcbConfig, EmaRates, FirstVisit, RetireConfig, SaggRiacConfig,

@@ -6,8 +6,9 @@
 //! table, before anything starts.
 
 use crate::config::{Invalid, out_of_range};
-use crate::experiment::{Experiment, Instance, UserProblem};
+use crate::experiment::{Experiment, Instance};
 use crate::paper::{self, Options};
+use crate::summary::UserProblem;
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use acps_learner::selection::DUcbConfig;
 use acps_learner::{LearnerConfig, Method};

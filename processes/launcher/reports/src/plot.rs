@@ -18,7 +18,7 @@
 //!   the initial throw.
 //! - `bench`, from `acps bench`: rollouts/s of every mode per environment, ratio above each bar.
 
-use crate::experiment::Summary;
+use acps_experiments::summary::Summary;
 use acps_models::robot::Robot;
 use acps_models::targets::Field;
 use acps_models::trajectory::JointTrajectory;
@@ -209,7 +209,7 @@ fn score_unit(summary: &Summary) -> Option<&str> {
 
 /// Whether the training contexts are the paper's throwing targets: points on the ground, in m.
 fn throws_at_targets(summary: &Summary) -> bool {
-    crate::experiment::scores_are_distances(&summary.experiment, summary.user_problem.as_ref())
+    acps_experiments::summary::scores_are_distances(&summary.experiment, summary.user_problem.as_ref())
 }
 
 /// What the recorded settings say about how the scores came about, for a title: the throws'
@@ -1800,7 +1800,7 @@ impl Picture for BenchBars<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::experiment::{BestPolicy, MethodSummary, UserProblem};
+    use acps_experiments::summary::{BestPolicy, MethodSummary, UserProblem};
     use std::path::PathBuf;
     use std::sync::mpsc::{RecvTimeoutError, channel};
     use std::time::Duration;

@@ -6,8 +6,8 @@
 //! The statistics are written here (about 150 lines) rather than taken from `statrs`, which would
 //! bring nalgebra into the launcher for two distribution functions.
 
-use crate::experiment::{UserProblem, lower_is_better, scores_are_distances};
-use crate::records::RUNS_CSV_HEADER;
+use acps_experiments::records::RUNS_CSV_HEADER;
+use acps_experiments::summary::{UserProblem, lower_is_better, scores_are_distances};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -260,8 +260,8 @@ pub struct MeanSem {
 /// Mean and SEM of `values` (not empty).
 pub fn mean_sem(values: &[f64]) -> MeanSem {
     MeanSem {
-        mean: crate::experiment::mean(values),
-        sem: crate::experiment::standard_error(values),
+        mean: acps_experiments::summary::mean(values),
+        sem: acps_experiments::summary::standard_error(values),
     }
 }
 

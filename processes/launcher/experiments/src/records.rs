@@ -17,16 +17,167 @@
 //!
 //! Empty CSV fields mean "no value" (an evaluation whose rollouts all failed).
 
-use crate::experiment::{RunResult, Summary, UserProblem};
-use acps_learner::creps::{PolicySnapshot, Rejection, RestoredPolicy};
+use crate::summary::{RunResult, Summary, UserProblem};
+use acps_learner::creps::{PolicySnapshot, PolicySnapshotRestoreError, Rejection, RestoredPolicy};
 use acps_shared::Problem;
-use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// The header of `runs.csv`, which `acps compare` reads back.
-pub(crate) const RUNS_CSV_HEADER: &str = "method,run,seed,episode,score";
+pub const RUNS_CSV_HEADER: &str = "method,run,seed,episode,score";
+
+/// A run directory's records that could not be written, or a policy file or run directory
+/// `acps evaluate` cannot use. Each message names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordsError {
+    /// Reading, writing or creating a file or directory failed.
+    #[error("{action} {}", path.display())]
+    Io {
+        /// "reading", "writing" or "creating".
+        action: &'static str,
+        /// The file or directory.
+        path: PathBuf,
+        /// The system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A policy could not be serialised (it holds a value JSON cannot).
+    #[error("serialising the policy of {}", path.display())]
+    Serialise {
+        /// The file it was for.
+        path: PathBuf,
+        /// serde_json's reason.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// The file is not JSON of a policy file's shape.
+    #[error("{}: not an acps policy file", path.display())]
+    NotAPolicy {
+        /// The file.
+        path: PathBuf,
+        /// serde_json's reason.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A field of a policy file is out of its range.
+    #[error("{}: {field} {reason}", path.display())]
+    Field {
+        /// The file.
+        path: PathBuf,
+        /// The field, such as `problem.theta0`.
+        field: &'static str,
+        /// What it must be and what it is.
+        reason: String,
+    },
+    /// The saved policy does not restore (its shapes or values).
+    #[error("{}: {error}{hint}", path.display())]
+    Policy {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        error: PolicySnapshotRestoreError,
+        /// Where its size comes from, for a shape error.
+        hint: String,
+    },
+    /// A policy file of a run directory whose method or run is not the one its name says.
+    #[error(
+        "{}: method {method:?} and run {run} are not the ones the file's name says (they would be in {named}); was the file relabelled?",
+        path.display()
+    )]
+    Relabelled {
+        /// The file.
+        path: PathBuf,
+        /// The method it holds.
+        method: String,
+        /// The run it holds.
+        run: usize,
+        /// The name it would have.
+        named: String,
+    },
+    /// Not a regular file (a FIFO, a device, a directory ...).
+    #[error("{} is a {kind}, not a {expected}", path.display())]
+    Special {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        kind: &'static str,
+        /// What was expected there.
+        expected: &'static str,
+    },
+    /// Larger than any policy file.
+    #[error("{}: {len} bytes is more than a policy file holds (at most {MAX_POLICY_BYTES} bytes)", path.display())]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Its size in bytes.
+        len: u64,
+    },
+    /// `acps evaluate`'s path does not exist.
+    #[error(
+        "{} does not exist; give a run directory (the --out of `acps experiment` or `acps run`) or one of its policies/METHOD-runR.json files",
+        path.display()
+    )]
+    Missing {
+        /// The path.
+        path: PathBuf,
+    },
+    /// `--method` or `--run` with a policy file instead of a run directory.
+    #[error("--method and --run choose a file in a run directory; {} is a policy file", path.display())]
+    ChoiceOnFile {
+        /// The policy file.
+        path: PathBuf,
+    },
+    /// A run directory without `policies/`.
+    #[error(
+        "{} has no {POLICY_DIR}/ directory: the run directory of an experiment with a learned policy holds one (toy's Section 4 model has no policy)",
+        dir.display()
+    )]
+    NoPolicyDir {
+        /// The run directory.
+        dir: PathBuf,
+    },
+    /// `policies/` holds no policy file.
+    #[error("{} holds no policy file (METHOD-runR.json)", dir.display())]
+    NoPolicies {
+        /// The `policies/` directory.
+        dir: PathBuf,
+    },
+    /// No policy file of the run asked for.
+    #[error("{} holds no policy file of run {run} (--run); --run must be one of {runs:?}", dir.display())]
+    NoRun {
+        /// The `policies/` directory.
+        dir: PathBuf,
+        /// The run asked for.
+        run: usize,
+        /// The runs it holds.
+        runs: Vec<usize>,
+    },
+    /// No policy file of the method asked for.
+    #[error(
+        "--method {method}: {} holds no policy file of that method for run {run}; --method must be one of [{}]",
+        dir.display(),
+        methods.join(", ")
+    )]
+    NoMethod {
+        /// The method asked for.
+        method: String,
+        /// The `policies/` directory.
+        dir: PathBuf,
+        /// The run.
+        run: usize,
+        /// The methods it holds for that run.
+        methods: Vec<String>,
+    },
+}
+
+fn io<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> RecordsError + 'a {
+    move |source| RecordsError::Io {
+        action,
+        path: path.to_path_buf(),
+        source,
+    }
+}
 
 /// The `format` of policy files this build writes and reads.
 pub const POLICY_FORMAT: &str = "acps-policy-2";
@@ -70,27 +221,35 @@ impl SavedPolicy {
     /// Read and check a policy file: its format, the problem's space, contexts and theta_0, the
     /// policy's shapes and values, and that the policy fits the problem (context dimension,
     /// n_theta). Errors name the file and the field.
-    pub fn load(path: &Path) -> anyhow::Result<(Self, RestoredPolicy)> {
+    pub fn load(path: &Path) -> Result<(Self, RestoredPolicy), RecordsError> {
         let text = read_regular(path)?;
-        let not_a_policy = || format!("{}: not an acps policy file", path.display());
-        let json: serde_json::Value = serde_json::from_str(&text).with_context(not_a_policy)?;
-        let bad = |field: &str, reason: String| anyhow::anyhow!("{}: {field} {reason}", path.display());
+        let not_a_policy = |source| RecordsError::NotAPolicy {
+            path: path.to_path_buf(),
+            source,
+        };
+        let json: serde_json::Value = serde_json::from_str(&text).map_err(not_a_policy)?;
+        let bad = |field: &'static str, reason: String| RecordsError::Field {
+            path: path.to_path_buf(),
+            field,
+            reason,
+        };
         // The format first: a file of another format need not have this one's fields.
         let format = json.get("format").and_then(|f| f.as_str());
         if format != Some(POLICY_FORMAT) {
             let got = format.map_or("none".to_string(), |f| format!("{f:?}"));
             return Err(bad("format", format!("must be {POLICY_FORMAT:?}, got {got}")));
         }
-        let saved: SavedPolicy = serde_json::from_value(json).with_context(not_a_policy)?;
+        let saved: SavedPolicy = serde_json::from_value(json).map_err(not_a_policy)?;
         let problem = &saved.problem;
         check_problem(problem).map_err(|(field, reason)| bad(field, reason))?;
         let n_theta = problem.theta0.len();
-        let restored = saved.policy.restore(n_theta).map_err(|e| {
-            let source = match e.field {
+        let restored = saved.policy.restore(n_theta).map_err(|error| RecordsError::Policy {
+            path: path.to_path_buf(),
+            hint: match error.field {
                 "weights" | "covariance" => format!(" (n_theta: problem.theta0 has {n_theta} entries)"),
                 _ => String::new(),
-            };
-            anyhow::anyhow!("{}: {e}{source}", path.display())
+            },
+            error,
         })?;
         if restored.context_dim() != problem.context_dim() {
             return Err(bad(
@@ -107,15 +266,15 @@ impl SavedPolicy {
 
     /// Refuse a file of a run directory whose method or run is not the one its name says (a
     /// relabelled file would replay another run's policy under this one's name).
-    pub fn check_name(&self, path: &Path) -> anyhow::Result<()> {
+    pub fn check_name(&self, path: &Path) -> Result<(), RecordsError> {
         let named = format!("{}-run{}.json", self.method, self.run);
         if path.file_name() != Some(named.as_ref()) {
-            bail!(
-                "{}: method {:?} and run {} are not the ones the file's name says (they would be in {named}); was the file relabelled?",
-                path.display(),
-                self.method,
-                self.run
-            );
+            return Err(RecordsError::Relabelled {
+                path: path.to_path_buf(),
+                method: self.method.clone(),
+                run: self.run,
+                named,
+            });
         }
         Ok(())
     }
@@ -189,48 +348,46 @@ fn special_kind(file_type: &std::fs::FileType) -> &'static str {
 
 /// The text of the regular file `path`, refusing anything else without blocking or reading it:
 /// a FIFO would block a plain open until a writer comes, a device could stream forever.
-fn read_regular(path: &Path) -> anyhow::Result<String> {
+fn read_regular(path: &Path) -> Result<String, RecordsError> {
     use std::io::Read as _;
     use std::os::unix::fs::OpenOptionsExt;
-    let reading = || format!("reading {}", path.display());
     let check = |metadata: std::fs::Metadata| {
         if !metadata.is_file() {
-            bail!(
-                "{} is a {}, not a policy file",
-                path.display(),
-                special_kind(&metadata.file_type())
-            );
+            return Err(RecordsError::Special {
+                path: path.to_path_buf(),
+                kind: special_kind(&metadata.file_type()),
+                expected: "policy file",
+            });
         }
         if metadata.len() > MAX_POLICY_BYTES {
-            bail!(
-                "{}: {} bytes is more than a policy file holds (at most {MAX_POLICY_BYTES} bytes)",
-                path.display(),
-                metadata.len()
-            );
+            return Err(RecordsError::TooLarge {
+                path: path.to_path_buf(),
+                len: metadata.len(),
+            });
         }
         Ok(())
     };
     // Look before opening (opening a socket fails, opening a device may act on it), then check
     // what was opened, in case the path was replaced in between.
-    check(std::fs::metadata(path).with_context(reading)?)?;
+    check(std::fs::metadata(path).map_err(io("reading", path))?)?;
     let file = std::fs::OpenOptions::new()
         .read(true)
         .custom_flags(libc::O_NONBLOCK)
         .open(path)
-        .with_context(reading)?;
-    check(file.metadata().with_context(reading)?)?;
+        .map_err(io("reading", path))?;
+    check(file.metadata().map_err(io("reading", path))?)?;
     let mut text = String::new();
     file.take(MAX_POLICY_BYTES)
         .read_to_string(&mut text)
-        .with_context(reading)?;
+        .map_err(io("reading", path))?;
     Ok(text)
 }
 
 /// Write the CSV tables and the policy files of `summary` into `dir` (which exists).
-pub fn write(summary: &Summary, dir: &Path) -> anyhow::Result<()> {
+pub fn write(summary: &Summary, dir: &Path) -> Result<(), RecordsError> {
     let file = |name: &str, text: String| {
         let path = dir.join(name);
-        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
+        std::fs::write(&path, text).map_err(io("writing", &path))
     };
     file("curves.csv", curves_csv(summary))?;
     file("runs.csv", runs_csv(summary))?;
@@ -331,7 +488,7 @@ fn field(value: Option<f64>) -> String {
     value.map(|v| v.to_string()).unwrap_or_default()
 }
 
-fn write_policies(summary: &Summary, dir: &Path) -> anyhow::Result<()> {
+fn write_policies(summary: &Summary, dir: &Path) -> Result<(), RecordsError> {
     let saved: Vec<SavedPolicy> = summary
         .run_results
         .iter()
@@ -341,12 +498,15 @@ fn write_policies(summary: &Summary, dir: &Path) -> anyhow::Result<()> {
     if saved.is_empty() {
         return Ok(());
     }
-    std::fs::create_dir_all(dir.join(POLICY_DIR))
-        .with_context(|| format!("creating {}", dir.join(POLICY_DIR).display()))?;
+    let policies = dir.join(POLICY_DIR);
+    std::fs::create_dir_all(&policies).map_err(io("creating", &policies))?;
     for policy in saved {
         let path = SavedPolicy::path(dir, &policy.method, policy.run);
-        let json = serde_json::to_string_pretty(&policy)?;
-        std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;
+        let json = serde_json::to_string_pretty(&policy).map_err(|source| RecordsError::Serialise {
+            path: path.clone(),
+            source,
+        })?;
+        std::fs::write(&path, json).map_err(io("writing", &path))?;
     }
     Ok(())
 }
@@ -369,29 +529,29 @@ fn saved_policy(summary: &Summary, method: &str, run: usize, result: &RunResult)
 /// The policy file `acps evaluate DIR` uses: `--method` (default: the first method with a
 /// policy file of the run, by name) and `--run` (default 0), both among the files that
 /// `DIR/policies` holds. `dir` may also be a policy file itself.
-pub fn policy_file(dir: &Path, method: Option<&str>, run: Option<usize>) -> anyhow::Result<PathBuf> {
+pub fn policy_file(dir: &Path, method: Option<&str>, run: Option<usize>) -> Result<PathBuf, RecordsError> {
     let metadata = match std::fs::metadata(dir) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
-            "{} does not exist; give a run directory (the --out of `acps experiment` or `acps run`) or one of its policies/METHOD-runR.json files",
-            dir.display()
-        ),
-        metadata => metadata.with_context(|| format!("reading {}", dir.display()))?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(RecordsError::Missing {
+                path: dir.to_path_buf(),
+            });
+        }
+        metadata => metadata.map_err(io("reading", dir))?,
     };
     if metadata.is_file() {
         if method.is_some() || run.is_some() {
-            bail!(
-                "--method and --run choose a file in a run directory; {} is a policy file",
-                dir.display()
-            );
+            return Err(RecordsError::ChoiceOnFile {
+                path: dir.to_path_buf(),
+            });
         }
         return Ok(dir.to_path_buf());
     }
     if !metadata.is_dir() {
-        bail!(
-            "{} is a {}, not a run directory or a policy file",
-            dir.display(),
-            special_kind(&metadata.file_type())
-        );
+        return Err(RecordsError::Special {
+            path: dir.to_path_buf(),
+            kind: special_kind(&metadata.file_type()),
+            expected: "run directory or a policy file",
+        });
     }
     let saved = saved_policies(dir)?;
     let run = run.unwrap_or(0);
@@ -402,39 +562,40 @@ pub fn policy_file(dir: &Path, method: Option<&str>, run: Option<usize>) -> anyh
         .map(|(m, _)| m.as_str())
         .collect();
     if saved.is_empty() {
-        bail!("{} holds no policy file (METHOD-runR.json)", policies.display());
+        return Err(RecordsError::NoPolicies { dir: policies });
     }
     if methods.is_empty() {
         let mut runs: Vec<usize> = saved.iter().map(|(_, r)| *r).collect();
         runs.dedup();
-        bail!(
-            "{} holds no policy file of run {run} (--run); --run must be one of {runs:?}",
-            policies.display()
-        );
+        return Err(RecordsError::NoRun {
+            dir: policies,
+            run,
+            runs,
+        });
     }
     // Only a name the directory lists: a --method such as ../x must not reach a file elsewhere.
     let method = match method {
         None => methods[0],
         Some(method) if methods.contains(&method) => method,
-        Some(method) => bail!(
-            "--method {method}: {} holds no policy file of that method for run {run}; --method must be one of [{}]",
-            policies.display(),
-            methods.join(", ")
-        ),
+        Some(method) => {
+            return Err(RecordsError::NoMethod {
+                method: method.to_string(),
+                dir: policies,
+                run,
+                methods: methods.iter().map(|m| m.to_string()).collect(),
+            });
+        }
     };
     Ok(SavedPolicy::path(dir, method, run))
 }
 
 /// The (method, run) of every policy file in `dir/policies`, sorted by run, then method.
-fn saved_policies(dir: &Path) -> anyhow::Result<Vec<(String, usize)>> {
+fn saved_policies(dir: &Path) -> Result<Vec<(String, usize)>, RecordsError> {
     let policies = dir.join(POLICY_DIR);
     if !policies.is_dir() {
-        bail!(
-            "{} has no {POLICY_DIR}/ directory: the run directory of an experiment with a learned policy holds one (toy's Section 4 model has no policy)",
-            dir.display()
-        );
+        return Err(RecordsError::NoPolicyDir { dir: dir.to_path_buf() });
     }
-    let entries = std::fs::read_dir(&policies).with_context(|| format!("reading {}", policies.display()))?;
+    let entries = std::fs::read_dir(&policies).map_err(io("reading", &policies))?;
     let mut saved: Vec<(String, usize)> = entries
         .filter_map(|entry| {
             let name = entry.ok()?.file_name().into_string().ok()?;

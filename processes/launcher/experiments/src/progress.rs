@@ -2,7 +2,7 @@
 //! averaged over the runs, rollouts per second and, for fleets, the live workers; and, once it
 //! is done, the final scores in the same words and unit.
 
-use crate::experiment::{Experiment, Summary};
+use crate::summary::{Summary, UserProblem, mean};
 use acps_learner::LearningProgress;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::time::Duration;
@@ -31,10 +31,10 @@ impl ScoreFormat {
         }
     }
 
-    /// The score of `experiment`, in the unit a problem file gives its scores.
-    pub fn of(experiment: &Experiment) -> Self {
-        match &experiment.user_problem {
-            None => Self::of_paper(&experiment.name),
+    /// The score of experiment `name`, in the unit a problem file gives its scores (`user`).
+    pub fn of(name: &str, user: Option<&UserProblem>) -> Self {
+        match user {
+            None => Self::of_paper(name),
             Some(user) if user.unit.is_empty() => Self::of_paper(""),
             Some(user) => Self {
                 name: "test score",
@@ -97,12 +97,12 @@ impl Progress {
         }
     }
 
-    /// A progress line for `experiment`, in the unit a problem file gives its scores.
-    pub fn of(experiment: &Experiment, quiet: bool) -> Self {
-        let total = experiment.learner.episodes * (experiment.methods.len() * experiment.runs) as u64;
+    /// A progress line for experiment `name` of `total` episodes, in the unit a problem file
+    /// gives its scores (`user`).
+    pub fn of(name: &str, total: u64, user: Option<&UserProblem>, quiet: bool) -> Self {
         Self {
-            score: ScoreFormat::of(experiment),
-            ..Self::new(&experiment.name, total, quiet)
+            score: ScoreFormat::of(name, user),
+            ..Self::new(name, total, quiet)
         }
     }
 
@@ -130,7 +130,7 @@ impl Progress {
             .values()
             .flat_map(|method| method.final_scores.iter().flatten().copied())
             .collect();
-        let score = (!finals.is_empty()).then(|| crate::experiment::mean(&finals));
+        let score = (!finals.is_empty()).then(|| mean(&finals));
         let of = match summary.methods.len() {
             1 => String::new(),
             methods => format!(" (mean of {methods} methods)"),

@@ -1,0 +1,21 @@
+//! acps experiments as a library: what the `acps` command runs, for any Rust program.
+//!
+//! - [`config`]: experiment files and command-line settings, each setting declared once with
+//!   its range, and checked into a [`config::Plan`] of [`config::Job`]s;
+//! - [`problem_file`]: a `[problem]` table of the user's, simulated by their workers;
+//! - [`paper`]: the paper's experiments (Sections 4 and 5) as [`experiment::Experiment`]s;
+//! - [`experiment`]: the runner, in this process or through a worker fleet;
+//! - [`checkpoints`]: the learners' checkpoints and resume;
+//! - [`summary`] and [`records`]: `summary.json` and the run directory's tables and policies;
+//! - [`progress`]: the progress line; [`workers`]: the project's models as worker environments.
+#![warn(missing_docs)]
+
+pub mod checkpoints;
+pub mod config;
+pub mod experiment;
+pub mod paper;
+pub mod problem_file;
+pub mod progress;
+pub mod records;
+pub mod summary;
+pub mod workers;
