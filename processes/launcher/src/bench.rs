@@ -5,7 +5,8 @@
 //! to W times one thread (the ratio). With `--relay`, every fleet is measured again through an
 //! `acps relay` on loopback that starts the W workers, as a host of workers on the network would.
 
-use acps_experiments::paper::{self, Options, Sim};
+use acps_experiments::paper::{self, Sim};
+use acps_experiments::settings::ExperimentFile;
 use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress, Learners};
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::RoundRobin;
@@ -127,12 +128,12 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
             .collect(),
         Workload::Throw(sim) => {
             let base = if sim == Sim::Rapier { 250.0 } else { 6000.0 };
-            let options = Options {
-                runs: JOBS,
+            let options = ExperimentFile {
+                runs: Some(JOBS),
                 episodes: Some(episodes(base)),
-                in_flight: IN_FLIGHT,
+                in_flight: Some(IN_FLIGHT),
                 methods: Some(vec![Method::MonotonicProgress]),
-                ..Options::default()
+                ..Default::default()
             };
             paper::grid(sim, &options)
                 .jobs()?

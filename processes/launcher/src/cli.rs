@@ -1,7 +1,7 @@
 //! The command line's arguments: what `acps --help` shows; `crate::commands` carries a command
 //! out.
 
-use acps_experiments::config::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
+use acps_experiments::settings::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
 use acps_fleet::processes::MAX_NICE;
 use acps_wire::ipc::{MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS};
 use clap::{Parser, Subcommand};
@@ -133,7 +133,7 @@ pub(crate) struct LearnArgs {
     pub(crate) episodes: u64,
     /// How throws are simulated.
     #[arg(long, value_enum, default_value = "rapier")]
-    pub(crate) sim: config::SimName,
+    pub(crate) sim: settings::SimName,
     /// Output directory.
     #[arg(long, default_value = "runs/learn")]
     pub(crate) out: PathBuf,
@@ -155,7 +155,7 @@ impl LearnArgs {
     /// The `acps run` this stands for.
     pub(crate) fn run_args(self) -> RunArgs {
         let settings = ExperimentFile {
-            experiment: Some(config::ExperimentName::Grid),
+            experiment: Some(settings::ExperimentName::Grid),
             sim: Some(self.sim),
             runs: Some(self.runs),
             episodes: Some(self.episodes),

@@ -5,8 +5,9 @@ use crate::cli::{
     BenchArgs, Command, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs,
 };
 use acps_experiments::checkpoints::Checkpoints;
-use acps_experiments::config::{self, Job, LoadedFile, Plan};
 use acps_experiments::experiment::Experiment;
+use acps_experiments::file::LoadedFile;
+use acps_experiments::plan::{self, Job, Plan};
 use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetBuilder, FleetProgress};
@@ -158,10 +159,10 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<(PathBuf, Vec<Job>)>> {
             )
         }
         (Some(dir), _) | (None, Some(dir)) => dir.clone(),
-        (None, None) => config::default_out(args.config.as_deref(), plan.name()),
+        (None, None) => plan::default_out(args.config.as_deref(), plan.name()),
     };
     let jobs = plan.jobs(&out);
-    config::check_memory(&jobs)?;
+    plan::check_memory(&jobs)?;
     for job in &jobs {
         job.experiment.check_methods()?;
     }

@@ -2,8 +2,9 @@
 //! targets or at the problem's test contexts, in the environment the run learned in.
 
 use acps_experiments::experiment::Experiment;
-use acps_experiments::paper::{self, Options, Overrides, Sim};
+use acps_experiments::paper::{self, Sim};
 use acps_experiments::records::SavedPolicy;
+use acps_experiments::settings::ExperimentFile;
 use acps_learner::creps::RestoredPolicy;
 use acps_models::contextual_function;
 use acps_models::environment;
@@ -157,9 +158,9 @@ fn experiment_of(saved: &SavedPolicy) -> Result<Experiment, (&'static str, Strin
     let problem = &saved.problem;
     let spec = &problem.environment;
     let [first, n_theta, problem_seed] = spec.parameters();
-    let options = Options {
-        runs: 1,
-        ..Options::default()
+    let options = ExperimentFile {
+        runs: Some(1),
+        ..Default::default()
     };
     let environment_name = |expected: &str| {
         if spec.name() == expected {
@@ -200,11 +201,8 @@ fn experiment_of(saved: &SavedPolicy) -> Result<Experiment, (&'static str, Strin
                     ),
                 ));
             }
-            let options = Options {
-                overrides: Overrides {
-                    n_theta: Some(n),
-                    ..Overrides::default()
-                },
+            let options = ExperimentFile {
+                n_theta: Some(n),
                 ..options
             };
             match name {

@@ -1,7 +1,8 @@
 //! acps experiments as a library: what the `acps` command runs, for any Rust program.
 //!
-//! - [`config`]: experiment files and command-line settings, each setting declared once with
-//!   its range, and checked into a [`config::Plan`] of [`config::Job`]s;
+//! - [`settings`]: every setting of an experiment, declared once with its range ([`keys`]: what
+//!   a key is and how it is refused); [`file`]: experiment files as read and written;
+//! - [`plan`]: a request checked into a [`plan::Plan`] of [`plan::Job`]s;
 //! - [`problem_file`]: a `[problem]` table of the user's, simulated by their workers;
 //! - [`paper`]: the paper's experiments (Sections 4 and 5) as [`experiment::Experiment`]s;
 //! - [`experiment`]: the runner, in this process or through a worker fleet;
@@ -11,11 +12,14 @@
 #![warn(missing_docs)]
 
 pub mod checkpoints;
-pub mod config;
 pub mod experiment;
+pub mod file;
+pub mod keys;
 pub mod paper;
+pub mod plan;
 pub mod problem_file;
 pub mod progress;
 pub mod records;
+pub mod settings;
 pub mod summary;
 pub mod workers;

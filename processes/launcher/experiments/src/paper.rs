@@ -4,6 +4,7 @@
 //! `settings` and explained in docs/CHOICES.md.
 
 use crate::experiment::{Experiment, Instance};
+use crate::settings::{DEFAULT_IN_FLIGHT, DEFAULT_RUNS, ExperimentFile, Memory};
 use crate::summary::{RunResult, mean};
 use acps_learner::creps::{CRepsConfig, MemoryConfig};
 use acps_learner::selection::{
@@ -22,161 +23,113 @@ use acps_shared::{Environment, Problem};
 use serde_json::json;
 use std::collections::BTreeMap;
 
-/// Choices shared by every experiment command.
-#[derive(Debug, Clone)]
-pub struct Options {
-    /// Runs per method (default: the paper's 20).
-    pub runs: usize,
-    /// Override of the experiment's number of training episodes.
-    pub episodes: Option<u64>,
-    /// Seed of run 0.
-    pub seed: u64,
-    /// Training tasks in flight.
-    pub in_flight: usize,
-    /// Only these methods (default: the methods of the paper's figure).
-    pub methods: Option<Vec<Method>>,
-    /// Settings the paper does not state, overriding the experiment's defaults.
-    pub overrides: Overrides,
-}
-
-impl Default for Options {
-    fn default() -> Self {
-        Self {
-            runs: 20,
-            episodes: None,
-            seed: 0,
-            in_flight: 1,
-            methods: None,
-            overrides: Overrides::default(),
-        }
-    }
-}
-
-/// Overrides of settings the paper leaves open or that are worth varying.
-#[derive(Debug, Clone, Default)]
-pub struct Overrides {
-    /// Number of low-level parameters n_theta of the contextual function (must exceed n_s).
-    pub n_theta: Option<usize>,
-    /// Baseline of a context's first visit.
-    pub first_visit: Option<FirstVisit>,
-    /// True: the paper's Section 5.2 per-task memory of the best N/K rollouts instead of the
-    /// sliding window of the last N.
-    pub best_per_task: Option<bool>,
-    /// Initial covariance Sigma_0 = initial_sigma I.
-    pub initial_sigma: Option<f64>,
-    /// D-UCB padding strength xi.
-    pub xi: Option<f64>,
-    /// C-REPS epsilon.
-    pub epsilon: Option<f64>,
-    /// Section 4 model: fixed learning factors instead of a random permutation per run.
-    pub learning_factors: Option<[f64; CONTEXTS]>,
-    /// D-UCB methods and absolute-progress: retire solved contexts ([`RetireConfig::default`]).
-    pub retire: Option<bool>,
-    /// absolute-progress and alp-gmm: share of uniform choices.
-    pub random_share: Option<f64>,
-    /// absolute-progress: rate of the fast moving average of a context's return.
-    pub ema_fast: Option<f64>,
-    /// absolute-progress: rate of the slow moving average.
-    pub ema_slow: Option<f64>,
-    /// alp-gmm: contexts between fits, and points per fit.
-    pub fit_rate: Option<usize>,
-    /// alp-gmm: largest number of components.
-    pub max_components: Option<usize>,
-    /// alp-gmm: snap its contexts to the training contexts.
-    pub snap: Option<bool>,
-    /// self-paced: alpha KL(q || target) as a share of the returns' standard deviation.
-    pub zeta: Option<f64>,
-    /// self-paced: C-REPS updates before the pull towards the target.
-    pub alpha_offset: Option<usize>,
-}
-
 /// The learning factors of the paper's Fig. 3 (context 3 learns fastest, its neighbour 4 hardly
 /// at all), as read off the figure; they equal numpy's `RandomState(0).permutation` of
 /// {0.1^2, ..., 1.0^2}.
 pub const FIG3_LEARNING_FACTORS: [f64; CONTEXTS] = [0.09, 0.81, 0.25, 1.0, 0.04, 0.49, 0.64, 0.16, 0.01, 0.36];
 
-impl Options {
-    pub(crate) fn first_visit(&self) -> FirstVisit {
-        self.overrides.first_visit.unwrap_or(FirstVisit::InitialReturn)
-    }
+/// The baseline of a context's first visit.
+pub(crate) fn first_visit(s: &ExperimentFile) -> FirstVisit {
+    s.first_visit.map_or(FirstVisit::InitialReturn, FirstVisit::from)
+}
 
-    /// Retirement of solved contexts, when asked for.
-    fn retire(&self) -> Option<RetireConfig> {
-        (self.overrides.retire == Some(true)).then(RetireConfig::default)
-    }
+/// Retirement of solved contexts, when asked for.
+fn retire(s: &ExperimentFile) -> Option<RetireConfig> {
+    (s.retire == Some(true)).then(RetireConfig::default)
+}
 
-    /// The selected methods (else `defaults`), the D-UCB ones with `ducb(method)` and this
-    /// run's first-visit rule, every one with this run's settings of the teachers beyond the
-    /// paper.
-    pub(crate) fn methods(&self, defaults: &[Method], ducb: impl Fn(Method) -> DUcbConfig) -> Vec<SelectorConfig> {
-        let methods = self.methods.clone().unwrap_or_else(|| defaults.to_vec());
-        let o = &self.overrides;
-        methods
-            .into_iter()
-            .map(|method| match SelectorConfig::from(method) {
-                SelectorConfig::Bandit(bandit) => SelectorConfig::Bandit(BanditConfig {
-                    ducb: ducb(method),
-                    first_visit: self.first_visit(),
-                    retire: self.retire(),
-                    ..bandit
-                }),
-                SelectorConfig::AbsoluteProgress(defaults) => {
-                    SelectorConfig::AbsoluteProgress(AbsoluteProgressConfig {
-                        rates: EmaRates {
-                            fast: o.ema_fast.unwrap_or(defaults.rates.fast),
-                            slow: o.ema_slow.unwrap_or(defaults.rates.slow),
-                        },
-                        random_share: o.random_share.unwrap_or(defaults.random_share),
-                        retire: self.retire(),
-                    })
-                }
-                SelectorConfig::AlpGmm { config: defaults, snap } => SelectorConfig::AlpGmm {
-                    config: AlpGmmConfig {
-                        fit_rate: o.fit_rate.unwrap_or(defaults.fit_rate),
-                        max_components: o.max_components.unwrap_or(defaults.max_components),
-                        random_share: o.random_share.unwrap_or(defaults.random_share),
-                    },
-                    snap: o.snap.unwrap_or(snap),
+/// `preset`'s D-UCB with the run's gamma, xi and B.
+pub(crate) fn ducb(preset: DUcbConfig, s: &ExperimentFile) -> DUcbConfig {
+    DUcbConfig {
+        gamma: s.gamma.unwrap_or(preset.gamma),
+        xi: s.xi.unwrap_or(preset.xi),
+        b: s.b.unwrap_or(preset.b),
+    }
+}
+
+/// The learner of an experiment whose C-REPS is `creps`: the run's seed, episodes (else
+/// `episodes`), window and evaluation interval (else `eval_every`).
+pub(crate) fn learner(s: &ExperimentFile, episodes: u64, eval_every: u64, creps: Option<CRepsConfig>) -> LearnerConfig {
+    LearnerConfig {
+        seed: s.seed.unwrap_or(0),
+        episodes: s.episodes.unwrap_or(episodes),
+        in_flight: s.in_flight.unwrap_or(DEFAULT_IN_FLIGHT),
+        eval_every: s.eval_every.unwrap_or(eval_every),
+        creps,
+    }
+}
+
+/// The selected methods (else `defaults`), the D-UCB ones with `ducb(method)` and this run's
+/// first-visit rule, every one with this run's settings of the teachers beyond the paper.
+pub(crate) fn methods(
+    s: &ExperimentFile,
+    defaults: &[Method],
+    ducb: impl Fn(Method) -> DUcbConfig,
+) -> Vec<SelectorConfig> {
+    let methods = s.methods.clone().unwrap_or_else(|| defaults.to_vec());
+    methods
+        .into_iter()
+        .map(|method| match SelectorConfig::from(method) {
+            SelectorConfig::Bandit(bandit) => SelectorConfig::Bandit(BanditConfig {
+                ducb: ducb(method),
+                first_visit: first_visit(s),
+                retire: retire(s),
+                ..bandit
+            }),
+            SelectorConfig::AbsoluteProgress(defaults) => SelectorConfig::AbsoluteProgress(AbsoluteProgressConfig {
+                rates: EmaRates {
+                    fast: s.ema_fast.unwrap_or(defaults.rates.fast),
+                    slow: s.ema_slow.unwrap_or(defaults.rates.slow),
                 },
-                SelectorConfig::SelfPaced(defaults) => SelectorConfig::SelfPaced(SelfPacedConfig {
-                    zeta: o.zeta.unwrap_or(defaults.zeta),
-                    offset: o.alpha_offset.unwrap_or(defaults.offset),
-                    ..defaults
-                }),
-                other => other,
-            })
-            .collect()
-    }
+                random_share: s.random_share.unwrap_or(defaults.random_share),
+                retire: retire(s),
+            }),
+            SelectorConfig::AlpGmm { config: defaults, snap } => SelectorConfig::AlpGmm {
+                config: AlpGmmConfig {
+                    fit_rate: s.fit_rate.unwrap_or(defaults.fit_rate),
+                    max_components: s.max_components.unwrap_or(defaults.max_components),
+                    random_share: s.random_share.unwrap_or(defaults.random_share),
+                },
+                snap: s.snap.unwrap_or(snap),
+            },
+            SelectorConfig::SelfPaced(defaults) => SelectorConfig::SelfPaced(SelfPacedConfig {
+                zeta: s.zeta.unwrap_or(defaults.zeta),
+                offset: s.alpha_offset.unwrap_or(defaults.offset),
+                ..defaults
+            }),
+            other => other,
+        })
+        .collect()
+}
 
-    /// `settings` with the settings of the teachers beyond the paper: `retire` always (null
-    /// when off), `absolute_progress`, `alp_gmm` and `self_paced` when `methods` has them.
-    pub(crate) fn with_teachers(
-        &self,
-        mut settings: serde_json::Value,
-        methods: &[SelectorConfig],
-    ) -> serde_json::Value {
-        let map = settings
-            .as_object_mut()
-            .expect("an experiment's settings are an object");
-        map.insert("retire".into(), json!(self.retire()));
-        for method in methods {
-            match method {
-                SelectorConfig::AbsoluteProgress(config) => {
-                    map.insert("absolute_progress".into(), json!(config));
-                }
-                SelectorConfig::AlpGmm { config, snap } => {
-                    let mut recorded = json!(config);
-                    recorded["snap"] = json!(snap);
-                    map.insert("alp_gmm".into(), recorded);
-                }
-                SelectorConfig::SelfPaced(config) => {
-                    map.insert("self_paced".into(), json!(config));
-                }
-                _ => {}
+/// `settings` with the settings of the teachers beyond the paper: `retire` always (null when
+/// off), `absolute_progress`, `alp_gmm` and `self_paced` when `methods` has them.
+pub(crate) fn with_teachers(
+    s: &ExperimentFile,
+    mut settings: serde_json::Value,
+    methods: &[SelectorConfig],
+) -> serde_json::Value {
+    let map = settings
+        .as_object_mut()
+        .expect("an experiment's settings are an object");
+    map.insert("retire".into(), json!(retire(s)));
+    for method in methods {
+        match method {
+            SelectorConfig::AbsoluteProgress(config) => {
+                map.insert("absolute_progress".into(), json!(config));
             }
+            SelectorConfig::AlpGmm { config, snap } => {
+                let mut recorded = json!(config);
+                recorded["snap"] = json!(snap);
+                map.insert("alp_gmm".into(), recorded);
+            }
+            SelectorConfig::SelfPaced(config) => {
+                map.insert("self_paced".into(), json!(config));
+            }
+            _ => {}
         }
-        settings
     }
+    settings
 }
 
 /// A panel of Fig. 2: its noise levels.
@@ -193,7 +146,7 @@ pub fn toy_panel(panel: char) -> Option<LearningModelConfig> {
 
 /// Section 4, one panel of Fig. 2: D-UCB with gamma 0.95, xi 1e-8, B = 1 for best reward and
 /// diversity and 0.25 for the progress heuristics; SAGG-RIAC with split threshold 8, window 10.
-pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
+pub fn toy(model: LearningModelConfig, s: &ExperimentFile) -> Experiment {
     let defaults = [
         Method::RoundRobin,
         Method::BestReward,
@@ -202,41 +155,35 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
         Method::MonotonicProgress,
         Method::SaggRiac,
     ];
-    let xi = options.overrides.xi.unwrap_or(1e-8);
-    let b = |method| {
-        if matches!(method, Method::BestReward | Method::Diversity) {
-            1.0
-        } else {
-            0.25
-        }
+    let b = |method| match s.b {
+        Some(b) => b,
+        None if matches!(method, Method::BestReward | Method::Diversity) => 1.0,
+        None => 0.25,
     };
-    let episodes = options.episodes.unwrap_or(1000);
-    let learning_factors = options.overrides.learning_factors;
-    let methods = options.methods(&defaults, |method| DUcbConfig {
+    let preset = |method| DUcbConfig {
         gamma: 0.95,
-        xi,
+        xi: 1e-8,
         b: b(method),
-    });
+    };
+    let learner = learner(s, 1000, 10, None);
+    let episodes = learner.episodes;
+    let learning_factors = (s.fig3_learning_factors == Some(true)).then_some(FIG3_LEARNING_FACTORS);
+    let methods = methods(s, &defaults, |method| ducb(preset(method), s));
+    let recorded = ducb(preset(Method::BestReward), s);
     let settings = json!({
         "model": { "sigma_r": model.sigma_r, "sigma_b": model.sigma_b, "contexts": CONTEXTS, "learning_factors": learning_factors.map_or("random permutation per run".to_string(), |w| format!("{w:?}")) },
-        "ducb": { "gamma": 0.95, "xi": xi, "b_best_reward_diversity": 1.0, "b_progress": 0.25 },
-        "first_visit": options.first_visit(),
+        "ducb": { "gamma": recorded.gamma, "xi": recorded.xi, "b_best_reward_diversity": b(Method::BestReward), "b_progress": b(Method::MonotonicProgress) },
+        "first_visit": first_visit(s),
         "sagg_riac": SaggRiacConfig::default(),
-        "eval_every": 10,
+        "eval_every": learner.eval_every,
     });
     Experiment {
         name: "toy".into(),
-        settings: options.with_teachers(settings, &methods),
+        settings: with_teachers(s, settings, &methods),
         methods,
-        runs: options.runs,
-        base_seed: options.seed,
-        learner: LearnerConfig {
-            seed: options.seed,
-            episodes,
-            in_flight: options.in_flight,
-            eval_every: 10,
-            creps: None,
-        },
+        runs: s.runs.unwrap_or(DEFAULT_RUNS),
+        base_seed: learner.seed,
+        learner,
         instance: Box::new(move |seed| {
             let mut environment = LearningModel::new(model, seed).expect("panel noise levels are valid");
             if let Some(factors) = learning_factors {
@@ -263,7 +210,7 @@ pub fn toy(model: LearningModelConfig, options: &Options) -> Experiment {
 /// Section 5.1.2 (Fig. 4 and 5): 25 grid contexts, C-REPS epsilon 2.0 over the last 50 rollouts,
 /// an update every 25, quadratic features, W = 0 and Sigma = I; D-UCB B 1, gamma 0.99, xi 1e-8;
 /// evaluation every 50 rollouts on 100 test contexts.
-pub fn function(options: &Options) -> Experiment {
+pub fn function(s: &ExperimentFile) -> Experiment {
     let defaults = [
         Method::BestReward,
         Method::Diversity,
@@ -277,7 +224,7 @@ pub fn function(options: &Options) -> Experiment {
         episodes: 2500,
         eval_every: 50,
     };
-    function_experiment("function", 2, setting, &defaults, options, |function| {
+    function_experiment("function", 2, setting, &defaults, s, |function| {
         function
             .grid_problem()
             .expect("the function experiment's contexts are 2-D")
@@ -286,21 +233,14 @@ pub fn function(options: &Options) -> Experiment {
 
 /// Section 5.1.3 (Fig. 6) for `n_s` context dimensions: C-REPS epsilon 1.0 over the last
 /// 25 n_s^2 rollouts, an update every 13 n_s^2; D-UCB with monotonic progress.
-pub fn dims(n_s: usize, options: &Options) -> Experiment {
+pub fn dims(n_s: usize, s: &ExperimentFile) -> Experiment {
     let defaults = [Method::MonotonicProgress, Method::Random, Method::RandomContinuous];
     let setting = FunctionSetting {
         creps: CRepsConfig::paper_dims(n_s),
         episodes: 5000,
         eval_every: 100,
     };
-    function_experiment(
-        "dims",
-        n_s,
-        setting,
-        &defaults,
-        options,
-        ContextualFunction::shell_problem,
-    )
+    function_experiment("dims", n_s, setting, &defaults, s, ContextualFunction::shell_problem)
 }
 
 /// The C-REPS setting and schedule of a Section 5.1 experiment.
@@ -315,47 +255,40 @@ fn function_experiment(
     n_s: usize,
     setting: FunctionSetting,
     defaults: &[Method],
-    options: &Options,
+    s: &ExperimentFile,
     problem: impl Fn(&ContextualFunction) -> Problem + Send + Sync + 'static,
 ) -> Experiment {
-    let overrides = &options.overrides;
-    let n_theta = overrides.n_theta.unwrap_or(DEFAULT_N_THETA);
-    let n_tasks = 25;
-    let memory = match setting.creps.memory.clone() {
-        // The window of N as the paper's Section 5.2 memory of the best N/K per task.
-        MemoryConfig::SlidingWindow { capacity } if overrides.best_per_task == Some(true) => {
-            MemoryConfig::best_per_task(capacity, n_tasks)
-        }
-        memory => memory,
+    let n_theta = s.n_theta.unwrap_or(DEFAULT_N_THETA);
+    let capacity = match setting.creps.memory {
+        MemoryConfig::SlidingWindow { capacity } => capacity,
+        MemoryConfig::BestPerTask { .. } => unreachable!("Section 5.1's memories are windows"),
     };
-    let creps = with_overrides(setting.creps, overrides, memory);
-    let ducb = DUcbConfig {
-        gamma: 0.99,
-        xi: overrides.xi.unwrap_or(1e-8),
-        b: 1.0,
-    };
+    let creps = creps(setting.creps, s, Memory::Window, capacity, 25);
+    let ducb = ducb(
+        DUcbConfig {
+            gamma: 0.99,
+            xi: 1e-8,
+            b: 1.0,
+        },
+        s,
+    );
+    let learner = learner(s, setting.episodes, setting.eval_every, Some(creps));
     let settings = json!({
         "n_s": n_s,
         "n_theta": n_theta,
-        "creps": creps_settings(&creps, "quadratic", "0"),
+        "creps": creps_settings(learner.creps.as_ref().expect("set above"), "quadratic", "0"),
         "ducb": ducb,
-        "first_visit": options.first_visit(),
-        "eval_every": setting.eval_every,
+        "first_visit": first_visit(s),
+        "eval_every": learner.eval_every,
     });
-    let methods = options.methods(defaults, |_| ducb.clone());
+    let methods = methods(s, defaults, |_| ducb.clone());
     Experiment {
         name: name.into(),
-        settings: options.with_teachers(settings, &methods),
+        settings: with_teachers(s, settings, &methods),
         methods,
-        runs: options.runs,
-        base_seed: options.seed,
-        learner: LearnerConfig {
-            seed: options.seed,
-            episodes: options.episodes.unwrap_or(setting.episodes),
-            in_flight: options.in_flight,
-            eval_every: setting.eval_every,
-            creps: Some(creps),
-        },
+        runs: s.runs.unwrap_or(DEFAULT_RUNS),
+        base_seed: learner.seed,
+        learner,
         instance: Box::new(move |seed| {
             let function = ContextualFunction::new(n_s, n_theta, seed).expect("the experiment's function is valid");
             stateless(problem(&function), Box::new(function))
@@ -389,12 +322,20 @@ fn stateless(problem: Problem, environment: Box<dyn Environment>) -> Instance {
     }
 }
 
-/// `preset` with the run's overrides of epsilon and Sigma_0, and `memory`.
-pub(crate) fn with_overrides(preset: CRepsConfig, overrides: &Overrides, memory: MemoryConfig) -> CRepsConfig {
+/// `preset` with the run's epsilon, Sigma_0, ridge, update interval and memory: its kind (else
+/// `memory`) of its size (else `size` rollouts; best-per-task keeps size/K of each of the
+/// `tasks` training contexts).
+pub(crate) fn creps(preset: CRepsConfig, s: &ExperimentFile, memory: Memory, size: usize, tasks: usize) -> CRepsConfig {
+    let size = s.memory_size.unwrap_or(size);
     CRepsConfig {
-        epsilon: overrides.epsilon.unwrap_or(preset.epsilon),
-        initial_sigma: overrides.initial_sigma.unwrap_or(preset.initial_sigma),
-        memory,
+        epsilon: s.epsilon.unwrap_or(preset.epsilon),
+        initial_sigma: s.initial_sigma.unwrap_or(preset.initial_sigma),
+        ridge: s.ridge.unwrap_or(preset.ridge),
+        update_every: s.update_every.unwrap_or(preset.update_every),
+        memory: match s.memory.unwrap_or(memory) {
+            Memory::Window => MemoryConfig::SlidingWindow { capacity: size },
+            Memory::BestPerTask => MemoryConfig::best_per_task(size, tasks),
+        },
         ..preset
     }
 }
@@ -402,23 +343,11 @@ pub(crate) fn with_overrides(preset: CRepsConfig, overrides: &Overrides, memory:
 /// Section 5.2.2's C-REPS for K tasks ([`CRepsConfig::paper_throwing`]: epsilon 0.5, an update
 /// every 50 trials on a memory of the best 300/K trials per task, polar-quadratic features,
 /// Sigma_0 = 0.02 I), W = 0 around theta_0.
-fn throwing_creps(tasks: usize, options: &Options) -> CRepsConfig {
-    let preset = CRepsConfig::paper_throwing(tasks);
-    let memory = if options.overrides.best_per_task == Some(false) {
-        MemoryConfig::SlidingWindow { capacity: 300 }
-    } else {
-        preset.memory.clone()
-    };
-    with_overrides(preset, &options.overrides, memory)
+fn throwing_creps(tasks: usize, s: &ExperimentFile) -> CRepsConfig {
+    creps(CRepsConfig::paper_throwing(tasks), s, Memory::BestPerTask, 300, tasks)
 }
 
-fn throwing_settings(
-    sim: Sim,
-    creps: &CRepsConfig,
-    ducb: &DUcbConfig,
-    options: &Options,
-    eval_every: u64,
-) -> serde_json::Value {
+fn throwing_settings(sim: Sim, learner: &LearnerConfig, ducb: &DUcbConfig, s: &ExperimentFile) -> serde_json::Value {
     json!({
         "sim": sim_name(sim),
         "rapier": (sim == Sim::Rapier).then(RapierConfig::default),
@@ -426,25 +355,28 @@ fn throwing_settings(
         "theta": "offset on theta_0 = (g1, g1dot, g2dot), 21 values",
         "theta0_landing": INITIAL_LANDING,
         "speed_limits": SpeedLimits::Ignore,
-        "creps": creps_settings(creps, "polar-quadratic", "theta_0 (offset 0)"),
+        "creps": creps_settings(learner.creps.as_ref().expect("the throws learn a policy"), "polar-quadratic", "theta_0 (offset 0)"),
         "ducb": ducb,
-        "first_visit": options.first_visit(),
-        "eval_every": eval_every,
+        "first_visit": first_visit(s),
+        "eval_every": learner.eval_every,
     })
 }
 
 /// Section 5.2.2's D-UCB: gamma 0.99, B 10,000, xi 1e-9.
-fn throwing_ducb(options: &Options) -> DUcbConfig {
-    DUcbConfig {
-        gamma: 0.99,
-        xi: options.overrides.xi.unwrap_or(1e-9),
-        b: 10_000.0,
-    }
+fn throwing_ducb(s: &ExperimentFile) -> DUcbConfig {
+    ducb(
+        DUcbConfig {
+            gamma: 0.99,
+            xi: 1e-9,
+            b: 10_000.0,
+        },
+        s,
+    )
 }
 
 /// Section 5.2.3, the grid problem (Fig. 8): 25 training targets, 16 test targets, 10,000
 /// episodes, D-UCB gamma 0.99, B 10,000, xi 1e-9; the summary names the best policy of all runs.
-pub fn grid(sim: Sim, options: &Options) -> Experiment {
+pub fn grid(sim: Sim, s: &ExperimentFile) -> Experiment {
     let defaults = [
         Method::BestReward,
         Method::Diversity,
@@ -453,23 +385,16 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
         Method::RoundRobin,
         Method::RandomContinuous,
     ];
-    let ducb = throwing_ducb(options);
-    let creps = throwing_creps(25, options);
-    let eval_every = 100;
-    let methods = options.methods(&defaults, |_| ducb.clone());
+    let ducb = throwing_ducb(s);
+    let learner = learner(s, 10_000, 100, Some(throwing_creps(25, s)));
+    let methods = methods(s, &defaults, |_| ducb.clone());
     Experiment {
         name: "grid".into(),
-        settings: options.with_teachers(throwing_settings(sim, &creps, &ducb, options, eval_every), &methods),
+        settings: with_teachers(s, throwing_settings(sim, &learner, &ducb, s), &methods),
         methods,
-        runs: options.runs,
-        base_seed: options.seed,
-        learner: LearnerConfig {
-            seed: options.seed,
-            episodes: options.episodes.unwrap_or(10_000),
-            in_flight: options.in_flight,
-            eval_every,
-            creps: Some(creps),
-        },
+        runs: s.runs.unwrap_or(DEFAULT_RUNS),
+        base_seed: learner.seed,
+        learner,
         instance: Box::new(move |_| {
             let environment = environment::grid(sim).expect("the shipped PA-10 throws");
             stateless(grid_problem(environment.spec()), Box::new(environment))
@@ -484,25 +409,18 @@ pub fn grid(sim: Sim, options: &Options) -> Experiment {
 
 /// Section 5.2.4, the dartboard problem (Fig. 10): 81 fields on a 1.4 m board centred on
 /// theta_0's landing point, 50,000 episodes, monotonic progress.
-pub fn dartboard(sim: Sim, options: &Options) -> Experiment {
-    let ducb = throwing_ducb(options);
-    let creps = throwing_creps(81, options);
-    let eval_every = 1000;
+pub fn dartboard(sim: Sim, s: &ExperimentFile) -> Experiment {
+    let ducb = throwing_ducb(s);
+    let learner = learner(s, 50_000, 1000, Some(throwing_creps(81, s)));
     let fields = environment::dartboard_fields();
-    let methods = options.methods(&[Method::MonotonicProgress], |_| ducb.clone());
+    let methods = methods(s, &[Method::MonotonicProgress], |_| ducb.clone());
     Experiment {
         name: "dartboard".into(),
-        settings: options.with_teachers(throwing_settings(sim, &creps, &ducb, options, eval_every), &methods),
+        settings: with_teachers(s, throwing_settings(sim, &learner, &ducb, s), &methods),
         methods,
-        runs: options.runs,
-        base_seed: options.seed,
-        learner: LearnerConfig {
-            seed: options.seed,
-            episodes: options.episodes.unwrap_or(50_000),
-            in_flight: options.in_flight,
-            eval_every,
-            creps: Some(creps),
-        },
+        runs: s.runs.unwrap_or(DEFAULT_RUNS),
+        base_seed: learner.seed,
+        learner,
         instance: Box::new(move |_| {
             let fields = environment::dartboard_fields();
             let environment = environment::dartboard(sim).expect("the shipped PA-10 throws");

@@ -2,20 +2,15 @@
 //! instead of naming one of the paper's. acps cannot simulate such a problem; `acps run` serves
 //! its tasks through the worker fleet to workers the user provides (README, "Your own problem").
 //!
-//! The table is checked here, key by key, with the accepted ranges of [`crate::config`]'s key
-//! table, before anything starts.
+//! The table is checked here, key by key, with the accepted ranges of its keys
+//! ([`PROBLEM_KEYS`]), before anything starts.
 
-use crate::config::{Invalid, out_of_range};
-use crate::experiment::{Experiment, Instance};
-use crate::paper::{self, Options};
+use crate::keys::{FILE, Invalid, Key, out_of_range};
 use crate::summary::UserProblem;
-use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
-use acps_learner::selection::DUcbConfig;
-use acps_learner::{LearnerConfig, Method};
+use acps_learner::creps::FeatureMap;
 use acps_shared::{ContextSpace, EnvironmentSpec, Problem, ScoreAggregate};
 use acps_wire::wire::{MAX_CONTEXT, MAX_THETA};
 use serde::{Deserialize, Serialize};
-use serde_json::json;
 
 /// Most points a context grid expands to.
 pub const MAX_GRID_POINTS: u64 = 100_000;
@@ -30,9 +25,68 @@ fn bounded(values: &[f64]) -> bool {
     values.iter().all(|x| x.abs() <= MAX_MAGNITUDE)
 }
 
-/// Evaluations of the greedy policy on the test contexts happen every this many training
-/// episodes (or once at the end of shorter runs), as in the paper's Section 5.1.2.
-const EVAL_EVERY: u64 = 50;
+/// What a list of contexts accepts.
+const CONTEXTS: &str = "a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box";
+/// What a context grid accepts.
+const GRID: &str = "a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: low <= high in -1e6..=1e6, points >= 1 per dimension and at most 100000 in all, inside the context box";
+
+/// A key of the `[problem]` table.
+const fn problem_key(name: &'static str, accepted: &'static str) -> Key {
+    Key {
+        name,
+        doc: "",
+        default: "",
+        accepted,
+        why: "",
+        applies: FILE,
+        methods: &[],
+    }
+}
+
+/// Every key of the `[problem]` table and of its `[problem.environment]`, as `problem.KEY`.
+pub const PROBLEM_KEYS: &[Key] = &[
+    problem_key(
+        "problem.name",
+        "1 to 32 characters of ASCII letters, digits, '-', '_' and '.' (default: the file's name without .toml)",
+    ),
+    problem_key("problem.training_contexts", CONTEXTS),
+    problem_key("problem.training_grid", GRID),
+    problem_key("problem.test_contexts", CONTEXTS),
+    problem_key("problem.test_grid", GRID),
+    problem_key(
+        "problem.context_low",
+        "a list of 1 to 8 numbers in -1e6..=1e6, one per context dimension (default: the lower corner of the contexts' bounding box)",
+    ),
+    problem_key(
+        "problem.context_high",
+        "a list of numbers in -1e6..=1e6, one per context dimension, each above context_low's (default: the upper corner of the contexts' bounding box)",
+    ),
+    problem_key(
+        "problem.theta0",
+        "a list of 1 to 64 numbers in -1e6..=1e6 (the initial parameters)",
+    ),
+    problem_key(
+        "problem.features",
+        "one of affine, quadratic, polar (2-D contexts only)",
+    ),
+    problem_key("problem.score", "one of sum, mean, log-mean"),
+    problem_key("problem.metric", "a text that is not blank"),
+    problem_key("problem.unit", "a text"),
+    problem_key("problem.lower_is_better", "true or false"),
+    problem_key(
+        "problem.environment",
+        "a table with name, settings and optionally parameters",
+    ),
+    problem_key(
+        "problem.environment.name",
+        "1 to 32 characters of ASCII letters, digits, '-', '_' and '.'",
+    ),
+    problem_key(
+        "problem.environment.settings",
+        "a text (its FNV-1a 64-bit hash is the environment's settings identity)",
+    ),
+    problem_key("problem.environment.parameters", "three integers in 0..=2^63-1"),
+];
 
 /// A `[problem]` table as written; checking it (in `Plan::new`) says which keys must be set.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -109,7 +163,8 @@ pub enum Features {
 }
 
 impl Features {
-    fn map(self) -> FeatureMap {
+    /// The feature map it names.
+    pub fn map(self) -> FeatureMap {
         match self {
             Self::Affine => FeatureMap::Affine,
             Self::Quadratic => FeatureMap::Quadratic,
@@ -142,8 +197,10 @@ pub struct CheckedProblem {
     pub resolved: ProblemFile,
     /// The problem.
     pub problem: Problem,
-    features: Features,
-    user: UserProblem,
+    /// The policy's context features.
+    pub features: Features,
+    /// How its scores read.
+    pub user: UserProblem,
 }
 
 /// The name of a context key and its points, once expanded.
@@ -403,64 +460,6 @@ impl ContextGrid {
                 .collect();
         }
         Some(points)
-    }
-}
-
-/// The experiment of a checked problem file: C-REPS with BOLeRo's defaults (an update every 25
-/// rollouts on the last 100, or the best 100/K per training context) and the file's features,
-/// D-UCB with [`DUcbConfig::default`] (docs/DUCB-PARAMETERS.md), monotonic progress against
-/// random selection by default. No environment: the user's workers perform every rollout.
-pub fn experiment(checked: &CheckedProblem, options: &Options) -> Experiment {
-    let overrides = &options.overrides;
-    let problem = checked.problem.clone();
-    let preset = CRepsConfig {
-        features: checked.features.map(),
-        ..CRepsConfig::default()
-    };
-    let memory = match overrides.best_per_task {
-        Some(true) => MemoryConfig::best_per_task(100, problem.training_contexts.len()),
-        _ => preset.memory.clone(),
-    };
-    let creps = paper::with_overrides(preset, overrides, memory);
-    let ducb = DUcbConfig {
-        xi: overrides.xi.unwrap_or(DUcbConfig::default().xi),
-        ..DUcbConfig::default()
-    };
-    let episodes = options.episodes.unwrap_or(LearnerConfig::default().episodes);
-    let eval_every = EVAL_EVERY.min(episodes);
-    let features = serde_json::to_value(checked.features).expect("a unit variant serialises");
-    let settings = json!({
-        "problem": checked.resolved,
-        "creps": paper::creps_settings(&creps, features.as_str().unwrap_or_default(), "theta0"),
-        "ducb": ducb,
-        "first_visit": options.first_visit(),
-        "eval_every": eval_every,
-    });
-    let methods = options.methods(&[Method::MonotonicProgress, Method::Random], |_| ducb.clone());
-    Experiment {
-        name: problem.name.clone(),
-        settings: options.with_teachers(settings, &methods),
-        methods,
-        runs: options.runs,
-        base_seed: options.seed,
-        learner: LearnerConfig {
-            seed: options.seed,
-            episodes,
-            in_flight: options.in_flight,
-            eval_every,
-            creps: Some(creps),
-        },
-        instance: Box::new(move |_| Instance {
-            problem: problem.clone(),
-            environment: None,
-            optimal_score: None,
-            keeps_state: false,
-        }),
-        selection_window: 250.min(episodes as usize),
-        detail: None,
-        best_policy: false,
-        user_problem: Some(checked.user.clone()),
-        continuous_contexts: true,
     }
 }
 

@@ -4,13 +4,14 @@
 use acps_experiments::experiment::{Instance, RunError};
 use acps_experiments::paper;
 use acps_experiments::progress::Progress;
+use acps_experiments::settings::ExperimentFile;
 use acps_models::contextual_function::ContextualFunction;
 use acps_shared::Environment;
 
 #[test]
 fn an_instance_whose_environment_is_not_its_problems_is_refused_in_process() {
-    let options = paper::Options {
-        runs: 1,
+    let options = ExperimentFile {
+        runs: Some(1),
         episodes: Some(10),
         ..Default::default()
     };
@@ -74,9 +75,9 @@ fn a_run_whose_every_rollout_of_a_kind_failed_is_refused() {
         ),
     ];
     for (kind, expected) in cases {
-        let options = paper::Options {
-            runs: 2,
-            seed: 3,
+        let options = ExperimentFile {
+            runs: Some(2),
+            seed: Some(3),
             episodes: Some(20),
             methods: Some(vec![acps_learner::Method::Random]),
             ..Default::default()
@@ -104,8 +105,8 @@ fn a_run_whose_every_rollout_of_a_kind_failed_is_refused() {
 
 #[test]
 fn a_method_the_environment_cannot_serve_is_refused_before_the_run() {
-    let options = paper::Options {
-        runs: 1,
+    let options = ExperimentFile {
+        runs: Some(1),
         episodes: Some(10),
         methods: Some(vec![acps_learner::Method::RandomContinuous]),
         ..Default::default()

@@ -2,7 +2,9 @@
 //! refused with file, line and accepted range, and a run's resolved file re-runs it bit for bit.
 
 use crate::{acps, temp_dir};
-use acps_experiments::config::{ExperimentFile, ExperimentName, LoadedFile, Plan, SimName};
+use acps_experiments::file::LoadedFile;
+use acps_experiments::plan::Plan;
+use acps_experiments::settings::{ExperimentFile, ExperimentName, SimName};
 use std::path::{Path, PathBuf};
 
 fn succeeds(args: &[&str]) {

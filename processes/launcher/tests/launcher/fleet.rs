@@ -1,7 +1,8 @@
 //! The worker fleet end to end: real learner and worker processes over iceoryx2.
 
 use crate::{assert_clean, run_name, succeeded, temp_dir, watched};
-use acps_experiments::paper::{self, Options, Sim};
+use acps_experiments::paper::{self, Sim};
+use acps_experiments::settings::ExperimentFile;
 use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetJob, FleetProgress, Liveness};
 use acps_learner::{Method, run_in_process};
@@ -790,12 +791,12 @@ fn test_fleet(run: &RunName, start_with: usize) -> Fleet {
 /// A short analytic grid experiment (2 runs x 40 episodes, P = `in_flight`) with
 /// [`served_and_in_process`]'s jobs and episodes.
 fn short_grid(in_flight: usize) -> (acps_experiments::experiment::Experiment, Vec<FleetJob>, Vec<String>) {
-    let options = Options {
-        runs: 2,
+    let options = ExperimentFile {
+        runs: Some(2),
         episodes: Some(40),
-        in_flight,
+        in_flight: Some(in_flight),
         methods: Some(vec![Method::MonotonicProgress]),
-        ..Options::default()
+        ..Default::default()
     };
     let experiment = paper::grid(Sim::Analytic, &options);
     let (jobs, reference) = served_and_in_process(&experiment);
@@ -1247,12 +1248,12 @@ impl EnvironmentFactory for Liar {
 fn workers_of_other_environments_are_refused_and_the_result_stays_the_in_process_one() {
     // Two runs of the function experiment: two problem instances (seeds 0 and 1), so two
     // environments.
-    let options = Options {
-        runs: 2,
+    let options = ExperimentFile {
+        runs: Some(2),
         episodes: Some(100),
-        in_flight: 2,
+        in_flight: Some(2),
         methods: Some(vec![Method::MonotonicProgress]),
-        ..Options::default()
+        ..Default::default()
     };
     let (mut jobs, reference) = served_and_in_process(&paper::function(&options));
     let function = |seed| ContextualFunction::new(2, DEFAULT_N_THETA, seed).unwrap();
@@ -1318,11 +1319,11 @@ fn workers_of_other_environments_are_refused_and_the_result_stays_the_in_process
 fn a_fleet_job_with_contexts_larger_than_the_wire_carries_is_refused_before_serving() {
     // Section 5.1.3's problem in 9 dimensions: it runs in-process, and its contexts are one value
     // more than a task on the wire carries.
-    let options = Options {
-        runs: 1,
+    let options = ExperimentFile {
+        runs: Some(1),
         episodes: Some(20),
         methods: Some(vec![Method::Random]),
-        ..Options::default()
+        ..Default::default()
     };
     let experiment = paper::dims(9, &options);
     let summary = experiment

@@ -2,7 +2,9 @@
 //! fleet to workers the user provides (here processes/worker/examples/bowl.rs).
 
 use crate::{TempDir, acps, assert_clean, run_name, succeeded, temp_dir, watched};
-use acps_experiments::config::{ExperimentFile, LoadedFile, Plan};
+use acps_experiments::file::LoadedFile;
+use acps_experiments::plan::Plan;
+use acps_experiments::settings::ExperimentFile;
 use acps_shared::EnvironmentSpec;
 use acps_wire::ipc;
 use std::path::{Path, PathBuf};
