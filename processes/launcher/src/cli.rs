@@ -1,6 +1,7 @@
 //! The command line's arguments: what `acps --help` shows; `crate::commands` carries a command
 //! out.
 
+use acps_experiments::run_dir::DEFAULT_CHECKPOINT_EVERY;
 use acps_experiments::settings::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
 use acps_fleet::processes::MAX_NICE;
 use acps_wire::ipc::{MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS};
@@ -413,8 +414,6 @@ fn in_flight_per_worker() -> impl Fn(&str) -> Result<usize, String> + Clone + Se
 
 /// Default of `acps run --worker-in-flight`.
 pub(crate) const DEFAULT_WORKER_IN_FLIGHT: usize = 4;
-/// Default of `--checkpoint-every`.
-pub(crate) const DEFAULT_CHECKPOINT_EVERY: u64 = 10;
 
 impl Cli {
     /// How many -v were given.

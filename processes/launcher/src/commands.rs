@@ -5,9 +5,9 @@ use crate::cli::{
     BenchArgs, Command, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs,
 };
 use acps_experiments::checkpoints::Checkpoints;
-use acps_experiments::experiment::Experiment;
 use acps_experiments::file::LoadedFile;
-use acps_experiments::plan::{self, Job, Plan};
+use acps_experiments::plan::{Job, Plan};
+use acps_experiments::run_dir::{self, RunDir};
 use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetBuilder, FleetProgress};
@@ -16,7 +16,7 @@ use acps_wire::ipc::{self, RunName};
 use acps_worker::{WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -139,10 +139,9 @@ fn interrupted(error: &anyhow::Error) -> bool {
     })
 }
 
-/// The run's output directory and the experiments `args` ask for, checked (their methods,
-/// memory and what they resume from), with their own directories (the run's, or one per panel
-/// in it) and resolved files; `None` when `--save-config` wrote the resolved file instead.
-fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<(PathBuf, Vec<Job>)>> {
+/// The run directory `args` ask for, checked (its settings, memory, methods and what it resumes
+/// from); `None` when `--save-config` wrote the resolved file instead.
+fn run_dir(args: &ExperimentArgs) -> anyhow::Result<Option<RunDir>> {
     let file = args.config.as_deref().map(LoadedFile::read).transpose()?;
     let plan = Plan::new(file.as_ref(), &args.settings)?;
     if let Some(path) = &args.save_config {
@@ -150,110 +149,39 @@ fn jobs(args: &ExperimentArgs) -> anyhow::Result<Option<(PathBuf, Vec<Job>)>> {
         println!("{} -> {}", plan.name(), path.display());
         return Ok(None);
     }
-    let out = match (&args.resume, &args.out) {
-        (Some(resume), Some(out)) if resume != out => {
-            bail!(
-                "--resume {} and --out {} name different directories; --resume DIR continues the run whose output directory is DIR",
-                resume.display(),
-                out.display()
-            )
-        }
-        (Some(dir), _) | (None, Some(dir)) => dir.clone(),
-        (None, None) => plan::default_out(args.config.as_deref(), plan.name()),
+    let out = args.resume.clone().or_else(|| args.out.clone());
+    let run = RunDir::of(&plan, args.config.as_deref(), out)?;
+    // --resume DIR --out OTHER: the run's directory is OTHER, which DIR must be.
+    let run = match (&args.resume, &args.out) {
+        (Some(resume), Some(out)) if resume != out => RunDir {
+            out: out.clone(),
+            ..run
+        },
+        _ => run,
     };
-    let jobs = plan.jobs(&out);
-    plan::check_memory(&jobs)?;
-    for job in &jobs {
-        job.experiment.check_methods()?;
-    }
-    check_resumable(args, &jobs)?;
-    Ok(Some((out, jobs)))
+    Ok(Some(run.resuming(args.resume.as_deref(), args.checkpoint_every)?))
 }
 
-/// The checkpoints of the experiment that writes into `dir`, if it keeps or resumes any.
-fn checkpoints(args: &ExperimentArgs, dir: &Path) -> Option<Checkpoints> {
-    (args.checkpoint_every > 0 || args.resume.is_some()).then(|| Checkpoints {
-        dir: dir.join("checkpoints"),
-        every: args.checkpoint_every,
-        resume: args.resume.is_some(),
-    })
-}
-
-/// Refuse to resume where no run ever wrote checkpoints (a mistyped directory, or a run started
-/// with --checkpoint-every 0).
-fn check_resumable(args: &ExperimentArgs, jobs: &[Job]) -> anyhow::Result<()> {
-    let Some(resume) = &args.resume else {
-        return Ok(());
-    };
-    if !jobs.iter().any(|job| job.dir.join("checkpoints").is_dir()) {
-        bail!(
-            "nothing to resume in {}: it has no checkpoints directory (was the run started with this --out and --checkpoint-every > 0?)",
-            resume.display()
-        );
-    }
-    Ok(())
-}
-
-/// Make every job's output directory before anything is computed or started, and write its
-/// resolved experiment file there: an output that cannot be written fails now, not after the
-/// run. Returns the directories it created, the outermost of each path, for a run refused
-/// before it started to take back.
-fn prepare_outputs(jobs: &[Job]) -> anyhow::Result<Vec<PathBuf>> {
-    let mut created = Vec::new();
-    for job in jobs {
-        let outermost = job
-            .dir
-            .ancestors()
-            .take_while(|d| !d.as_os_str().is_empty() && !d.exists())
-            .last();
-        created.extend(outermost.map(Path::to_path_buf));
-        output_dir(&job.dir)?;
-        job.config.write_resolved(&job.dir)?;
-    }
-    Ok(created)
-}
-
-/// Create the output directory `dir` and make sure files can be written into it.
-fn output_dir(dir: &Path) -> anyhow::Result<()> {
-    if dir.exists() && !dir.is_dir() {
-        bail!(
-            "output directory {} exists and is not a directory: choose another --out",
-            dir.display()
-        );
-    }
-    let fail =
-        |what: &str, e: std::io::Error| anyhow::anyhow!("output directory {}: cannot {what}: {e}", dir.display());
-    std::fs::create_dir_all(dir).map_err(|e| fail("create it", e))?;
-    let probe = dir.join(format!(".acps-probe-{}", std::process::id()));
-    std::fs::write(&probe, b"").map_err(|e| fail("write into it", e))?;
-    std::fs::remove_file(&probe).map_err(|e| fail("write into it", e))
+/// The pictures of a run directory.
+fn pictures(summary: &Summary, dir: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    acps_reports::plot::write_all(summary, dir)
 }
 
 /// Set by the Ctrl-C handler of `acps experiment`.
 static STOP: AtomicBool = AtomicBool::new(false);
 
 pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
-    let Some((out, jobs)) = jobs(&args)? else {
+    let Some(run) = run_dir(&args)? else {
         return Ok(());
     };
-    for job in &jobs {
+    for job in &run.jobs {
         job.experiment.check_in_process()?;
     }
-    prepare_outputs(&jobs)?;
+    run.prepare()?;
     ctrlc::set_handler(|| STOP.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
-    for Job { experiment, dir, .. } in jobs {
-        let progress = experiment.progress(args.quiet);
-        let checkpoints = checkpoints(&args, &dir);
-        let outcome = experiment.run_until(&progress, checkpoints.as_ref(), &STOP);
-        match &outcome {
-            Ok(summary) => progress.finish(summary),
-            Err(_) => progress.abandon(),
-        }
-        let summary = outcome
-            .with_context(|| format!("experiment {}", experiment.name))
-            .map_err(|e| stopped(e, checkpoints.as_ref(), &out, false))?;
-        write(&experiment, &summary, &dir, args.quiet)?;
-    }
+    let checkpoints = run.checkpoints(&run.out);
+    run.in_process(args.quiet, &STOP, &pictures)
+        .map_err(|e| stopped(e, checkpoints.as_ref(), &run.out, false))?;
     Ok(())
 }
 
@@ -266,9 +194,10 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         RunName::new(name).with_context(|| format!("--run {name}"))?;
     }
     let net = net_options(&args.net, &args.listen, &[])?;
-    let Some((out, jobs)) = jobs(&args.experiment)? else {
+    let Some(planned) = run_dir(&args.experiment)? else {
         return Ok(());
     };
+    let (out, jobs) = (&planned.out, &planned.jobs);
     args.started.check()?;
     if let Some(job) = jobs.iter().find(|job| job.experiment.user_problem.is_some())
         && args.started.worker_command.is_none()
@@ -279,7 +208,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             job.experiment.name
         );
     }
-    let created = prepare_outputs(&jobs)?;
+    let created = planned.prepare()?;
     let name = args.run.clone().unwrap_or_else(|| {
         // Run names take letters, digits and '-' only; problem names also '_' and '.'.
         let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
@@ -336,7 +265,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             }
         }
         let progress = experiment.progress(args.experiment.quiet);
-        let checkpoints = checkpoints(&args.experiment, dir);
+        let checkpoints = planned.checkpoints(dir);
         let remote = listener.as_mut().map(|l| l as &mut dyn acps_fleet::Remote);
         let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), remote, |p| {
             progress.show(&p.learning, p.outcomes, Some(p.workers));
@@ -347,7 +276,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         }
         let (summary, report) = outcome
             .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
-            .map_err(|e| stopped(e, checkpoints.as_ref(), &out, true))?;
+            .map_err(|e| stopped(e, checkpoints.as_ref(), out, true))?;
         if !args.experiment.quiet {
             let relays = if listener.is_some() {
                 " and relays of other hosts"
@@ -359,13 +288,13 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
                 experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
             );
         }
-        write(experiment, &summary, dir, args.experiment.quiet)?;
+        run_dir::write(experiment, &summary, dir, args.experiment.quiet, &pictures)?;
     }
     Ok(())
 }
 
 pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
-    output_dir(&args.out)?;
+    run_dir::output_dir(&args.out)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let options = crate::bench::BenchOptions {
         envs: args.env,
@@ -622,24 +551,6 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
         let first = replay.throws.first().context("--render: there is no throw to draw")?;
         evaluate::render(&saved, first, &file)?;
         println!("-> {}", file.display());
-    }
-    Ok(())
-}
-
-/// Write the run directory's results; its config.toml was written before the run.
-fn write(experiment: &Experiment, summary: &Summary, dir: &Path, quiet: bool) -> anyhow::Result<()> {
-    summary
-        .write(dir)
-        .with_context(|| format!("writing {}", dir.join("summary.json").display()))?;
-    acps_experiments::records::write(summary, dir)?;
-    acps_reports::plot::write_all(summary, dir).map_err(|e| anyhow::anyhow!("plotting into {}: {e}", dir.display()))?;
-    if !quiet {
-        println!("{} -> {}", experiment.name, dir.join("summary.json").display());
-        let score = experiment.score_format();
-        for (method, result) in &summary.methods {
-            let line = score.final_line(result.final_mean, result.final_sem, summary.runs);
-            println!("  {method:>20}: {line}");
-        }
     }
     Ok(())
 }

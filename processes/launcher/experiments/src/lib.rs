@@ -8,6 +8,7 @@
 //! - [`experiment`]: the runner, in this process or through a worker fleet;
 //! - [`checkpoints`]: the learners' checkpoints and resume;
 //! - [`summary`] and [`records`]: `summary.json` and the run directory's tables and policies;
+//! - [`run_dir`]: a run directory from an experiment file: plan, prepare, run, write;
 //! - [`progress`]: the progress line; [`workers`]: the project's models as worker environments.
 #![warn(missing_docs)]
 
@@ -20,6 +21,7 @@ pub mod plan;
 pub mod problem_file;
 pub mod progress;
 pub mod records;
+pub mod run_dir;
 pub mod settings;
 pub mod summary;
 pub mod workers;

@@ -1,0 +1,280 @@
+//! A run directory from an experiment file, without the command line: [`RunDir::plan`] checks
+//! the request (its settings, memory, methods and what it resumes from), [`RunDir::prepare`]
+//! makes the output directories and writes each resolved `config.toml` before anything runs, and
+//! [`RunDir::in_process`] runs every experiment and writes `summary.json`, the tables, the
+//! policies and (through the caller's [`Pictures`]) the pictures. `acps experiment` is this;
+//! `acps run` drives the same jobs through a worker fleet.
+//!
+//! ```no_run
+//! use acps_experiments::run_dir::RunDir;
+//! use acps_experiments::settings::ExperimentFile;
+//! use std::path::Path;
+//! use std::sync::atomic::AtomicBool;
+//!
+//! let settings = ExperimentFile { runs: Some(2), ..Default::default() };
+//! let run = RunDir::plan(Some(Path::new("experiments/function-fig4.toml")), &settings, Some("runs/mine".into()))?;
+//! run.prepare()?;
+//! let summaries = run.in_process(true, &AtomicBool::new(false), &|_, _| Ok(()))?;
+//! println!("{}", summaries[0].methods["random"].final_mean.unwrap());
+//! # Ok::<(), acps_experiments::run_dir::RunDirError>(())
+//! ```
+
+use crate::checkpoints::Checkpoints;
+use crate::experiment::{Experiment, RunError};
+use crate::file::LoadedFile;
+use crate::keys::ConfigError;
+use crate::plan::{self, Job, Plan};
+use crate::records::{self, RecordsError};
+use crate::settings::ExperimentFile;
+use crate::summary::Summary;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+/// Draws a summary's pictures into its run directory (acps-reports' `plot::write_all`, or
+/// nothing).
+pub type Pictures<'a> = &'a dyn Fn(&Summary, &Path) -> Result<(), Box<dyn std::error::Error>>;
+
+/// A run directory that could not be planned, prepared, run or written.
+#[derive(Debug, thiserror::Error)]
+pub enum RunDirError {
+    /// The experiment file or settings were refused.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// An experiment could not start or complete; `experiment` names it.
+    #[error("experiment {experiment}")]
+    Run {
+        /// Its name.
+        experiment: String,
+        /// Why.
+        #[source]
+        source: RunError,
+    },
+    /// A method the experiment's environment cannot serve, or a problem only the user's
+    /// workers simulate, asked to run in this process.
+    #[error(transparent)]
+    Refused(RunError),
+    /// The tables or policies could not be written.
+    #[error(transparent)]
+    Records(#[from] RecordsError),
+    /// `--resume` and `--out` name different directories.
+    #[error(
+        "--resume {} and --out {} name different directories; --resume DIR continues the run whose output directory is DIR",
+        resume.display(),
+        out.display()
+    )]
+    TwoDirectories {
+        /// The directory to resume.
+        resume: PathBuf,
+        /// The output directory.
+        out: PathBuf,
+    },
+    /// Nothing to resume: no job's directory has checkpoints.
+    #[error(
+        "nothing to resume in {}: it has no checkpoints directory (was the run started with this --out and --checkpoint-every > 0?)",
+        dir.display()
+    )]
+    NothingToResume {
+        /// The run directory.
+        dir: PathBuf,
+    },
+    /// The output path exists and is not a directory.
+    #[error("output directory {} exists and is not a directory: choose another --out", dir.display())]
+    NotADirectory {
+        /// The path.
+        dir: PathBuf,
+    },
+    /// The output directory cannot be made or written into, or a file in it written.
+    #[error("output directory {}: cannot {action}", dir.display())]
+    Output {
+        /// The directory.
+        dir: PathBuf,
+        /// "create it" or "write into it".
+        action: &'static str,
+        /// The system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// `summary.json` could not be written.
+    #[error("writing {}", path.display())]
+    Summary {
+        /// The file.
+        path: PathBuf,
+        /// The system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The pictures could not be drawn.
+    #[error("plotting into {}: {message}", dir.display())]
+    Pictures {
+        /// The run directory.
+        dir: PathBuf,
+        /// The plotting library's reason.
+        message: String,
+    },
+}
+
+/// A checked request with its output directory and jobs.
+pub struct RunDir {
+    /// The run's output directory.
+    pub out: PathBuf,
+    /// The experiments to run, each with its own directory (the run's, or one per panel or
+    /// dimension in it) and resolved file.
+    pub jobs: Vec<Job>,
+    /// Write checkpoints after every this many learning rounds (0: none).
+    pub checkpoint_every: u64,
+    /// Continue every job from its checkpoints in `out`.
+    pub resume: bool,
+}
+
+impl RunDir {
+    /// Check `settings` over the experiment file `config`, writing into `out` (default:
+    /// `runs/STEM` for `config` STEM.toml, else `runs/NAME`); checkpoints every 10 learning
+    /// rounds, no resume (see [`RunDir::resuming`]).
+    pub fn plan(config: Option<&Path>, settings: &ExperimentFile, out: Option<PathBuf>) -> Result<Self, RunDirError> {
+        let file = config.map(LoadedFile::read).transpose()?;
+        let plan = Plan::new(file.as_ref(), settings)?;
+        Self::of(&plan, config, out)
+    }
+
+    /// The run directory of a checked `plan` read from `config`.
+    pub fn of(plan: &Plan, config: Option<&Path>, out: Option<PathBuf>) -> Result<Self, RunDirError> {
+        let out = out.unwrap_or_else(|| plan::default_out(config, plan.name()));
+        let jobs = plan.jobs(&out);
+        plan::check_memory(&jobs)?;
+        for job in &jobs {
+            job.experiment.check_methods().map_err(RunDirError::Refused)?;
+        }
+        Ok(Self {
+            out,
+            jobs,
+            checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
+            resume: false,
+        })
+    }
+
+    /// The same run, continuing from the checkpoints in `resume` (which must be its output
+    /// directory) when set, writing checkpoints every `every` learning rounds.
+    pub fn resuming(mut self, resume: Option<&Path>, every: u64) -> Result<Self, RunDirError> {
+        self.checkpoint_every = every;
+        let Some(resume) = resume else {
+            return Ok(self);
+        };
+        if resume != self.out {
+            return Err(RunDirError::TwoDirectories {
+                resume: resume.to_path_buf(),
+                out: self.out,
+            });
+        }
+        // Where no run ever wrote checkpoints: a mistyped directory, or --checkpoint-every 0.
+        if !self.jobs.iter().any(|job| job.dir.join("checkpoints").is_dir()) {
+            return Err(RunDirError::NothingToResume {
+                dir: resume.to_path_buf(),
+            });
+        }
+        self.resume = true;
+        Ok(self)
+    }
+
+    /// The checkpoints of the experiment that writes into `dir`, if it keeps or resumes any.
+    pub fn checkpoints(&self, dir: &Path) -> Option<Checkpoints> {
+        (self.checkpoint_every > 0 || self.resume).then(|| Checkpoints {
+            dir: dir.join("checkpoints"),
+            every: self.checkpoint_every,
+            resume: self.resume,
+        })
+    }
+
+    /// Make every job's output directory before anything is computed or started, and write its
+    /// resolved experiment file there: an output that cannot be written fails now, not after the
+    /// run. Returns the directories it created, the outermost of each path, for a run refused
+    /// before it started to take back.
+    pub fn prepare(&self) -> Result<Vec<PathBuf>, RunDirError> {
+        let mut created = Vec::new();
+        for job in &self.jobs {
+            let outermost = job
+                .dir
+                .ancestors()
+                .take_while(|d| !d.as_os_str().is_empty() && !d.exists())
+                .last();
+            created.extend(outermost.map(Path::to_path_buf));
+            output_dir(&job.dir)?;
+            job.config.write_resolved(&job.dir)?;
+        }
+        Ok(created)
+    }
+
+    /// Run every experiment in this process, one after another (each runs its (method, run)
+    /// jobs in parallel), and write each one's directory; stop with [`RunError::Interrupted`]
+    /// once `stop` is set, after every unfinished job wrote its checkpoint. Returns the
+    /// summaries in the order of [`RunDir::jobs`].
+    pub fn in_process(&self, quiet: bool, stop: &AtomicBool, pictures: Pictures) -> Result<Vec<Summary>, RunDirError> {
+        for job in &self.jobs {
+            job.experiment.check_in_process().map_err(RunDirError::Refused)?;
+        }
+        let mut summaries = Vec::with_capacity(self.jobs.len());
+        for Job { experiment, dir, .. } in &self.jobs {
+            let progress = experiment.progress(quiet);
+            let checkpoints = self.checkpoints(dir);
+            let outcome = experiment.run_until(&progress, checkpoints.as_ref(), stop);
+            match &outcome {
+                Ok(summary) => progress.finish(summary),
+                Err(_) => progress.abandon(),
+            }
+            let summary = outcome.map_err(|source| RunDirError::Run {
+                experiment: experiment.name.clone(),
+                source,
+            })?;
+            write(experiment, &summary, dir, quiet, pictures)?;
+            summaries.push(summary);
+        }
+        Ok(summaries)
+    }
+}
+
+/// `--checkpoint-every`'s default: learning rounds between two checkpoints.
+pub const DEFAULT_CHECKPOINT_EVERY: u64 = 10;
+
+/// Create the output directory `dir` and make sure files can be written into it.
+pub fn output_dir(dir: &Path) -> Result<(), RunDirError> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(RunDirError::NotADirectory { dir: dir.to_path_buf() });
+    }
+    let fail = |action, source| RunDirError::Output {
+        dir: dir.to_path_buf(),
+        action,
+        source,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| fail("create it", e))?;
+    let probe = dir.join(format!(".acps-probe-{}", std::process::id()));
+    std::fs::write(&probe, b"").map_err(|e| fail("write into it", e))?;
+    std::fs::remove_file(&probe).map_err(|e| fail("write into it", e))
+}
+
+/// Write the run directory's results (its config.toml was written before the run) and, unless
+/// `quiet`, say where they are and the final scores.
+pub fn write(
+    experiment: &Experiment,
+    summary: &Summary,
+    dir: &Path,
+    quiet: bool,
+    pictures: Pictures,
+) -> Result<(), RunDirError> {
+    summary.write(dir).map_err(|source| RunDirError::Summary {
+        path: dir.join("summary.json"),
+        source,
+    })?;
+    records::write(summary, dir)?;
+    pictures(summary, dir).map_err(|e| RunDirError::Pictures {
+        dir: dir.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    if !quiet {
+        println!("{} -> {}", experiment.name, dir.join("summary.json").display());
+        let score = experiment.score_format();
+        for (method, result) in &summary.methods {
+            let line = score.final_line(result.final_mean, result.final_sem, summary.runs);
+            println!("  {method:>20}: {line}");
+        }
+    }
+    Ok(())
+}
