@@ -64,14 +64,14 @@ pub use dual::{
 };
 pub use error::{
     BatchCreateError, CRepsCreateError, CRepsRestoreError, CRepsUpdateError, DualEvaluateError, DualSolveError,
-    FeatureMapValidateError, InvalidValue, PolicyCreateError, PolicyFitError,
+    FeatureMapValidateError, InvalidValue, PolicyCreateError, PolicyFitError, Rejection,
 };
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
 pub use joint::{ContextTerm, JointDualSolution, evaluate_joint_dual, solve_joint_dual};
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
 pub use snapshot::{PolicySnapshot, PolicySnapshotRestoreError, RestoredPolicy};
-pub use update::{Batch, ContextReport, Rejection, UpdateReport, UpdateSettings, update, update_paced};
+pub use update::{Batch, ContextReport, UpdateReport, UpdateSettings, update, update_paced};
 
 use nalgebra::{DMatrix, DVector};
 use rand::RngCore;
