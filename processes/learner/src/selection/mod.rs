@@ -12,7 +12,7 @@
 //!   al. 2021), [`AlpGmm`] (Portelas et al. 2019), [`SelfPaced`] (SPRL, Klink et al. 2019), and
 //!   [`RetireConfig`], the retirement of solved contexts the paper's outlook asks for (Sec. 6).
 //!
-//! Every public name of both is also here, `selection::DUcb` as `selection::paper::DUcb`.
+//! Every public name of both is re-exported here: `selection::DUcb` is `selection::paper::DUcb`.
 //! Shared by both: the errors ([`SelectorCreateError`], [`SelectorRestoreError`]) and, inside
 //! the crate, the checks of contexts and spaces (`validate`) and projections onto the space
 //! (`geometry`).

@@ -1,5 +1,5 @@
-//! The context selectors of the paper (Fabisch & Metzen, JMLR 2014), and the one it compares
-//! against from elsewhere.
+//! The context selectors of the paper (Fabisch & Metzen, JMLR 2014), SAGG-RIAC included, which
+//! the paper compares against.
 //!
 //! - `ducb`: [`DUcb`], discounted UCB (Algorithm 1).
 //! - `intrinsic`: the [`IntrinsicReward`]s D-UCB is rewarded with, and their per-context
