@@ -37,7 +37,7 @@ use acps_shared::{EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stre
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
 /// How the learner runs, independent of the selection method.
 ///
@@ -346,76 +346,109 @@ pub struct LearnerSnapshot {
     fit: Fit,
     selector: SelectorState,
     policy: Option<CRepsState>,
+    run: RunState,
+}
+
+/// What of a learner changes as it runs, apart from its selector and policy: the learner holds
+/// it and a snapshot saves it as it is, so the two cannot drift apart. Bincode writes a nested
+/// struct as its fields in order, so a snapshot's bytes are those of these fields written after
+/// the policy's; `VecDeque` and `BTreeSet` encode as the sequences they iterate.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct RunState {
     selection_rng: ChaCha8Rng,
     exploration_rng: ChaCha8Rng,
     next_id: u64,
     train_issued: u64,
     train_consumed: u64,
     next_to_consume: u64,
-    /// Tasks to hand out after a restore, in order: those out without an outcome, then the
-    /// queue of those never handed out.
-    outbox: Vec<u64>,
+    /// Tasks to hand out, in order. In a snapshot, those out without an outcome come first, so
+    /// that a restored learner hands them out again before the queue.
+    outbox: VecDeque<u64>,
     pending: BTreeMap<u64, Pending>,
     arrived: BTreeMap<u64, Outcome>,
     evaluations: Vec<Evaluation>,
     episodes: Vec<Episode>,
     updates: Vec<UpdateRecord>,
     lowest_reward: Option<f64>,
-    retried: Vec<u64>,
+    retried: BTreeSet<u64>,
     stats: LearnerStats,
+}
+
+impl RunState {
+    /// A run that has not started, its random streams seeded from `seed`.
+    fn start(seed: u64) -> Self {
+        Self {
+            selection_rng: ChaCha8Rng::seed_from_u64(derive_seed(seed, Stream::Selection, 0)),
+            exploration_rng: ChaCha8Rng::seed_from_u64(derive_seed(seed, Stream::Exploration, 0)),
+            next_id: 0,
+            train_issued: 0,
+            train_consumed: 0,
+            next_to_consume: 0,
+            outbox: VecDeque::new(),
+            pending: BTreeMap::new(),
+            arrived: BTreeMap::new(),
+            evaluations: Vec::new(),
+            episodes: Vec::new(),
+            updates: Vec::new(),
+            lowest_reward: None,
+            retried: BTreeSet::new(),
+            stats: LearnerStats::default(),
+        }
+    }
 }
 
 impl LearnerSnapshot {
     /// True when the run was complete when the snapshot was taken.
     pub fn is_done(&self) -> bool {
-        self.train_consumed == self.fit.episodes && self.pending.is_empty()
+        self.run.train_consumed == self.fit.episodes && self.run.pending.is_empty()
     }
 
     /// Why the snapshot cannot be a state of a learner, if it cannot (ids and roles that point
     /// nowhere, counters that contradict each other).
     fn check(&self) -> Result<(), String> {
+        let run = &self.run;
         let arms = self.fit.training_contexts as usize;
-        if self.train_consumed != self.episodes.len() as u64
-            || self.train_consumed > self.train_issued
-            || self.train_issued > self.fit.episodes
-            || self.next_to_consume > self.next_id
+        if run.train_consumed != run.episodes.len() as u64
+            || run.train_consumed > run.train_issued
+            || run.train_issued > self.fit.episodes
+            || run.next_to_consume > run.next_id
         {
             return Err(format!(
                 "counters (issued {}, consumed {}, episodes {}, next id {}, next to consume {}) contradict each other",
-                self.train_issued,
-                self.train_consumed,
-                self.episodes.len(),
-                self.next_id,
-                self.next_to_consume
+                run.train_issued,
+                run.train_consumed,
+                run.episodes.len(),
+                run.next_id,
+                run.next_to_consume
             ));
         }
-        if self.updates.len() as u64 != self.stats.updates + self.stats.rejected_updates {
+        if run.updates.len() as u64 != run.stats.updates + run.stats.rejected_updates {
             return Err(format!(
                 "{} update reports for {} applied and {} rejected updates",
-                self.updates.len(),
-                self.stats.updates,
-                self.stats.rejected_updates
+                run.updates.len(),
+                run.stats.updates,
+                run.stats.rejected_updates
             ));
         }
-        for (&id, pending) in &self.pending {
+        for (&id, pending) in &run.pending {
             let role_ok = match &pending.role {
                 Role::Train { bucket, choice } => *bucket < arms && choice.arm.is_none_or(|a| a < arms),
-                Role::Evaluate { evaluation, index } => self
+                Role::Evaluate { evaluation, index } => run
                     .evaluations
                     .get(*evaluation)
                     .is_some_and(|e| *index < e.outcomes.len()),
                 Role::Baseline { arm } => *arm < arms,
             };
-            if pending.task.id != id || id < self.next_to_consume || id >= self.next_id || !role_ok {
+            if pending.task.id != id || id < run.next_to_consume || id >= run.next_id || !role_ok {
                 return Err(format!("pending task {id} does not fit the run"));
             }
         }
-        let unknown = self
+        let unknown = run
             .outbox
             .iter()
-            .chain(self.arrived.keys())
-            .chain(&self.retried)
-            .find(|id| !self.pending.contains_key(id));
+            .chain(run.arrived.keys())
+            .chain(&run.retried)
+            .find(|id| !run.pending.contains_key(id));
         if let Some(id) = unknown {
             return Err(format!("task {id} is queued or answered but not pending"));
         }
@@ -467,21 +500,7 @@ pub struct Learner {
     problem: Problem,
     selector: Box<dyn ContextSelector>,
     policy: Option<CReps>,
-    selection_rng: ChaCha8Rng,
-    exploration_rng: ChaCha8Rng,
-    next_id: u64,
-    train_issued: u64,
-    train_consumed: u64,
-    next_to_consume: u64,
-    outbox: VecDeque<u64>,
-    pending: BTreeMap<u64, Pending>,
-    arrived: BTreeMap<u64, Outcome>,
-    evaluations: Vec<Evaluation>,
-    episodes: Vec<Episode>,
-    updates: Vec<UpdateRecord>,
-    lowest_reward: Option<f64>,
-    retried: std::collections::HashSet<u64>,
-    stats: LearnerStats,
+    run: RunState,
 }
 
 impl Learner {
@@ -546,25 +565,11 @@ impl Learner {
             return Err(LearnerCreateError::PacedWithoutPolicy { problem: name() });
         }
         let mut learner = Self {
-            selection_rng: ChaCha8Rng::seed_from_u64(derive_seed(config.seed, Stream::Selection, 0)),
-            exploration_rng: ChaCha8Rng::seed_from_u64(derive_seed(config.seed, Stream::Exploration, 0)),
+            run: RunState::start(config.seed),
             config,
             problem,
             selector,
             policy,
-            next_id: 0,
-            train_issued: 0,
-            train_consumed: 0,
-            next_to_consume: 0,
-            outbox: VecDeque::new(),
-            pending: BTreeMap::new(),
-            arrived: BTreeMap::new(),
-            evaluations: Vec::new(),
-            episodes: Vec::new(),
-            updates: Vec::new(),
-            lowest_reward: None,
-            retried: std::collections::HashSet::new(),
-            stats: LearnerStats::default(),
         };
         if learner.selector.wants_initial_returns() {
             for arm in 0..learner.problem.training_contexts.len() {
@@ -573,7 +578,7 @@ impl Learner {
             }
         }
         learner.create_evaluation();
-        while learner.train_issued < learner.config.episodes.min(learner.config.in_flight as u64) {
+        while learner.run.train_issued < learner.config.episodes.min(learner.config.in_flight as u64) {
             learner.create_training_task();
         }
         Ok(learner)
@@ -582,18 +587,18 @@ impl Learner {
     /// The next task to perform, or `None` when every created task has been handed out (wait for
     /// outcomes, or the run is done).
     pub fn ask(&mut self) -> Option<Task> {
-        let id = self.outbox.pop_front()?;
-        Some(self.pending[&id].task.clone())
+        let id = self.run.outbox.pop_front()?;
+        Some(self.run.pending[&id].task.clone())
     }
 
     /// Hand a task out again (for example after the worker that had it died). Returns false when
     /// the task is not waiting for an outcome.
     pub fn reissue(&mut self, task_id: u64) -> bool {
-        let waiting = self.pending.contains_key(&task_id)
-            && !self.arrived.contains_key(&task_id)
-            && !self.outbox.contains(&task_id);
+        let waiting = self.run.pending.contains_key(&task_id)
+            && !self.run.arrived.contains_key(&task_id)
+            && !self.run.outbox.contains(&task_id);
         if waiting {
-            self.outbox.push_back(task_id);
+            self.run.outbox.push_back(task_id);
         }
         waiting
     }
@@ -602,26 +607,27 @@ impl Learner {
     /// order, and consuming them may create new tasks.
     pub fn tell(&mut self, outcome: Outcome) -> Result<(), LearnerTellError> {
         let task_id = outcome.task_id;
-        if !self.pending.contains_key(&task_id) {
+        if !self.run.pending.contains_key(&task_id) {
             return Err(LearnerTellError::UnknownTask { task_id });
         }
-        if self.arrived.contains_key(&task_id) {
+        if self.run.arrived.contains_key(&task_id) {
             return Err(LearnerTellError::Duplicate { task_id });
         }
-        self.outbox.retain(|id| *id != task_id);
-        if !outcome.is_ok() && self.retried.insert(task_id) {
-            self.stats.retries += 1;
-            self.outbox.push_back(task_id);
+        self.run.outbox.retain(|id| *id != task_id);
+        if !outcome.is_ok() && self.run.retried.insert(task_id) {
+            self.run.stats.retries += 1;
+            self.run.outbox.push_back(task_id);
             return Ok(());
         }
-        self.arrived.insert(task_id, outcome);
-        while let Some(outcome) = self.arrived.remove(&self.next_to_consume) {
+        self.run.arrived.insert(task_id, outcome);
+        while let Some(outcome) = self.run.arrived.remove(&self.run.next_to_consume) {
             let pending = self
+                .run
                 .pending
-                .remove(&self.next_to_consume)
+                .remove(&self.run.next_to_consume)
                 .expect("arrived outcomes belong to pending tasks");
-            self.retried.remove(&self.next_to_consume);
-            self.next_to_consume += 1;
+            self.run.retried.remove(&self.run.next_to_consume);
+            self.run.next_to_consume += 1;
             self.consume(pending, outcome);
         }
         Ok(())
@@ -629,17 +635,18 @@ impl Learner {
 
     /// True when every training episode and every evaluation has been consumed.
     pub fn is_done(&self) -> bool {
-        self.train_consumed == self.config.episodes && self.pending.is_empty()
+        self.run.train_consumed == self.config.episodes && self.run.pending.is_empty()
     }
 
     /// Evaluations so far, complete ones first in episode order.
     pub fn evaluations(&self) -> &[Evaluation] {
-        &self.evaluations
+        &self.run.evaluations
     }
 
     /// The score of the most recent complete evaluation that has one.
     pub fn latest_score(&self) -> Option<f64> {
-        self.evaluations
+        self.run
+            .evaluations
             .iter()
             .rev()
             .filter(|e| e.remaining == 0)
@@ -649,7 +656,7 @@ impl Learner {
     /// How far this learner is, for progress displays.
     pub fn progress(&self) -> LearningProgress {
         LearningProgress {
-            episodes: self.train_consumed,
+            episodes: self.run.train_consumed,
             total_episodes: self.config.episodes,
             score: self.latest_score(),
             scored: usize::from(self.latest_score().is_some()),
@@ -658,17 +665,17 @@ impl Learner {
 
     /// The consumed training episodes in order.
     pub fn episodes(&self) -> &[Episode] {
-        &self.episodes
+        &self.run.episodes
     }
 
     /// Every C-REPS update so far, in order, with its report.
     pub fn updates(&self) -> &[UpdateRecord] {
-        &self.updates
+        &self.run.updates
     }
 
     /// Counters of the run.
     pub fn stats(&self) -> &LearnerStats {
-        &self.stats
+        &self.run.stats
     }
 
     /// The seed of every random stream of the run.
@@ -688,7 +695,7 @@ impl Learner {
 
     /// Tasks created but not yet consumed.
     pub fn tasks_in_flight(&self) -> usize {
-        self.pending.len()
+        self.run.pending.len()
     }
 
     /// Learning rounds so far, the clock checkpoints are counted in: C-REPS updates run
@@ -696,42 +703,29 @@ impl Learner {
     /// (the first one, before training, included).
     pub fn rounds(&self) -> u64 {
         if self.policy.is_some() {
-            self.stats.updates + self.stats.rejected_updates
+            self.run.stats.updates + self.run.stats.rejected_updates
         } else {
-            self.evaluations.len() as u64
+            self.run.evaluations.len() as u64
         }
     }
 
     /// The whole evolving state, for a checkpoint. Tasks handed out whose outcome has not
     /// arrived are recorded as to be handed out again, ahead of the queue.
     pub fn snapshot(&self) -> LearnerSnapshot {
-        let out: Vec<u64> = self
+        let run = &self.run;
+        let out = run
             .pending
             .keys()
             .copied()
-            .filter(|id| !self.arrived.contains_key(id) && !self.outbox.contains(id))
-            .collect();
-        let mut retried: Vec<u64> = self.retried.iter().copied().collect();
-        retried.sort_unstable();
+            .filter(|id| !run.arrived.contains_key(id) && !run.outbox.contains(id));
         LearnerSnapshot {
             fit: Fit::of(self),
             selector: self.selector.save_state(),
             policy: self.policy.as_ref().map(CReps::state),
-            selection_rng: self.selection_rng.clone(),
-            exploration_rng: self.exploration_rng.clone(),
-            next_id: self.next_id,
-            train_issued: self.train_issued,
-            train_consumed: self.train_consumed,
-            next_to_consume: self.next_to_consume,
-            outbox: out.into_iter().chain(self.outbox.iter().copied()).collect(),
-            pending: self.pending.clone(),
-            arrived: self.arrived.clone(),
-            evaluations: self.evaluations.clone(),
-            episodes: self.episodes.clone(),
-            updates: self.updates.clone(),
-            lowest_reward: self.lowest_reward,
-            retried,
-            stats: self.stats.clone(),
+            run: RunState {
+                outbox: out.chain(run.outbox.iter().copied()).collect(),
+                ..run.clone()
+            },
         }
     }
 
@@ -759,32 +753,18 @@ impl Learner {
         };
         self.selector.restore_state(snapshot.selector)?;
         self.policy = policy;
-        self.selection_rng = snapshot.selection_rng;
-        self.exploration_rng = snapshot.exploration_rng;
-        self.next_id = snapshot.next_id;
-        self.train_issued = snapshot.train_issued;
-        self.train_consumed = snapshot.train_consumed;
-        self.next_to_consume = snapshot.next_to_consume;
-        self.outbox = snapshot.outbox.into();
-        self.pending = snapshot.pending;
-        self.arrived = snapshot.arrived;
-        self.evaluations = snapshot.evaluations;
-        self.episodes = snapshot.episodes;
-        self.updates = snapshot.updates;
-        self.lowest_reward = snapshot.lowest_reward;
-        self.retried = snapshot.retried.into_iter().collect();
-        self.stats = snapshot.stats;
+        self.run = snapshot.run;
         Ok(())
     }
 
     fn create(&mut self, kind: TaskKind, context: Vec<f64>, role: Role) {
         let theta = match (&self.policy, kind) {
             (None, _) => Vec::new(),
-            (Some(policy), TaskKind::Train) => policy.sample(&context, &mut self.exploration_rng),
+            (Some(policy), TaskKind::Train) => policy.sample(&context, &mut self.run.exploration_rng),
             (Some(policy), _) => policy.greedy(&context),
         };
-        let id = self.next_id;
-        self.next_id += 1;
+        let id = self.run.next_id;
+        self.run.next_id += 1;
         let task = Task {
             id,
             kind,
@@ -792,16 +772,16 @@ impl Learner {
             context,
             theta,
         };
-        self.pending.insert(id, Pending { task, role });
-        self.outbox.push_back(id);
+        self.run.pending.insert(id, Pending { task, role });
+        self.run.outbox.push_back(id);
     }
 
     fn create_training_task(&mut self) {
-        let choice = self.selector.choose(&mut self.selection_rng);
+        let choice = self.selector.choose(&mut self.run.selection_rng);
         let bucket = choice
             .arm
             .unwrap_or_else(|| nearest(&self.problem.training_contexts, &choice.context));
-        self.train_issued += 1;
+        self.run.train_issued += 1;
         self.create(TaskKind::Train, choice.context.clone(), Role::Train { choice, bucket });
     }
 
@@ -810,9 +790,9 @@ impl Learner {
         if contexts.is_empty() {
             return;
         }
-        let evaluation = self.evaluations.len();
-        self.evaluations.push(Evaluation {
-            episode: self.train_consumed,
+        let evaluation = self.run.evaluations.len();
+        self.run.evaluations.push(Evaluation {
+            episode: self.run.train_consumed,
             score: None,
             failed: 0,
             outcomes: vec![None; contexts.len()],
@@ -832,7 +812,7 @@ impl Learner {
             }
             Role::Evaluate { evaluation, index } => {
                 let aggregate = self.problem.score;
-                let evaluation = &mut self.evaluations[evaluation];
+                let evaluation = &mut self.run.evaluations[evaluation];
                 if !outcome.is_ok() {
                     evaluation.failed += 1;
                 }
@@ -854,9 +834,13 @@ impl Learner {
     }
 
     fn consume_training(&mut self, task: Task, choice: Choice, bucket: usize, outcome: &Outcome) {
-        self.train_consumed += 1;
+        self.run.train_consumed += 1;
         let reward = if outcome.is_ok() {
-            self.lowest_reward = Some(self.lowest_reward.map_or(outcome.reward, |low| low.min(outcome.reward)));
+            self.run.lowest_reward = Some(
+                self.run
+                    .lowest_reward
+                    .map_or(outcome.reward, |low| low.min(outcome.reward)),
+            );
             let report = self.policy.as_mut().and_then(|p| {
                 p.record_paced(
                     bucket,
@@ -868,33 +852,35 @@ impl Learner {
             });
             if let Some(report) = report {
                 match report.rejected {
-                    None => self.stats.updates += 1,
+                    None => self.run.stats.updates += 1,
                     Some(reason) => {
-                        tracing::debug!(seed = self.config.seed, episode = self.train_consumed, %reason, "C-REPS update rejected; the old policy stays");
-                        self.stats.rejected_updates += 1;
-                        self.stats.last_rejection = Some(reason);
+                        tracing::debug!(seed = self.config.seed, episode = self.run.train_consumed, %reason, "C-REPS update rejected; the old policy stays");
+                        self.run.stats.rejected_updates += 1;
+                        self.run.stats.last_rejection = Some(reason);
                     }
                 }
-                self.updates.push(UpdateRecord {
-                    episode: self.train_consumed,
+                self.run.updates.push(UpdateRecord {
+                    episode: self.run.train_consumed,
                     report,
                 });
             }
             outcome.reward
         } else {
-            self.stats.failed_episodes += 1;
-            self.lowest_reward.unwrap_or(0.0)
+            self.run.stats.failed_episodes += 1;
+            self.run.lowest_reward.unwrap_or(0.0)
         };
         self.selector.observe(&choice, reward);
-        self.episodes.push(Episode {
+        self.run.episodes.push(Episode {
             arm: choice.arm,
             context: choice.context,
             reward: if outcome.is_ok() { reward } else { f64::NAN },
         });
-        if self.train_consumed.is_multiple_of(self.config.eval_every) || self.train_consumed == self.config.episodes {
+        if self.run.train_consumed.is_multiple_of(self.config.eval_every)
+            || self.run.train_consumed == self.config.episodes
+        {
             self.create_evaluation();
         }
-        if self.train_issued < self.config.episodes {
+        if self.run.train_issued < self.config.episodes {
             self.create_training_task();
         }
     }

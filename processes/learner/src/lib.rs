@@ -6,12 +6,14 @@
 //! - [`method`]: the methods by name ([`Method`]) and their configurations ([`SelectorConfig`]:
 //!   baselines, D-UCB with an intrinsic reward, SAGG-RIAC, and beyond the paper absolute
 //!   progress, ALP-GMM, self-paced and the retirement of solved contexts).
-//! - [`selection`]: the context selectors themselves (D-UCB, intrinsic rewards, baselines,
-//!   SAGG-RIAC; paper Sections 2.2 and 3; absolute progress, ALP-GMM, self-paced) and the
-//!   [`ContextSelector`](selection::ContextSelector) trait for selectors of your own.
+//! - [`selection`]: the context selectors themselves and the
+//!   [`ContextSelector`](selection::ContextSelector) trait for selectors of your own; the
+//!   paper's in [`selection::paper`] (D-UCB, intrinsic rewards, baselines, SAGG-RIAC; paper
+//!   Sections 2.2 and 3), the later teachers in [`selection::beyond`] (absolute progress,
+//!   ALP-GMM, self-paced, retirement).
 //! - [`creps`]: contextual relative entropy policy search (paper Appendix A): the upper-level
 //!   policy, its sample memory and its update; and SPRL's joint update of the policy with a
-//!   context distribution.
+//!   context distribution ([`creps::joint`]).
 //! - [`checkpoint`]: a learner's state in a file, to resume a run bit for bit.
 //!
 //! Every fallible operation has an error type of its own, named after the object and the

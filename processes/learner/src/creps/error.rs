@@ -1,5 +1,8 @@
 //! The errors of the C-REPS operations, one type per operation, and the argument checks that
-//! produce their shared cause, [`InvalidValue`].
+//! produce their shared cause, [`InvalidValue`]; and [`Rejection`], why an update that ran kept the
+//! old policy.
+
+use serde::{Deserialize, Serialize};
 
 /// A setting or argument outside its accepted range: the cause shared by the errors of the
 /// C-REPS operations. Every message names the setting or argument and the accepted range.
@@ -144,6 +147,44 @@ pub enum PolicyCreateError {
     NotPositiveSemiDefinite,
 }
 
+/// Why an update was rejected (the old policy is kept).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
+pub enum Rejection {
+    /// Fewer than two samples: the covariance estimate divides by `1 - sum d^2 = 0`.
+    #[error("fewer than 2 samples, too few to estimate a covariance")]
+    TooFewSamples,
+    /// The dual solver reached its iteration cap before its tolerance (the report's
+    /// `optimality` says how far it got).
+    #[error("the dual solver reached its iteration cap before the optimum")]
+    DualNotSolved,
+    /// `Phi^T D Phi + ridge I` is not positive definite (ridge 0 and too few distinct contexts).
+    #[error("the weighted least-squares matrix Phi^T D Phi + ridge I is not positive definite; use ridge > 0")]
+    SingularRegression,
+    /// The new mean coefficients W overflowed.
+    #[error("the new mean coefficients W are not finite")]
+    MeanNotFinite,
+    /// The new covariance overflowed.
+    #[error("the new covariance is not finite")]
+    CovarianceNotFinite,
+    /// The new covariance has a clearly negative eigenvalue.
+    #[error("the new covariance is not positive semi-definite")]
+    CovarianceNotPositiveSemiDefinite,
+}
+
+impl Rejection {
+    /// A short kebab-case name, as in `updates.csv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Rejection::TooFewSamples => "too-few-samples",
+            Rejection::DualNotSolved => "dual-not-solved",
+            Rejection::SingularRegression => "singular-regression",
+            Rejection::MeanNotFinite => "mean-not-finite",
+            Rejection::CovarianceNotFinite => "covariance-not-finite",
+            Rejection::CovarianceNotPositiveSemiDefinite => "covariance-not-positive-semi-definite",
+        }
+    }
+}
+
 /// Why [`LinearGaussianPolicy::fit`](super::LinearGaussianPolicy::fit) produces no policy.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PolicyFitError {
@@ -152,7 +193,7 @@ pub enum PolicyFitError {
     Invalid(#[from] InvalidValue),
     /// The data make the weighted fit impossible.
     #[error("update rejected: {0}")]
-    Rejected(#[from] super::update::Rejection),
+    Rejected(#[from] Rejection),
 }
 
 /// Why [`solve_dual`](super::solve_dual) refuses its inputs.

@@ -18,6 +18,14 @@
 //! failed update (a singular regression, a non-finite or non-positive-semi-definite covariance)
 //! is reported with its [`Rejection`] and leaves the policy unchanged.
 //!
+//! One file per piece, each importing only pieces before it in this list: `error` (every
+//! operation's error type, and [`Rejection`]); `features` ([`FeatureMap`]); `memory`
+//! ([`MemoryConfig`]); [`dual`] (the dual and its solver); [`joint`] (SPRL's dual with a context
+//! distribution, Klink et al. 2019); `policy` ([`LinearGaussianPolicy`] and its weighted fit);
+//! `update` (one update and its [`UpdateReport`]); this module's learner, [`CReps`], with
+//! [`PacedContexts`], what SPRL's selector hands it; and `snapshot` (a learned policy as plain
+//! data, [`PolicySnapshot`]).
+//!
 //! [`update`] runs one update on rollouts of your own, without a memory or a learner:
 //!
 //! ```
@@ -64,14 +72,14 @@ pub use dual::{
 };
 pub use error::{
     BatchCreateError, CRepsCreateError, CRepsRestoreError, CRepsUpdateError, DualEvaluateError, DualSolveError,
-    FeatureMapValidateError, InvalidValue, PolicyCreateError, PolicyFitError,
+    FeatureMapValidateError, InvalidValue, PolicyCreateError, PolicyFitError, Rejection,
 };
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
 pub use joint::{ContextTerm, JointDualSolution, evaluate_joint_dual, solve_joint_dual};
 pub use memory::MemoryConfig;
 pub use policy::LinearGaussianPolicy;
 pub use snapshot::{PolicySnapshot, PolicySnapshotRestoreError, RestoredPolicy};
-pub use update::{Batch, ContextReport, Rejection, UpdateReport, UpdateSettings, update, update_paced};
+pub use update::{Batch, ContextReport, UpdateReport, UpdateSettings, update, update_paced};
 
 use nalgebra::{DMatrix, DVector};
 use rand::RngCore;

@@ -5,8 +5,9 @@ use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
 use rand::RngCore;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::error::{InvalidValue, PolicyCreateError, PolicyFitError, check_finite, check_len, check_non_negative};
-use super::update::Rejection;
+use super::error::{
+    InvalidValue, PolicyCreateError, PolicyFitError, Rejection, check_finite, check_len, check_non_negative,
+};
 
 /// A Gaussian over parameter vectors whose mean is linear in the context features.
 ///

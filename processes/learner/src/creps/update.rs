@@ -4,7 +4,9 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::dual::{DualOptions, effective_sample_size, solve_valid};
-use super::error::{BatchCreateError, CRepsUpdateError, check_finite, check_len, check_non_negative, check_positive};
+use super::error::{
+    BatchCreateError, CRepsUpdateError, Rejection, check_finite, check_len, check_non_negative, check_positive,
+};
 use super::joint::{ContextTerm, solve_joint_valid};
 use super::{FeatureMap, LinearGaussianPolicy};
 
@@ -30,44 +32,6 @@ impl Default for UpdateSettings {
             eta_min: super::DEFAULT_ETA_MIN,
             ridge: 1e-4,
             dual: DualOptions::default(),
-        }
-    }
-}
-
-/// Why an update was rejected (the old policy is kept).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
-pub enum Rejection {
-    /// Fewer than two samples: the covariance estimate divides by `1 - sum d^2 = 0`.
-    #[error("fewer than 2 samples, too few to estimate a covariance")]
-    TooFewSamples,
-    /// The dual solver reached its iteration cap before its tolerance (the report's
-    /// `optimality` says how far it got).
-    #[error("the dual solver reached its iteration cap before the optimum")]
-    DualNotSolved,
-    /// `Phi^T D Phi + ridge I` is not positive definite (ridge 0 and too few distinct contexts).
-    #[error("the weighted least-squares matrix Phi^T D Phi + ridge I is not positive definite; use ridge > 0")]
-    SingularRegression,
-    /// The new mean coefficients W overflowed.
-    #[error("the new mean coefficients W are not finite")]
-    MeanNotFinite,
-    /// The new covariance overflowed.
-    #[error("the new covariance is not finite")]
-    CovarianceNotFinite,
-    /// The new covariance has a clearly negative eigenvalue.
-    #[error("the new covariance is not positive semi-definite")]
-    CovarianceNotPositiveSemiDefinite,
-}
-
-impl Rejection {
-    /// A short kebab-case name, as in `updates.csv`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Rejection::TooFewSamples => "too-few-samples",
-            Rejection::DualNotSolved => "dual-not-solved",
-            Rejection::SingularRegression => "singular-regression",
-            Rejection::MeanNotFinite => "mean-not-finite",
-            Rejection::CovarianceNotFinite => "covariance-not-finite",
-            Rejection::CovarianceNotPositiveSemiDefinite => "covariance-not-positive-semi-definite",
         }
     }
 }

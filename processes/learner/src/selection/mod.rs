@@ -1,53 +1,31 @@
 //! Context selection: which training context to practise next.
 //!
 //! Every strategy implements [`ContextSelector`]; the learner core only talks to that trait, so a
-//! new teacher plugs in without touching the learner loop.
+//! new teacher plugs in without touching the learner loop. A selector's evolving state is a
+//! [`SelectorState`], the checkpoints' encoding of it.
 //!
-//! - [`BanditSelector`]: the paper's proposal, [`DUcb`] over the training contexts rewarded with
-//!   an [`IntrinsicReward`] (Sec. 3).
-//! - [`RoundRobin`], [`UniformDiscrete`], [`UniformContinuous`]: the paper's baselines.
-//! - [`SaggRiac`]: goal generation by competence progress in regions (Sec. 2.2, 4).
+//! - [`paper`]: the paper's selectors (Fabisch & Metzen 2014): its proposal [`BanditSelector`],
+//!   [`DUcb`] over the training contexts rewarded with an [`IntrinsicReward`] (Sec. 3); its
+//!   baselines [`RoundRobin`], [`UniformDiscrete`] and [`UniformContinuous`]; and [`SaggRiac`],
+//!   goal generation by competence progress in regions (Baranes & Oudeyer 2013; Sec. 2.2, 4).
+//! - [`beyond`]: teachers beyond the paper (issue 22): [`AbsoluteProgress`] (Kanitscheider et
+//!   al. 2021), [`AlpGmm`] (Portelas et al. 2019), [`SelfPaced`] (SPRL, Klink et al. 2019), and
+//!   [`RetireConfig`], the retirement of solved contexts the paper's outlook asks for (Sec. 6).
 //!
-//! Beyond the paper (issue 22):
-//! - [`AbsoluteProgress`]: training contexts drawn in proportion to the absolute difference of a
-//!   fast and a slow moving average of their returns (Kanitscheider et al. 2021).
-//! - [`RetireConfig`]: [`BanditSelector`] and [`AbsoluteProgress`] may retire solved contexts
-//!   and bring them back when their return falls (the paper's outlook, Sec. 6).
-//! - [`AlpGmm`]: contexts drawn from the continuous space where a Gaussian mixture over
-//!   (context, absolute learning progress) places the progress (Portelas et al. 2019).
+//! Every public name of both is re-exported here: `selection::DUcb` is `selection::paper::DUcb`.
+//! Shared by both: the errors ([`SelectorCreateError`], [`SelectorRestoreError`]) and, inside
+//! the crate, the checks of contexts and spaces (`validate`) and projections onto the space
+//! (`geometry`).
 
-mod absolute_progress;
-mod alp_gmm;
-mod bandit;
-mod baselines;
-mod ducb;
+pub mod beyond;
 mod error;
 mod geometry;
-mod gmm;
-mod intrinsic;
-mod neighbours;
-mod progress;
-mod retire;
-mod sagg_riac;
-mod self_paced;
+pub mod paper;
 mod validate;
 
-pub use absolute_progress::{AbsoluteProgress, AbsoluteProgressConfig, AbsoluteProgressState};
-pub use alp_gmm::{AlpGmm, AlpGmmConfig, AlpGmmState};
-pub use gmm::Component;
-
-pub use bandit::BanditSelector;
-pub use baselines::{RoundRobin, UniformContinuous, UniformDiscrete};
-pub use ducb::{DUcb, DUcbConfig, DUcbCreateError, DUcbRestoreError, DUcbState, DUcbUpdateError};
+pub use beyond::*;
 pub use error::{SelectorCreateError, SelectorRestoreError};
-pub use intrinsic::{
-    FirstVisit, IntrinsicReward, IntrinsicRewardParseError, IntrinsicTracker, IntrinsicTrackerRestoreError,
-    IntrinsicTrackerUpdateError,
-};
-pub use progress::{EmaRates, ReturnAverages};
-pub use retire::{RetireConfig, Retirement, RetirementState};
-pub use sagg_riac::{Goal, GoalMode, RegionSummary, SaggRiac, SaggRiacConfig, SaggRiacState};
-pub use self_paced::{MAX_DRAWS, SelfPaced, SelfPacedConfig, SelfPacedState};
+pub use paper::*;
 
 use crate::creps::PacedContexts;
 use rand::RngCore;

@@ -27,10 +27,10 @@
 //! - Draws outside the space are drawn again (the original samples within bounds); after
 //!   [`MAX_DRAWS`] misses the last draw is projected into the space.
 
-use super::geometry::project;
-use super::validate::check_space;
-use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use crate::creps::{GaussianKl, PacedContexts, PacedTerms, bound_by_kl, log_det};
+use crate::selection::geometry::project;
+use crate::selection::validate::check_space;
+use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 use rand::RngCore;

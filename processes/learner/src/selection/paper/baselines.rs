@@ -2,8 +2,8 @@
 //! random over the training contexts (Sec. 5.1) and random over the continuous space
 //! (Sec. 5.1.3, 5.2).
 
-use super::validate::{check_contexts, check_space};
-use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
+use crate::selection::validate::{check_contexts, check_space};
+use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
 

@@ -97,7 +97,7 @@ impl FromStr for IntrinsicReward {
 #[serde(rename_all = "kebab-case")]
 pub enum FirstVisit {
     /// The baseline starts at the return of the initial greedy policy in that context, given
-    /// through [`ContextSelector::prime`](super::ContextSelector::prime). A context that was
+    /// through [`ContextSelector::prime`](crate::selection::ContextSelector::prime). A context that was
     /// never primed falls back to [`Zero`](Self::Zero).
     #[default]
     InitialReturn,

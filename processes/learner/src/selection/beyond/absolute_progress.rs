@@ -18,11 +18,9 @@
 //! uniform share) and are only probed now and then ([`RetireConfig`]).
 
 use super::progress::{EmaRates, ReturnAverages, proportional};
-use super::validate::check_contexts;
-use super::{
-    Choice, ContextSelector, RetireConfig, Retirement, RetirementState, SelectorCreateError, SelectorRestoreError,
-    SelectorState,
-};
+use super::{RetireConfig, Retirement, RetirementState};
+use crate::selection::validate::check_contexts;
+use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
 

@@ -13,9 +13,9 @@
 //! (algorithms.md section 4): the mode probabilities 0.7 / 0.2 / 0.1, the split criterion
 //! |R1| |R2| |interest(R1) - interest(R2)| and the (interest - minimum) leaf weights.
 
-use super::geometry::{nearest, project};
-use super::validate::check_space_and_snap;
-use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
+use crate::selection::geometry::{nearest, project};
+use crate::selection::validate::check_space_and_snap;
+use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};

@@ -16,7 +16,7 @@
 //! practice.
 
 use super::progress::{EmaRates, ReturnAverages};
-use super::{SelectorCreateError, SelectorRestoreError};
+use crate::selection::{SelectorCreateError, SelectorRestoreError};
 use serde::{Deserialize, Serialize};
 
 /// When a context counts as solved, and how retired contexts are watched (see the module docs).

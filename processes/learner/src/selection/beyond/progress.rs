@@ -3,7 +3,7 @@
 //! levels say how far apart the contexts are. Used by [`AbsoluteProgress`](super::AbsoluteProgress)
 //! and by the retirement of solved contexts ([`RetireConfig`](super::RetireConfig)).
 
-use super::SelectorCreateError;
+use crate::selection::SelectorCreateError;
 use serde::{Deserialize, Serialize};
 
 /// The rates of the two moving averages of a context's return: each visit moves an average by

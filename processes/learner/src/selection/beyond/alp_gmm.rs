@@ -18,12 +18,12 @@
 //! A fit needs randomness (its k-means++ start), which only [`choose`](ContextSelector::choose)
 //! receives: a fit that falls due in `observe` is made at the next choice.
 
-use super::geometry::{nearest, project};
 use super::gmm::{Component, Mixture};
 use super::neighbours::NeighbourIndex;
 use super::progress::proportional;
-use super::validate::check_space_and_snap;
-use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
+use crate::selection::geometry::{nearest, project};
+use crate::selection::validate::check_space_and_snap;
+use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::ContextSpace;
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
@@ -120,7 +120,7 @@ pub struct AlpGmm {
 impl AlpGmm {
     /// ALP-GMM over `space`. With `snap_to`, every context is replaced by the nearest of these
     /// training contexts (Euclidean, ties to the lowest index) and the choice names its arm, as
-    /// [`SaggRiac`](super::SaggRiac) does.
+    /// [`SaggRiac`](crate::selection::SaggRiac) does.
     pub fn new(
         space: ContextSpace,
         snap_to: Option<Vec<Vec<f64>>>,

@@ -12,10 +12,10 @@
 //! a plateau are left out of the bandit's choices and only probed now and then
 //! ([`RetireConfig`]); without it nothing changes.
 
-use super::validate::check_contexts;
-use super::{
-    Choice, ContextSelector, DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker, RetireConfig, Retirement,
-    SelectorCreateError, SelectorRestoreError, SelectorState,
+use super::{DUcb, DUcbConfig, FirstVisit, IntrinsicReward, IntrinsicTracker};
+use crate::selection::validate::check_contexts;
+use crate::selection::{
+    Choice, ContextSelector, RetireConfig, Retirement, SelectorCreateError, SelectorRestoreError, SelectorState,
 };
 use rand::RngCore;
 use std::collections::VecDeque;
