@@ -5,9 +5,10 @@ use crate::cli::{
     BenchArgs, Command, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs,
 };
 use acps_experiments::checkpoints::Checkpoints;
+use acps_experiments::experiment::RunError;
 use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::{Job, Plan};
-use acps_experiments::run_dir::{self, RunDir};
+use acps_experiments::run_dir::{self, RunDir, RunDirError};
 use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetBuilder, FleetProgress};
@@ -113,12 +114,7 @@ fn stopped(
     }
     // A fleet can fail half-way (its workers gone, refused or silent); other errors happen
     // before the run starts or concern the checkpoints themselves.
-    let fleet_failed = error.chain().any(|e| {
-        matches!(
-            e.downcast_ref::<acps_experiments::experiment::RunError>(),
-            Some(acps_experiments::experiment::RunError::Fleet(_))
-        )
-    });
+    let fleet_failed = run_errors(&error).any(|e| matches!(e, RunError::Fleet(_)));
     match resume {
         Some(resume) if fleet_failed && checkpoints.is_some_and(|c| c.dir.is_dir()) => {
             Stopped::Failed { error, resume }.into()
@@ -127,16 +123,21 @@ fn stopped(
     }
 }
 
+/// The experiments' own errors in `error`'s chain, also inside a run directory's.
+fn run_errors(error: &anyhow::Error) -> impl Iterator<Item = &RunError> {
+    error.chain().filter_map(|e| {
+        e.downcast_ref::<RunError>()
+            .or_else(|| e.downcast_ref::<RunDirError>().and_then(RunDirError::run_error))
+    })
+}
+
 /// True when `error` is a run stopped by Ctrl-C.
 fn interrupted(error: &anyhow::Error) -> bool {
-    use acps_experiments::experiment::RunError;
     use acps_fleet::FleetError;
-    error.chain().any(|e| {
-        matches!(
-            e.downcast_ref::<RunError>(),
-            Some(RunError::Fleet(FleetError::Interrupted) | RunError::Interrupted)
-        ) || matches!(e.downcast_ref::<FleetError>(), Some(FleetError::Interrupted))
-    })
+    run_errors(error).any(|e| matches!(e, RunError::Fleet(FleetError::Interrupted) | RunError::Interrupted))
+        || error
+            .chain()
+            .any(|e| matches!(e.downcast_ref::<FleetError>(), Some(FleetError::Interrupted)))
 }
 
 /// The run directory `args` ask for, checked (its settings, memory, methods and what it resumes

@@ -47,12 +47,12 @@ pub enum RunDirError {
         experiment: String,
         /// Why.
         #[source]
-        source: RunError,
+        source: Box<RunError>,
     },
     /// A method the experiment's environment cannot serve, or a problem only the user's
     /// workers simulate, asked to run in this process.
     #[error(transparent)]
-    Refused(RunError),
+    Refused(Box<RunError>),
     /// The tables or policies could not be written.
     #[error(transparent)]
     Records(#[from] RecordsError),
@@ -113,6 +113,16 @@ pub enum RunDirError {
     },
 }
 
+impl RunDirError {
+    /// The experiment's own error, when the run started and failed (or was stopped).
+    pub fn run_error(&self) -> Option<&RunError> {
+        match self {
+            Self::Run { source, .. } | Self::Refused(source) => Some(source),
+            _ => None,
+        }
+    }
+}
+
 /// A checked request with its output directory and jobs.
 pub struct RunDir {
     /// The run's output directory.
@@ -142,7 +152,9 @@ impl RunDir {
         let jobs = plan.jobs(&out);
         plan::check_memory(&jobs)?;
         for job in &jobs {
-            job.experiment.check_methods().map_err(RunDirError::Refused)?;
+            job.experiment
+                .check_methods()
+                .map_err(|e| RunDirError::Refused(Box::new(e)))?;
         }
         Ok(Self {
             out,
@@ -209,7 +221,9 @@ impl RunDir {
     /// summaries in the order of [`RunDir::jobs`].
     pub fn in_process(&self, quiet: bool, stop: &AtomicBool, pictures: Pictures) -> Result<Vec<Summary>, RunDirError> {
         for job in &self.jobs {
-            job.experiment.check_in_process().map_err(RunDirError::Refused)?;
+            job.experiment
+                .check_in_process()
+                .map_err(|e| RunDirError::Refused(Box::new(e)))?;
         }
         let mut summaries = Vec::with_capacity(self.jobs.len());
         for Job { experiment, dir, .. } in &self.jobs {
@@ -222,7 +236,7 @@ impl RunDir {
             }
             let summary = outcome.map_err(|source| RunDirError::Run {
                 experiment: experiment.name.clone(),
-                source,
+                source: Box::new(source),
             })?;
             write(experiment, &summary, dir, quiet, pictures)?;
             summaries.push(summary);
