@@ -1,16 +1,17 @@
 //! The paper's robust qualitative claims, each over several fixed seeds. The experiments are the
 //! ones `acps experiment` runs, shortened where the claim allows it.
 
-use acps::experiment::{MethodSummary, Summary};
-use acps::paper::{self, Options};
-use acps::progress::Progress;
+use acps_experiments::paper;
+use acps_experiments::progress::Progress;
+use acps_experiments::settings::ExperimentFile;
+use acps_experiments::summary::{MethodSummary, Summary};
 use acps_learner::Method;
 
-fn options(runs: usize, methods: &[Method]) -> Options {
-    Options {
-        runs,
+fn options(runs: usize, methods: &[Method]) -> ExperimentFile {
+    ExperimentFile {
+        runs: Some(runs),
         methods: Some(methods.to_vec()),
-        ..Options::default()
+        ..Default::default()
     }
 }
 

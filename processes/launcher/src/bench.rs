@@ -47,7 +47,7 @@ pub struct BenchOptions {
     /// Largest fleet.
     pub max_workers: usize,
     /// Tasks each worker keeps in flight.
-    pub worker_in_flight: usize,
+    pub worker_queue_depth: usize,
     /// Niceness of the workers (default: [`acps_fleet::processes::default_nice`]).
     pub worker_nice: Option<u8>,
     /// Multiplies the amount of work per row (1 = a few seconds per row).
@@ -436,7 +436,7 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
         builder
             .spawn_workers(
                 workers,
-                acps_experiments::workers::command(options.worker_in_flight, workers),
+                acps_experiments::workers::command(options.worker_queue_depth, workers),
             )
             // The clock starts with the whole fleet at work, not with its first worker.
             .start_with(workers)
@@ -545,7 +545,7 @@ fn relay_command(
         &format!("{name}-host"),
     ]);
     command.args(["--workers", &workers.to_string()]);
-    command.args(["--worker-in-flight", &options.worker_in_flight.to_string(), "-q"]);
+    command.args(["--worker-queue-depth", &options.worker_queue_depth.to_string(), "-q"]);
     if let Some(nice) = options.worker_nice {
         command.args(["--worker-nice", &nice.to_string()]);
     }

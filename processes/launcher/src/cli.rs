@@ -5,6 +5,7 @@ use acps_experiments::run_dir::DEFAULT_CHECKPOINT_EVERY;
 use acps_experiments::settings::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
 use acps_fleet::processes::MAX_NICE;
 use acps_wire::ipc::{MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS};
+use acps_worker::DEFAULT_QUEUE_DEPTH;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -176,7 +177,8 @@ impl LearnArgs {
             },
             started: StartedWorkers {
                 workers: self.workers,
-                worker_in_flight: DEFAULT_WORKER_IN_FLIGHT,
+                worker_queue_depth: DEFAULT_QUEUE_DEPTH,
+                deprecated: DeprecatedWorkerInFlight { worker_in_flight: None },
                 worker_nice: WorkerNiceArg { worker_nice: None },
                 worker_command: None,
             },
@@ -196,10 +198,12 @@ pub(crate) struct BenchArgs {
     /// number of cores, at most 128].
     #[arg(long, allow_hyphen_values = true, value_parser = integer::<usize>(1, MAX_WORKERS as u64))]
     pub(crate) max_workers: Option<usize>,
-    /// Tasks each worker keeps in flight, asked for or queued (1..=128; at most 8 of rollouts
+    /// Each worker's queue: tasks it keeps asked for or queued (1..=128; at most 8 of rollouts
     /// slower than a batch's 800 us, which travel alone).
-    #[arg(long, default_value_t = 128, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
-    pub(crate) worker_in_flight: usize,
+    #[arg(long, default_value_t = 128, allow_hyphen_values = true, value_parser = queue_depth())]
+    pub(crate) worker_queue_depth: usize,
+    #[command(flatten)]
+    pub(crate) deprecated: DeprecatedWorkerInFlight,
     /// Multiplies the work per measurement, in (0, 100] (1: a few seconds per row and round; the
     /// default bench takes 62 s on 2 idle cores, up to 2.5 minutes on a busy machine, and warns
     /// when other programs took CPU time from it).
@@ -272,16 +276,19 @@ pub(crate) struct StartedWorkers {
     /// [default: the number of cores, at most 128].
     #[arg(long, allow_hyphen_values = true, value_parser = integer::<usize>(0, MAX_WORKERS as u64))]
     pub(crate) workers: Option<usize>,
-    /// Tasks each started worker keeps in flight, asked for or queued (1..=128; at most 8 of
-    /// rollouts slower than a batch's 800 us, which travel alone).
-    #[arg(long, default_value_t = DEFAULT_WORKER_IN_FLIGHT, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
-    pub(crate) worker_in_flight: usize,
+    /// Each started worker's queue: tasks it keeps asked for or queued (1..=128; at most 8 of
+    /// rollouts slower than a batch's 800 us, which travel alone). Not the learner's window
+    /// (--in-flight), which sets the results.
+    #[arg(long, default_value_t = DEFAULT_QUEUE_DEPTH, allow_hyphen_values = true, value_parser = queue_depth())]
+    pub(crate) worker_queue_depth: usize,
+    #[command(flatten)]
+    pub(crate) deprecated: DeprecatedWorkerInFlight,
     #[command(flatten)]
     pub(crate) worker_nice: WorkerNiceArg,
     /// Start the --workers W workers with this shell command instead of `acps worker`: your
     /// own simulator's worker, in any language (a problem file's problem needs it, or
     /// --workers 0). Each runs as `sh -c "exec CMD"` with ACPS_RUN (the run's name) and
-    /// ACPS_WORKER_INDEX (0..W-1) set; --worker-in-flight does not apply.
+    /// ACPS_WORKER_INDEX (0..W-1) set; --worker-queue-depth does not apply.
     #[arg(long, value_name = "CMD")]
     pub(crate) worker_command: Option<String>,
 }
@@ -325,11 +332,14 @@ pub(crate) struct WorkerArgs {
     /// a learner sets for the workers it starts].
     #[arg(long)]
     pub(crate) run: Option<String>,
-    /// Tasks kept in flight, asked for or queued (1..=128): more hides the wake-up latency
-    /// between processes; cheap rollouts travel in batches of up to half of them, and at most 8
-    /// of rollouts slower than a batch's 800 us, which travel alone, are in flight.
-    #[arg(long, default_value_t = 4, allow_hyphen_values = true, value_parser = in_flight_per_worker())]
-    pub(crate) in_flight: usize,
+    /// The worker's queue: tasks it keeps asked for or queued (1..=128): more hides the wake-up
+    /// latency between processes; cheap rollouts travel in batches of up to half of them, and at
+    /// most 8 of rollouts slower than a batch's 800 us, which travel alone, are in flight.
+    #[arg(long, default_value_t = DEFAULT_QUEUE_DEPTH, allow_hyphen_values = true, value_parser = queue_depth())]
+    pub(crate) queue_depth: usize,
+    /// Deprecated name of --queue-depth (a worker's queue is not the learner's window).
+    #[arg(long = "in-flight", hide = true, conflicts_with = "queue_depth", allow_hyphen_values = true, value_parser = queue_depth())]
+    pub(crate) in_flight: Option<usize>,
     /// The worker's name in iceoryx2's node list: 1 to 128 ASCII letters, digits, '-', '_' and
     /// '.', not 'learner' (default: worker-PID).
     #[arg(long)]
@@ -407,13 +417,35 @@ fn number(
     }
 }
 
-/// A worker's tasks in flight: what the task service holds per worker.
-fn in_flight_per_worker() -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
+/// A worker's queue depth: what the task service holds per worker.
+fn queue_depth() -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync + 'static {
     integer(1, MAX_IN_FLIGHT_PER_WORKER as u64)
 }
 
-/// Default of `acps run --worker-in-flight`.
-pub(crate) const DEFAULT_WORKER_IN_FLIGHT: usize = 4;
+/// `--worker-in-flight`, the old name of `--worker-queue-depth`, still taken with a warning.
+#[derive(clap::Args)]
+pub(crate) struct DeprecatedWorkerInFlight {
+    /// Deprecated name of --worker-queue-depth (a worker's queue is not the learner's window).
+    #[arg(long = "worker-in-flight", hide = true, conflicts_with = "worker_queue_depth", allow_hyphen_values = true, value_parser = queue_depth())]
+    worker_in_flight: Option<usize>,
+}
+
+impl DeprecatedWorkerInFlight {
+    /// `depth`, or the deprecated option's value with a warning that names the new one.
+    pub(crate) fn or(&self, depth: usize) -> usize {
+        deprecated("--worker-in-flight", "--worker-queue-depth", self.worker_in_flight).unwrap_or(depth)
+    }
+}
+
+/// `value` of the deprecated option `old`, after a warning to use `new` instead.
+pub(crate) fn deprecated(old: &str, new: &str, value: Option<usize>) -> Option<usize> {
+    if value.is_some() {
+        eprintln!(
+            "warning: {old} is deprecated and will be removed: use {new} (a worker's queue, not the learner's window --in-flight)"
+        );
+    }
+    value
+}
 
 impl Cli {
     /// How many -v were given.
@@ -446,7 +478,7 @@ mod tests {
                 "0",
                 "--nice",
                 "0",
-                "--in-flight",
+                "--queue-depth",
                 "1",
             ][..],
             &[
@@ -458,7 +490,7 @@ mod tests {
                 "1000000",
                 "--nice",
                 "19",
-                "--in-flight",
+                "--queue-depth",
                 "128",
             ],
             &[
@@ -470,7 +502,7 @@ mod tests {
                 "1",
                 "--rounds",
                 "1",
-                "--worker-in-flight",
+                "--worker-queue-depth",
                 "1",
             ],
             &[
@@ -482,7 +514,7 @@ mod tests {
                 "128",
                 "--rounds",
                 "100",
-                "--worker-in-flight",
+                "--worker-queue-depth",
                 "128",
             ],
             &["acps", "evaluate", "dir", "--run", "0"],

@@ -2,7 +2,7 @@
 
 use crate::bench::BenchEvent;
 use crate::cli::{
-    BenchArgs, Command, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs,
+    self, BenchArgs, Command, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs,
 };
 use acps_experiments::checkpoints::Checkpoints;
 use acps_experiments::experiment::RunError;
@@ -300,7 +300,7 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let options = crate::bench::BenchOptions {
         envs: args.env,
         max_workers: args.max_workers.unwrap_or(cores.min(ipc::MAX_WORKERS)),
-        worker_in_flight: args.worker_in_flight,
+        worker_queue_depth: args.deprecated.or(args.worker_queue_depth),
         worker_nice: args.worker_nice.worker_nice,
         scale: args.scale,
         rounds: args.rounds,
@@ -361,7 +361,7 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     let options = WorkerOptions {
-        in_flight: args.in_flight,
+        in_flight: cli::deprecated("--in-flight", "--queue-depth", args.in_flight).unwrap_or(args.queue_depth),
         name,
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
         spin: Duration::from_micros(args.spin_us),
@@ -514,7 +514,7 @@ impl StartedWorkers {
                 }
                 None => builder.spawn_workers(
                     workers,
-                    acps_experiments::workers::command(self.worker_in_flight, workers),
+                    acps_experiments::workers::command(self.deprecated.or(self.worker_queue_depth), workers),
                 ),
             };
             if let Some(nice) = self.worker_nice.worker_nice {

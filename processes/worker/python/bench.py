@@ -1,10 +1,10 @@
 """Rollouts per second of Python workers through a real fleet.
 
 A learner (``acps run function --workers 0``, the built-in contextual function with a random
-context choice and ``--in-flight`` training tasks in flight) serves W Python worker processes
-whose rollout is trivial (``--rollout-us 0``) or busy-waits that many microseconds. Each worker
-reports its rollouts and the seconds from joining to the run's end; the rate is their total
-rollouts over the longest of those times.
+context choice and 64 training tasks in flight) serves W Python worker processes, each with a
+queue of ``--queue-depth`` tasks, whose rollout is trivial (``--rollout-us 0``) or busy-waits
+that many microseconds. Each worker reports its rollouts and the seconds from joining to the
+run's end; the rate is their total rollouts over the longest of those times.
 
     python bench.py                                  # trivial rollouts, W = 1
     python bench.py --workers 1 2 --rollout-us 1000  # ~1 ms rollouts at W = 1 and W = 2
@@ -29,7 +29,7 @@ import acps_worker
 ROOT = Path(__file__).resolve().parents[3]
 
 
-def worker(run: str, identity: str, rollout_us: int, in_flight: int) -> None:
+def worker(run: str, identity: str, rollout_us: int, queue_depth: int) -> None:
     """One worker process: serve ``run`` and print its report as JSON."""
     name, settings, parameters = json.loads(identity)
     environment = acps_worker.Environment(name, int(settings), tuple(parameters))
@@ -43,7 +43,7 @@ def worker(run: str, identity: str, rollout_us: int, in_flight: int) -> None:
                 pass
         return -abs(task.theta[0]), 1.0 + abs(task.theta[0])
 
-    report = acps_worker.serve(rollout, run, environment=environment, in_flight=in_flight)
+    report = acps_worker.serve(rollout, run, environment=environment, queue_depth=queue_depth)
     print(
         json.dumps(
             {"exit": report.exit.value, "rollouts": report.rollouts, "seconds": report.seconds}
@@ -51,7 +51,7 @@ def worker(run: str, identity: str, rollout_us: int, in_flight: int) -> None:
     )
 
 
-def measure(acps: str, workers: int, episodes: int, rollout_us: int, in_flight: int) -> float:
+def measure(acps: str, workers: int, episodes: int, rollout_us: int, queue_depth: int) -> float:
     """Rollouts per second of ``workers`` Python workers; also prints the row."""
     run = f"bench-{os.getpid()}-{workers}"
     with tempfile.TemporaryDirectory() as out:
@@ -113,7 +113,7 @@ def measure(acps: str, workers: int, episodes: int, rollout_us: int, in_flight: 
                     run,
                     identity,
                     str(rollout_us),
-                    str(in_flight),
+                    str(queue_depth),
                 ],
                 stdout=subprocess.PIPE,
                 text=True,
@@ -127,7 +127,7 @@ def measure(acps: str, workers: int, episodes: int, rollout_us: int, in_flight: 
         seconds = float(max(r["seconds"] for r in reports))
         rate = rollouts / seconds
         print(
-            f"W={workers} rollout={rollout_us} us in_flight={in_flight}: {rollouts} rollouts in "
+            f"W={workers} rollout={rollout_us} us queue_depth={queue_depth}: {rollouts} rollouts in "
             f"{seconds:.3f} s = {rate:,.0f} rollouts/s",
             flush=True,
         )
@@ -159,11 +159,13 @@ def main() -> None:
     )
     parser.add_argument("--rollout-us", type=int, default=0)
     parser.add_argument(
-        "--in-flight", type=int, default=64, help="tasks each worker keeps in flight"
+        "--queue-depth", type=int, default=64, help="tasks each worker keeps asked for or queued"
     )
     args = parser.parse_args()
     episodes = args.episodes or (2000 if args.rollout_us >= 100 else 100_000)
-    rates = [measure(args.acps, w, episodes, args.rollout_us, args.in_flight) for w in args.workers]
+    rates = [
+        measure(args.acps, w, episodes, args.rollout_us, args.queue_depth) for w in args.workers
+    ]
     if len(rates) > 1:
         print(f"ratio W={args.workers[-1]} / W={args.workers[0]}: {rates[-1] / rates[0]:.2f}")
     assert all(math.isfinite(r) for r in rates)

@@ -72,10 +72,12 @@ pub struct WorkerOptions {
     pub spin: Duration,
 }
 
+pub use acps_wire::ipc::DEFAULT_QUEUE_DEPTH;
+
 impl Default for WorkerOptions {
     fn default() -> Self {
         Self {
-            in_flight: 4,
+            in_flight: DEFAULT_QUEUE_DEPTH,
             name: format!("worker-{}", std::process::id()),
             startup_timeout: Duration::from_secs(10),
             spin: Duration::ZERO,

@@ -18,6 +18,9 @@ use std::time::Duration;
 pub const MAX_WORKERS: usize = 128;
 /// Most tasks one worker keeps in flight.
 pub const MAX_IN_FLIGHT_PER_WORKER: usize = 128;
+/// A worker's queue unless set: the tasks it keeps asked for or queued (the Rust and Python
+/// workers and `acps run --worker-queue-depth` alike).
+pub const DEFAULT_QUEUE_DEPTH: usize = 4;
 /// Most requests one worker has waiting for tasks; one more may only deliver outcomes. The
 /// learner pays for every request channel of every worker whenever it loans an answer
 /// (iceoryx2 looks for returned chunks on each), so there are few: batches fill them.

@@ -4,7 +4,7 @@
 //! tests compare the mirror with [`describe`] (printed by `acps protocol`), so the two cannot
 //! drift apart. docs/PROTOCOL.md explains what they mean.
 
-use crate::ipc::{LIMITS, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS, RUN_ENV};
+use crate::ipc::{DEFAULT_QUEUE_DEPTH, LIMITS, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS, RUN_ENV};
 use crate::wire::{
     Answer, MAX_BATCH, MAX_CONTEXT, MAX_DIAGNOSTICS, MAX_THETA, PROTOCOL_VERSION, Refusal, Response, WireEnvironment,
     WireOutcome, WireTask, WorkerMessage,
@@ -146,7 +146,7 @@ pub fn describe() -> Value {
             "MAX_NAME": MAX_NAME, "MAX_CONTEXT": MAX_CONTEXT, "MAX_THETA": MAX_THETA,
             "MAX_DIAGNOSTICS": MAX_DIAGNOSTICS, "MAX_BATCH": MAX_BATCH, "MAX_WORKERS": MAX_WORKERS,
             "MAX_IN_FLIGHT_PER_WORKER": MAX_IN_FLIGHT_PER_WORKER,
-            "MAX_ASKING_REQUESTS": MAX_ASKING_REQUESTS,
+            "MAX_ASKING_REQUESTS": MAX_ASKING_REQUESTS, "DEFAULT_QUEUE_DEPTH": DEFAULT_QUEUE_DEPTH,
         },
         "codes": {
             "kind": {"train": 0, "evaluate": 1, "baseline": 2},

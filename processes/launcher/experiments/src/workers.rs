@@ -29,10 +29,10 @@ impl EnvironmentFactory for ModelFactory {
     }
 }
 
-/// The command of started worker `index`: `acps worker` of this executable, keeping
-/// `in_flight` tasks, which joins the run the fleet names in its environment. `workers` is the
+/// The command of started worker `index`: `acps worker` of this executable, with a queue of
+/// `queue_depth` tasks, which joins the run the fleet names in its environment. `workers` is the
 /// size of the fleet, which decides whether workers poll before they block.
-pub fn command(in_flight: usize, workers: usize) -> impl Fn(usize) -> Command {
+pub fn command(queue_depth: usize, workers: usize) -> impl Fn(usize) -> Command {
     let exe = std::env::current_exe();
     let spin = acps_fleet::processes::spin(workers).as_micros().to_string();
     move |index| {
@@ -40,8 +40,8 @@ pub fn command(in_flight: usize, workers: usize) -> impl Fn(usize) -> Command {
         let mut command = Command::new(exe.as_deref().unwrap_or(Path::new("acps")));
         command.args([
             "worker",
-            "--in-flight",
-            &in_flight.to_string(),
+            "--queue-depth",
+            &queue_depth.to_string(),
             "--spin-us",
             &spin,
             "--name",

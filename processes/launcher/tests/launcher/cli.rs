@@ -398,12 +398,12 @@ fn fleet_options_are_checked_before_anything_starts() {
             "'a_b' must be 1 to 40 characters of letters, digits and '-'",
         ),
         (
-            &["run", "grid", "--worker-in-flight", "0"],
-            "invalid value '0' for '--worker-in-flight <WORKER_IN_FLIGHT>': must be an integer in 1..=128",
+            &["run", "grid", "--worker-queue-depth", "0"],
+            "invalid value '0' for '--worker-queue-depth <WORKER_QUEUE_DEPTH>': must be an integer in 1..=128",
         ),
         (
-            &["worker", "--run", "x", "--in-flight", "129"],
-            "invalid value '129' for '--in-flight <IN_FLIGHT>': must be an integer in 1..=128",
+            &["worker", "--run", "x", "--queue-depth", "129"],
+            "invalid value '129' for '--queue-depth <QUEUE_DEPTH>': must be an integer in 1..=128",
         ),
         (
             &["worker", "--run", "x", "--startup-timeout=-1"],
@@ -509,9 +509,9 @@ fn numbers_outside_their_ranges_are_refused_before_anything_runs() {
             "invalid value '101' for '--rounds <ROUNDS>': must be an integer in 1..=100",
         ),
         (
-            &["bench", "--worker-in-flight", "129"],
+            &["bench", "--worker-queue-depth", "129"],
             2,
-            "'--worker-in-flight <WORKER_IN_FLIGHT>': must be an integer in 1..=128",
+            "'--worker-queue-depth <WORKER_QUEUE_DEPTH>': must be an integer in 1..=128",
         ),
         (
             &["worker", "--run", "x", "--spin-us", "1000001"],
@@ -985,6 +985,68 @@ fn a_run_killed_mid_way_resumes_to_the_same_summary() {
         String::from_utf8_lossy(&acps(&["experiment", "function", "--resume", "a", "--out", "b"]).stderr).into_owned();
     assert!(
         stderr.contains("--resume a and --out b name different directories"),
+        "{stderr}"
+    );
+}
+
+/// A worker's queue and the learner's window have different names now; the old names of the
+/// worker's queue still work, with a warning that names the new one.
+#[test]
+fn the_old_names_of_a_workers_queue_still_work_with_a_warning() {
+    let dir = temp_dir("deprecated-queue");
+    let args: Vec<String> = [
+        "run",
+        "function",
+        "--method",
+        "random",
+        "--runs",
+        "1",
+        "--episodes",
+        "50",
+        "--workers",
+        "1",
+        "--worker-in-flight",
+        "2",
+        "-q",
+        "--checkpoint-every",
+        "0",
+        "--out",
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .chain([dir.to_str().unwrap().to_string()])
+    .collect();
+    let output = acps_strings(&args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("warning: --worker-in-flight is deprecated and will be removed: use --worker-queue-depth"),
+        "{stderr}"
+    );
+    let output = acps_strings(&[
+        "worker".into(),
+        "--in-flight".into(),
+        "4".into(),
+        "--queue-depth".into(),
+        "4".into(),
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("'--in-flight <IN_FLIGHT>' cannot be used with '--queue-depth <QUEUE_DEPTH>'"),
+        "{stderr}"
+    );
+    let output = acps_strings(&[
+        "worker".into(),
+        "--in-flight".into(),
+        "4".into(),
+        "--run".into(),
+        "no-such-run".into(),
+        "--startup-timeout".into(),
+        "0".into(),
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("warning: --in-flight is deprecated and will be removed: use --queue-depth"),
         "{stderr}"
     );
 }

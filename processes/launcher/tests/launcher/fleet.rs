@@ -73,7 +73,7 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
                     .args([
                         "--workers",
                         workers,
-                        "--worker-in-flight",
+                        "--worker-queue-depth",
                         in_flight,
                         "--run",
                         run.as_str(),

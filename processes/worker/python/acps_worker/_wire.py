@@ -27,6 +27,8 @@ MAX_BATCH = 32
 MAX_WORKERS = 128
 #: Most tasks one worker keeps in flight.
 MAX_IN_FLIGHT_PER_WORKER = 128
+#: A worker's queue unless set: the tasks it keeps asked for or queued (as Rust's).
+DEFAULT_QUEUE_DEPTH = 4
 #: Most requests one worker has waiting for tasks; one more may only deliver outcomes.
 MAX_ASKING_REQUESTS = 8
 

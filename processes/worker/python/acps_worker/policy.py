@@ -1,7 +1,8 @@
 """Learned policies of a run directory (``policies/METHOD-runR.json``, format
-``acps-policy-2``, written by ``processes/launcher/src/records.rs``): the mean ``W^T phi(s)``
-computed with the same floating-point operations, in the same order, as the Rust learner
-(``processes/learner/src/creps/features.rs`` and nalgebra's ``tr_mul``), so the bits agree."""
+``acps-policy-2``, written by ``processes/launcher/experiments/src/records.rs``): the mean
+``W^T phi(s)`` computed with the same floating-point operations, in the same order, as the Rust
+learner (``processes/learner/src/creps/features.rs`` and nalgebra's ``tr_mul``), so the bits
+agree."""
 
 from __future__ import annotations
 

@@ -16,6 +16,7 @@ import signal
 import threading
 import time
 import traceback
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -266,7 +267,8 @@ def serve(
     run: str | None = None,
     *,
     environment: Environment | None = None,
-    in_flight: int = 4,
+    queue_depth: int = _wire.DEFAULT_QUEUE_DEPTH,
+    in_flight: int | None = None,
     name: str | None = None,
     startup_timeout: float = 10.0,
     stop: threading.Event | None = None,
@@ -281,7 +283,9 @@ def serve(
     of up to 16 diagnostics; ``None``, an exception or non-finite numbers make a failed
     outcome (the first exception is logged with its traceback). ``environment`` is the
     identity this worker serves (default :meth:`Environment.unnamed`, which matches only
-    problems that name none). ``in_flight`` (1..=128) tasks are kept asked for or queued.
+    problems that name none). ``queue_depth`` (1..=128) tasks are kept asked for or queued: the
+    worker's queue, not the learner's window (``in_flight``, its old name, still works with a
+    :class:`DeprecationWarning`).
 
     Raises :class:`NoLearnerError` when no learner comes within ``startup_timeout`` seconds,
     :class:`RefusedError` when the learner refuses this worker, :class:`ProtocolError` for a
@@ -293,12 +297,21 @@ def serve(
     if not run:
         raise ValueError(f"no run to join: pass run=NAME or set {_wire.RUN_ENV}")
     _ipc.check_run_name(run)
-    if isinstance(in_flight, bool) or not isinstance(in_flight, int):
-        raise TypeError(f"worker option in_flight must be an int, got {in_flight!r}")
-    if not 1 <= in_flight <= _wire.MAX_IN_FLIGHT_PER_WORKER:
+    option = "queue_depth"
+    if in_flight is not None:
+        warnings.warn(
+            "serve(in_flight=...) is deprecated: use queue_depth (a worker's queue, not the "
+            "learner's window)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        option, queue_depth = "in_flight", in_flight
+    if isinstance(queue_depth, bool) or not isinstance(queue_depth, int):
+        raise TypeError(f"worker option {option} must be an int, got {queue_depth!r}")
+    if not 1 <= queue_depth <= _wire.MAX_IN_FLIGHT_PER_WORKER:
         raise ValueError(
-            f"worker option in_flight must be in 1..={_wire.MAX_IN_FLIGHT_PER_WORKER}, "
-            f"got {in_flight}"
+            f"worker option {option} must be in 1..={_wire.MAX_IN_FLIGHT_PER_WORKER}, "
+            f"got {queue_depth}"
         )
     name = _ipc.check_worker_name(name if name is not None else f"worker-{os.getpid()}")
     if not startup_timeout >= 0:
@@ -307,7 +320,7 @@ def serve(
         run=run,
         rollout=rollout,
         environment=environment if environment is not None else Environment.unnamed(),
-        in_flight=in_flight,
+        in_flight=queue_depth,
         name=name,
         startup_timeout=startup_timeout,
         stop=stop if stop is not None else threading.Event(),

@@ -52,7 +52,7 @@ class ServeTest(unittest.TestCase):
         """Every task is performed; the learner finishes; nothing is left behind."""
         run = run_name("finish")
         learner = Learner(run, FUNCTION)
-        report = acps_worker.serve(bowl, run, environment=self.environment, in_flight=8)
+        report = acps_worker.serve(bowl, run, environment=self.environment, queue_depth=8)
         summary = learner.finished()
         self.assertEqual(report.exit, Exit.FINISHED)
         self.assertEqual(report.failed, 0)
@@ -147,9 +147,15 @@ class ServeTest(unittest.TestCase):
         self.assert_clean(run)
 
     def test_options_are_checked(self) -> None:
-        """in_flight out of range, a bad run name, no run at all."""
-        with self.assertRaisesRegex(ValueError, "in_flight must be in 1..=128, got 0"):
-            acps_worker.serve(bowl, "x", in_flight=0)
+        """queue_depth out of range, a bad run name, no run at all."""
+        with self.assertRaisesRegex(ValueError, "queue_depth must be in 1..=128, got 0"):
+            acps_worker.serve(bowl, "x", queue_depth=0)
+        # The old name still works, with a warning that names the new one.
+        with (
+            self.assertWarnsRegex(DeprecationWarning, "use queue_depth"),
+            self.assertRaisesRegex(ValueError, "in_flight must be in 1..=128, got 129"),
+        ):
+            acps_worker.serve(bowl, "x", in_flight=129)
         with self.assertRaisesRegex(ValueError, "must be 1 to 40 characters"):
             acps_worker.serve(bowl, "a_b")
         # Worker names as the Rust worker takes them.
