@@ -10,9 +10,12 @@ use crate::problem_file::CheckedProblem;
 use crate::settings::{DEFAULT_RUNS, ExperimentFile, ExperimentName, Memory, Resolving, SimName};
 use acps_learner::creps::CRepsConfig;
 use acps_learner::selection::DUcbConfig;
-use acps_learner::{LearnerConfig, Method};
+use acps_learner::{LearnerConfig, Method, SelectorConfig};
 use serde_json::json;
 use std::path::{Path, PathBuf};
+
+/// A problem file's methods unless set.
+const PROBLEM_METHODS: [Method; 2] = [Method::MonotonicProgress, Method::Random];
 
 /// A problem file's C-REPS memory unless set: BOLeRo's window of the last 100 rollouts.
 const WINDOW: usize = 100;
@@ -52,7 +55,12 @@ impl Plan {
         let stem = file.and_then(|f| f.path().file_stem()).and_then(|s| s.to_str());
         let describe = |invalid| describe(invalid, file, cli);
         let subject = match (settings.check().map_err(describe)?, &settings.problem) {
-            (Kind::File, Some(problem)) => Subject::File(Box::new(problem.check(stem).map_err(describe)?)),
+            (Kind::File, Some(problem)) => {
+                // Only methods that choose among the training contexts need them.
+                let methods = paper::methods(&settings, &PROBLEM_METHODS, |_| DUcbConfig::default());
+                let box_only = methods.iter().all(SelectorConfig::draws_from_space);
+                Subject::File(Box::new(problem.check(stem, box_only).map_err(describe)?))
+            }
             (Kind::Paper(name), _) => Subject::Paper(name),
             (Kind::File, None) => unreachable!("a file's kind is that of its [problem] table"),
         };
@@ -177,7 +185,7 @@ fn problem_experiment(checked: &CheckedProblem, s: &ExperimentFile) -> Experimen
         "first_visit": paper::first_visit(s),
         "eval_every": learner.eval_every,
     });
-    let methods = paper::methods(s, &[Method::MonotonicProgress, Method::Random], |_| ducb.clone());
+    let methods = paper::methods(s, &PROBLEM_METHODS, |_| ducb.clone());
     Experiment {
         name: problem.name.clone(),
         settings: paper::with_teachers(s, settings, &methods),

@@ -212,7 +212,11 @@ struct Contexts {
 impl ProblemFile {
     /// Check every key and build the problem; `stem` (the file's name without `.toml`) is the
     /// default name.
-    pub(crate) fn check(&self, stem: Option<&str>) -> Result<CheckedProblem, Invalid> {
+    ///
+    /// When every method draws its contexts from the continuous box (`box_only`), the training
+    /// contexts may be left out: the test contexts then stand in for them where the learner
+    /// needs points (the cells of a best-per-task memory).
+    pub(crate) fn check(&self, stem: Option<&str>, box_only: bool) -> Result<CheckedProblem, Invalid> {
         let theta0 = self.theta0.clone().ok_or(Invalid::missing("problem.theta0"))?;
         if !(1..=MAX_THETA).contains(&theta0.len()) || !bounded(&theta0) {
             return Err(out_of_range("problem.theta0", format!("{theta0:?}")));
@@ -220,8 +224,19 @@ impl ProblemFile {
         let training = contexts(
             ("problem.training_contexts", &self.training_contexts),
             ("problem.training_grid", &self.training_grid),
-        )?
-        .ok_or(Invalid::missing("problem.training_contexts"))?;
+        )?;
+        let given_test = contexts(
+            ("problem.test_contexts", &self.test_contexts),
+            ("problem.test_grid", &self.test_grid),
+        )?;
+        let training = match (training, &given_test) {
+            (Some(training), _) => training,
+            (None, Some(test)) if box_only => Contexts {
+                key: test.key,
+                points: test.points.clone(),
+            },
+            (None, _) => return Err(Invalid::missing("problem.training_contexts")),
+        };
         let dim = match &self.context_low {
             Some(low) => low.len(),
             None => training.points[0].len(),
@@ -234,10 +249,7 @@ impl ProblemFile {
             };
             return Err(Invalid::element(key, format!("{dim}-D contexts")));
         }
-        let test = contexts(
-            ("problem.test_contexts", &self.test_contexts),
-            ("problem.test_grid", &self.test_grid),
-        )?;
+        let test = given_test;
         for set in std::iter::once(&training).chain(&test) {
             if let Some((i, point)) = set.points.iter().enumerate().find(|(_, p)| p.len() != dim) {
                 return Err(Invalid::element(

@@ -560,3 +560,48 @@ fn d_ucb_and_c_reps_settings_are_refused_outside_their_ranges() {
         "{message}"
     );
 }
+
+/// A problem run only by methods that draw from the continuous box needs no training contexts;
+/// a method that chooses among them does, and says so.
+#[test]
+fn training_contexts_are_required_only_by_methods_that_choose_among_them() {
+    let table = "[problem]\nname = \"boxed\"\ntest_contexts = [[0.5], [-0.5]]\ncontext_low = [-1.0]\ncontext_high = [1.0]\ntheta0 = [0.0]\n";
+    let file = |methods: &str| LoadedFile::parse(Path::new("p.toml"), format!("methods = {methods}\n{table}")).unwrap();
+    for methods in [
+        "[\"random-continuous\"]",
+        "[\"random-continuous\", \"self-paced\", \"alp-gmm\"]",
+    ] {
+        let plan = Plan::new(Some(&file(methods)), &ExperimentFile::default()).unwrap();
+        let job = plan.jobs(Path::new("out")).swap_remove(0);
+        // The learners of every (method, run) start: the test contexts stand in for the training
+        // contexts.
+        assert_eq!(job.experiment.jobs().unwrap().len(), job.experiment.methods.len() * 20);
+        // The resolved file leaves them out and re-runs the same.
+        let resolved = plan.resolved();
+        assert_eq!(resolved.problem.as_ref().unwrap().training_contexts, None);
+        let again = LoadedFile::parse(Path::new("r.toml"), resolved.to_toml("").unwrap()).unwrap();
+        assert_eq!(
+            Plan::new(Some(&again), &ExperimentFile::default()).unwrap().resolved(),
+            resolved
+        );
+    }
+    for methods in ["[\"random\"]", "[\"random-continuous\", \"monotonic-progress\"]"] {
+        let message = Plan::new(Some(&file(methods)), &ExperimentFile::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            message.starts_with("p.toml:2: problem.training_contexts must be set"),
+            "{message}"
+        );
+    }
+    // Unset methods are the default monotonic progress and random, which need them.
+    let message = Plan::new(
+        Some(&LoadedFile::parse(Path::new("p.toml"), table.into()).unwrap()),
+        &ExperimentFile::default(),
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(message.contains("problem.training_contexts must be set"), "{message}");
+}
