@@ -331,6 +331,7 @@ pub(crate) fn creps(preset: CRepsConfig, s: &ExperimentFile, memory: Memory, siz
         epsilon: s.epsilon.unwrap_or(preset.epsilon),
         initial_sigma: s.initial_sigma.unwrap_or(preset.initial_sigma),
         ridge: s.ridge.unwrap_or(preset.ridge),
+        eta_min: s.eta_min.unwrap_or(preset.eta_min),
         update_every: s.update_every.unwrap_or(preset.update_every),
         memory: match s.memory.unwrap_or(memory) {
             Memory::Window => MemoryConfig::SlidingWindow { capacity: size },

@@ -12,7 +12,7 @@
 use crate::experiment::Experiment;
 use crate::keys::{ALL, ANY_METHOD, FILE, Invalid, Key, Kind, PAPER, Problem, WITH_CREPS, out_of_range};
 use crate::problem_file::{PROBLEM_KEYS, ProblemFile};
-use acps_learner::creps::{CRepsConfig, MemoryConfig};
+use acps_learner::creps::{CRepsConfig, ETA_MIN_RANGE, MemoryConfig};
 use acps_learner::selection::{AlpGmmConfig, EmaRates, FirstVisit};
 use acps_learner::{Method, SelectorConfig};
 use acps_wire::ipc;
@@ -516,6 +516,18 @@ settings! {
         methods: ANY_METHOD,
         check: |x, _| (0.0..=1e6).contains(x),
         resolved: |r| r.creps().map(|c| c.ridge),
+    },
+    /// Not toy: C-REPS's floor of the dual's temperature eta, relative to the returns' standard
+    /// deviation in each update.
+    eta_min: f64 {
+        arg: (long, allow_hyphen_values = true, value_parser = parse_option::<f64>("eta_min")),
+        default: "1e-5",
+        accepted: "a number in 1e-8..=1 (relative to the standard deviation of the returns)",
+        why: "below 1e-8 the log-weights carry less than 7 significant digits; above 1 the floor overrides the KL bound for any epsilon above about 0.5 (the paper suggests 1e-6..1e-4 in reward units)",
+        applies: WITH_CREPS,
+        methods: ANY_METHOD,
+        check: |x, _| (ETA_MIN_RANGE.0..=ETA_MIN_RANGE.1).contains(x),
+        resolved: |r| r.creps().map(|c| c.eta_min),
     },
     /// D-UCB padding strength xi.
     xi: f64 {
