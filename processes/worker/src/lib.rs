@@ -14,6 +14,7 @@
 //!
 //! Embedding: call [`serve`] on any thread of your program with an [`EnvironmentFactory`] (for
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
+#![warn(missing_docs)]
 
 use acps_shared::{Environment, EnvironmentSpec, Serves};
 /// A run's name, which a worker joins by; [`RunName::from_env`] reads the one a fleet gives the
