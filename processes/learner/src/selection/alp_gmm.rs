@@ -18,13 +18,13 @@
 //! A fit needs randomness (its k-means++ start), which only [`choose`](ContextSelector::choose)
 //! receives: a fit that falls due in `observe` is made at the next choice.
 
-use super::geometry::{nearest, project};
+use super::geometry::project;
 use super::gmm::{Component, Mixture};
 use super::neighbours::NeighbourIndex;
 use super::progress::proportional;
 use super::validate::check_space_and_snap;
 use super::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
-use acps_shared::ContextSpace;
+use acps_shared::{ContextSpace, nearest};
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
