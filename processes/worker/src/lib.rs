@@ -40,7 +40,21 @@ pub trait EnvironmentFactory {
 
     /// The environment for `spec`, or why there is none. The worker refuses the task when the
     /// environment's own spec is not `spec`.
-    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String>;
+    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError>;
+}
+
+/// Why an [`EnvironmentFactory`] provides no environment for a spec: the factory's own error
+/// (building a simulator can fail in as many ways as there are simulators), or a spec a task
+/// carried that does not decode.
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct EnvironmentProvideError(Box<dyn std::error::Error + Send + Sync>);
+
+impl EnvironmentProvideError {
+    /// The factory's `error`.
+    pub fn new(error: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        Self(error.into())
+    }
 }
 
 /// One environment of your own: the worker serves its spec and refuses tasks of any other.
@@ -51,7 +65,7 @@ impl<E: Environment> EnvironmentFactory for Single<E> {
         Serves::One(self.0.spec())
     }
 
-    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError> {
         Ok(&mut self.0)
     }
 }
@@ -105,7 +119,7 @@ pub struct WorkerReport {
 }
 
 /// A worker that could not serve.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum WorkerError {
     /// A bad option.
     #[error("worker option {field} must be {accepted}, got {got}")]
@@ -162,14 +176,15 @@ pub enum WorkerError {
         provided: Box<EnvironmentSpec>,
     },
     /// A task named an environment the factory cannot provide.
-    #[error("task {task_id} of job {job}: no environment: {reason}")]
+    #[error("task {task_id} of job {job}: no environment")]
     Environment {
         /// The job.
         job: u32,
         /// The task.
         task_id: u64,
         /// The factory's reason.
-        reason: String,
+        #[source]
+        reason: EnvironmentProvideError,
     },
 }
 
@@ -382,12 +397,13 @@ pub fn serve(
         let next = if outbox_full { None } else { queue.pop_front() };
         if let Some(wire) = next {
             let task = wire.to_task();
-            let no_environment = |reason: String| WorkerError::Environment {
+            let no_environment = |reason| WorkerError::Environment {
                 job: wire.job,
                 task_id: task.id,
                 reason,
             };
-            let spec = EnvironmentSpec::try_from(wire.environment).map_err(|e| no_environment(e.to_string()))?;
+            let spec = EnvironmentSpec::try_from(wire.environment)
+                .map_err(|e| no_environment(EnvironmentProvideError::new(e)))?;
             let environment = factory.environment(&spec).map_err(no_environment)?;
             let provided = environment.spec();
             if provided != spec {

@@ -12,7 +12,7 @@ use acps_models::throw::{Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPoli
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, Response, WorkerMessage};
-use acps_worker::{EnvironmentFactory, Single, WorkerError, WorkerExit, WorkerOptions};
+use acps_worker::{EnvironmentFactory, EnvironmentProvideError, Single, WorkerError, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -1238,7 +1238,7 @@ impl EnvironmentFactory for Liar {
         Serves::Any
     }
 
-    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError> {
         Ok(&mut self.0)
     }
 }
