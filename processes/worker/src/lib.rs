@@ -17,10 +17,10 @@
 #![warn(missing_docs)]
 
 use acps_shared::{Environment, EnvironmentSpec, Serves};
+use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, TICK};
 /// A run's name, which a worker joins by; [`RunName::from_env`] reads the one a fleet gives the
 /// worker processes it starts.
-pub use acps_wire::ipc::RunName;
-use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, TICK};
+pub use acps_wire::ipc::{RunName, RunNameParseError};
 use acps_wire::wire::{
     Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireOutcome, WireTask, WorkerMessage,
 };
@@ -138,7 +138,7 @@ pub enum WorkerError {
     #[error("no learner serves run '{run}' (waited {waited:?})")]
     NoLearner {
         /// The run.
-        run: String,
+        run: RunName,
         /// How long the worker waited.
         waited: Duration,
     },
@@ -146,7 +146,7 @@ pub enum WorkerError {
     #[error("the learner of run '{run}' refused this worker: {reason}")]
     Refused {
         /// The run.
-        run: String,
+        run: RunName,
         /// Why, naming both sides' protocol versions, run identities or environments.
         reason: String,
     },
@@ -264,7 +264,7 @@ pub fn serve(
                 let _ = ipc::remove_run_files(run);
             }
             return Err(WorkerError::NoLearner {
-                run: run.to_string(),
+                run: run.clone(),
                 waited,
             });
         }
@@ -277,17 +277,23 @@ pub fn serve(
         .tasks
         .client_builder()
         .create()
-        .map_err(|e| IpcError::new("creating the worker's client", e))?;
+        .map_err(IpcError::ClientCreate)?;
     let notifier = services
         .to_learner
         .notifier_builder()
         .create()
-        .map_err(|e| IpcError::new("creating the worker's notifier", e))?;
+        .map_err(|source| IpcError::NotifierCreate {
+            owner: "the worker",
+            source,
+        })?;
     let listener = services
         .to_workers
         .listener_builder()
         .create()
-        .map_err(|e| IpcError::new("creating the worker's listener", e))?;
+        .map_err(|source| IpcError::ListenerCreate {
+            owner: "the worker",
+            source,
+        })?;
     // The learner's identity, learnt from its first answer; 0 asks to join whatever runs.
     let mut identity = 0u64;
     let serves = factory.serves();
@@ -342,9 +348,7 @@ pub fn serve(
             outbox.run = identity;
             outbox.want = want as u32;
             outbox.observe_rollout(slowest);
-            let request = client
-                .send_copy(outbox)
-                .map_err(|e| IpcError::new("sending a request", e))?;
+            let request = client.send_copy(outbox).map_err(IpcError::RequestSend)?;
             *slot = Some((request, want));
             outbox = WorkerMessage::request(identity, 1, serves);
             sent = true;
@@ -352,7 +356,10 @@ pub fn serve(
         unannounced |= sent;
         let outbox_full = outbox.count as usize >= MAX_BATCH;
         if unannounced && wakes_learner(queue.len(), batching.size(), outbox_full) {
-            notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
+            notifier.notify().map_err(|source| IpcError::NotifierNotify {
+                whom: "the learner",
+                source,
+            })?;
             unannounced = false;
         }
         // Polling every slot costs about as much as a trivial rollout, so it waits until the
@@ -361,10 +368,7 @@ pub fn serve(
         if queue.is_empty() || outbox_full {
             for slot in slots.iter_mut() {
                 let Some((request, _)) = slot.as_ref() else { continue };
-                let Some(response) = request
-                    .receive()
-                    .map_err(|e| IpcError::new("receiving a response", e))?
-                else {
+                let Some(response) = request.receive().map_err(IpcError::ResponseReceive)? else {
                     continue;
                 };
                 let answer = *response.user_header();
@@ -383,7 +387,7 @@ pub fn serve(
                     }
                     Some(Response::Refused) | None => {
                         return Err(WorkerError::Refused {
-                            run: run.to_string(),
+                            run: run.clone(),
                             reason: refusal_reason(&answer, identity, &serves),
                         });
                     }
@@ -446,7 +450,13 @@ pub fn serve(
             Ok(woken) => woken,
             // A signal, also a pause and resume (SIGSTOP, SIGCONT): only `stop` ends the worker.
             Err(ListenerWaitError::InterruptSignal) => 0,
-            Err(error) => return Err(IpcError::new("waiting for the learner", error).into()),
+            Err(source) => {
+                return Err(IpcError::ListenerWait {
+                    whom: "the learner",
+                    source,
+                }
+                .into());
+            }
         };
         if woken > 0 {
             silence.heard();
