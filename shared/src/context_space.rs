@@ -144,6 +144,23 @@ pub fn random_unit_vector(dim: usize, rng: &mut dyn RngCore) -> Vec<f64> {
     }
 }
 
+/// Index of the point of `points` nearest to `point` (squared Euclidean distance over the
+/// coordinates both have); among equally near points the first, so a result never depends on
+/// rounding order. A point at a NaN distance (a NaN coordinate on either side) is never nearest:
+/// 0 when no point is at a comparable distance (none, or all NaN), which indexes any non-empty
+/// list.
+pub fn nearest(points: &[Vec<f64>], point: &[f64]) -> usize {
+    let distance2 = |p: &Vec<f64>| p.iter().zip(point).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+    points
+        .iter()
+        .map(distance2)
+        .enumerate()
+        .filter(|(_, d)| !d.is_nan())
+        // `min_by` keeps the first of equal minima.
+        .min_by(|(_, a), (_, b)| a.total_cmp(b))
+        .map_or(0, |(i, _)| i)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -167,5 +184,26 @@ mod tests {
         // Uniform in the disc: the fraction inside radius 0.5 is 0.25.
         let inner = samples.iter().filter(|s| s[0] * s[0] + s[1] * s[1] < 0.25).count() as f64 / 4000.0;
         assert!((inner - 0.25).abs() < 0.03, "inner fraction {inner}");
+    }
+
+    #[test]
+    fn the_nearest_point_is_the_first_of_the_closest_and_never_one_at_a_nan_distance() {
+        let points = [vec![0.0, 0.0], vec![1.0, 1.0], vec![1.0, 0.9]];
+        assert_eq!(nearest(&points, &[0.9, 0.9]), 2);
+        assert_eq!(nearest(&points, &[-1.0, -1.0]), 0);
+        // Ties go to the lowest index, whichever side of the point the tied points lie.
+        assert_eq!(nearest(&[vec![0.0], vec![2.0]], &[1.0]), 0);
+        assert_eq!(nearest(&[vec![2.0], vec![0.0]], &[1.0]), 0);
+        assert_eq!(nearest(&[vec![5.0], vec![2.0], vec![0.0]], &[1.0]), 1);
+        // A NaN distance never wins, wherever it is and whatever its sign.
+        for nan in [f64::NAN, -f64::NAN] {
+            assert_eq!(nearest(&[vec![nan], vec![3.0], vec![2.0]], &[1.0]), 2);
+            assert_eq!(nearest(&[vec![3.0], vec![nan], vec![2.0]], &[1.0]), 2);
+            assert_eq!(nearest(&[vec![f64::INFINITY], vec![nan]], &[1.0]), 0);
+            assert_eq!(nearest(&[vec![nan], vec![f64::INFINITY]], &[1.0]), 1);
+            assert_eq!(nearest(&[vec![nan], vec![nan]], &[1.0]), 0);
+            assert_eq!(nearest(&[vec![3.0], vec![2.0]], &[nan]), 0, "no distance is comparable");
+        }
+        assert_eq!(nearest(&[], &[1.0]), 0);
     }
 }

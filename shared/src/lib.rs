@@ -2,7 +2,8 @@
 //!
 //! - `problem`: [`Problem`], what the learner needs to know about a problem (its contexts,
 //!   space, initial parameters and how evaluations are scored).
-//! - `context_space`: [`ContextSpace`], the box or ball the contexts live in.
+//! - `context_space`: [`ContextSpace`], the box or ball the contexts live in, and the [`nearest`]
+//!   of a list of contexts.
 //! - `task`: the [`Task`] a learner hands out, the [`Outcome`] a rollout returns, and the
 //!   [`Environment`] trait of whatever performs rollouts.
 //! - `seed`: how every random stream of a run is derived from its seed ([`derive_seed`]).
@@ -18,7 +19,7 @@ mod seed;
 mod spec;
 mod task;
 
-pub use context_space::{ContextSpace, ContextSpaceCreateError, random_unit_vector};
+pub use context_space::{ContextSpace, ContextSpaceCreateError, nearest, random_unit_vector};
 pub use fnv::{FNV_OFFSET, fnv1a};
 pub use problem::{EnvironmentMatchError, Problem, ScoreAggregate};
 pub use seed::{Stream, derive_seed};

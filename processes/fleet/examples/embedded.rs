@@ -20,7 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cannon = Cannon::new(CannonSettings::default());
     let run = RunName::new(&format!("embedded-{}", std::process::id()))?;
     // A fleet that starts no worker processes: it serves whoever joins.
-    let mut fleet = Fleet::builder(run.as_str()).start()?;
+    let mut fleet = Fleet::builder(run.clone()).start()?;
     let stop = Arc::new(AtomicBool::new(false));
     // The host's simulator thread. iceoryx2's ports stay on the thread that made them, so the
     // worker creates its own.

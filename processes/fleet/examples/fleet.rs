@@ -43,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Learner::with_selector(config, cannon.problem(), &SelectorConfig::monotonic_progress())
     };
     let mut jobs = vec![FleetJob::new(learner()?)?];
-    let mut fleet = Fleet::builder(format!("cannon-{}", std::process::id()))
+    let mut fleet = Fleet::builder(RunName::new(&format!("cannon-{}", std::process::id()))?)
         .spawn_workers(2, |_| {
             Command::new(std::env::current_exe().expect("this program's path"))
         })

@@ -9,9 +9,10 @@
 
 use crate::processes;
 use crate::server::{
-    self, FleetError, FleetJob, FleetProgress, Learners, Liveness, Observer, Remote, Seat, ServeOptions, TaskSource,
+    self, FleetError, FleetJob, FleetProgress, ForwardingSource, Learners, Liveness, Observer, Remote, Seat,
+    ServeOptions, Source, TaskSource,
 };
-use acps_wire::ipc::{self, IpcError, RunName, ServerError};
+use acps_wire::ipc::{self, RunName, ServerError};
 use std::os::unix::process::CommandExt as _;
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -41,10 +42,10 @@ struct Spawn {
 /// Configures a [`Fleet`]; [`start`](Self::start) starts it.
 ///
 /// ```no_run
-/// use acps_fleet::Fleet;
+/// use acps_fleet::{Fleet, RunName};
 /// use std::process::Command;
 ///
-/// let fleet = Fleet::builder("cannon")
+/// let fleet = Fleet::builder("cannon".parse::<RunName>()?)
 ///     // Two processes of this very program, which serve as workers when told to.
 ///     .spawn_workers(2, |_| {
 ///         let mut command = Command::new(std::env::current_exe().expect("this program"));
@@ -53,11 +54,11 @@ struct Spawn {
 ///     })
 ///     .ctrl_c(true)
 ///     .start()?;
-/// # Ok::<(), acps_fleet::FleetStartError>(())
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[must_use]
 pub struct FleetBuilder {
-    name: String,
+    run: RunName,
     identity: Option<u64>,
     spawn: Option<(usize, WorkerCommand)>,
     nice: Option<u8>,
@@ -70,9 +71,6 @@ pub struct FleetBuilder {
 /// A fleet that could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum FleetStartError {
-    /// The run name is not valid.
-    #[error(transparent)]
-    Name(IpcError),
     /// The run could not be served: another learner of the same name is running
     /// ([`ServerError::Taken`]), or iceoryx2 failed.
     #[error(transparent)]
@@ -148,12 +146,12 @@ impl FleetBuilder {
         self
     }
 
-    /// Start the fleet: validate the name, install the Ctrl-C handler if asked, remove what
+    /// Start the fleet: install the Ctrl-C handler if asked, remove what
     /// dead runs left in shared memory (those of any name whose every node is dead, and the dead
     /// nodes of this run: workers started by hand may already wait for it), and take the run's
     /// learner seat, which is refused at once while another learner of the same run name lives.
     pub fn start(self) -> Result<Fleet, FleetStartError> {
-        let run = RunName::new(&self.name).map_err(FleetStartError::Name)?;
+        let run = self.run;
         let setting = |ok: bool, field, accepted, got: String| {
             if ok {
                 Ok(())
@@ -240,7 +238,7 @@ impl FleetBuilder {
 /// # fn jobs() -> Vec<FleetJob> { unimplemented!() }
 ///
 /// let mut jobs: Vec<FleetJob> = jobs();
-/// let mut fleet = Fleet::builder("cannon").ctrl_c(true).start()?;
+/// let mut fleet = Fleet::builder("cannon".parse()?).ctrl_c(true).start()?;
 /// println!("start workers with ACPS_RUN={}", fleet.run());
 /// let report = fleet.serve(&mut jobs, &mut |progress: &acps_fleet::FleetProgress| {
 ///     eprintln!("{} outcomes from {} workers", progress.outcomes, progress.workers);
@@ -263,11 +261,11 @@ pub struct Fleet {
 }
 
 impl Fleet {
-    /// A fleet for the run named `name` (1 to 40 letters, digits and '-'): its shared-memory
-    /// prefix, and how workers started by hand join it.
-    pub fn builder(name: impl Into<String>) -> FleetBuilder {
+    /// A fleet for the run `run`: its shared-memory prefix, and how workers started by hand join
+    /// it.
+    pub fn builder(run: RunName) -> FleetBuilder {
         FleetBuilder {
-            name: name.into(),
+            run,
             identity: None,
             spawn: None,
             nice: None,
@@ -310,10 +308,29 @@ impl Fleet {
     }
 
     /// [`serve`](Self::serve) any [`TaskSource`], and, with a [`Remote`], its peers on other
-    /// hosts beside the local workers: what `acps run --listen` and `acps relay` do.
+    /// hosts beside the local workers: what `acps run --listen` does.
     pub fn serve_with(
         &mut self,
         source: &mut dyn TaskSource,
+        observer: &mut dyn Observer,
+        remote: Option<&mut dyn Remote>,
+    ) -> Result<FleetProgress, FleetError> {
+        self.serve_source(&mut Source::Own(source), observer, remote)
+    }
+
+    /// [`serve`](Self::serve) a [`ForwardingSource`]: what `acps relay` does with the tasks of
+    /// its remote learner.
+    pub fn serve_forwarded(
+        &mut self,
+        source: &mut dyn ForwardingSource,
+        observer: &mut dyn Observer,
+    ) -> Result<FleetProgress, FleetError> {
+        self.serve_source(&mut Source::Forwarding(source), observer, None)
+    }
+
+    fn serve_source(
+        &mut self,
+        source: &mut Source<'_>,
         observer: &mut dyn Observer,
         remote: Option<&mut dyn Remote>,
     ) -> Result<FleetProgress, FleetError> {
@@ -429,17 +446,13 @@ mod tests {
 
     #[test]
     fn bad_settings_are_refused_naming_the_setting_and_its_range() {
-        let fleet = || Fleet::builder("settings");
+        let fleet = || Fleet::builder(RunName::new("settings").unwrap());
         let liveness = |change: fn(&mut Liveness)| {
             let mut liveness = Liveness::default();
             change(&mut liveness);
             fleet().liveness(liveness)
         };
         let cases = [
-            (
-                Fleet::builder("a_b"),
-                "run name: 'a_b' must be 1 to 40 characters of letters, digits and '-'",
-            ),
             (
                 fleet().worker_niceness(20),
                 "fleet setting worker_niceness must be in 0..=19, got 20",

@@ -17,9 +17,11 @@ pub mod processes;
 pub mod server;
 mod wake;
 
-pub use acps_wire::ipc::{RunName, ServerError};
+/// The progress [`TaskSource::learning`] reports.
+pub use acps_learner::LearningProgress;
+pub use acps_wire::ipc::{RunName, RunNameParseError, ServerError};
 pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};
 pub use server::{
-    FleetError, FleetJob, FleetJobBuildError, FleetProgress, Learners, Liveness, Observer, PeerId, Remote, RemoteEvent,
-    ServeOptions, SourceError, TaskSource,
+    FleetError, FleetJob, FleetJobBuildError, FleetProgress, ForwardError, ForwardingSource, Learners, Liveness,
+    ObserveError, Observer, PeerId, Remote, RemoteEvent, RemoteServeError, ServeOptions, TaskSource,
 };

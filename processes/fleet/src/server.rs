@@ -96,14 +96,67 @@ impl FleetJob {
     }
 }
 
-/// An error of a [`TaskSource`] or a [`Remote`], which ends the run.
-pub type SourceError = Box<dyn std::error::Error + Send + Sync>;
+/// Why an [`Observer`] ended the run: its own error (writing a checkpoint, say).
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct ObserveError(Box<dyn std::error::Error + Send + Sync>);
+
+impl ObserveError {
+    /// The observer's `error`.
+    pub fn new(error: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        Self(error.into())
+    }
+}
+
+/// Why a [`ForwardingSource`] ended the run.
+#[derive(Debug, thiserror::Error)]
+pub enum ForwardError {
+    /// The learner the tasks came from vanished.
+    #[error("the learner of run '{run}' is gone")]
+    LearnerGone {
+        /// The learner's run.
+        run: RunName,
+    },
+    /// The learner gave up on this source (it was silent too long, or the learner is a new one).
+    #[error("the learner of run '{run}' gave up on this relay: {reason}")]
+    Evicted {
+        /// The learner's run.
+        run: RunName,
+        /// The learner's reason.
+        reason: String,
+    },
+    /// The link to the learner failed, or it sent what cannot be served.
+    #[error(transparent)]
+    Link(Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// Why a [`Remote`] ended the run: its network side failed.
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct RemoteServeError(Box<dyn std::error::Error + Send + Sync>);
+
+impl RemoteServeError {
+    /// The remote's `error`.
+    pub fn new(error: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        Self(error.into())
+    }
+}
 
 /// What a server hands out to workers: jobs (numbered from 0), each of one environment, whose
 /// ready tasks go to workers that serve it and whose outcomes come back.
 ///
-/// [`Learners`], the run's learner cores, is the source of every learner; a relay's source is the
-/// tasks its remote learner sent (`acps-relay`).
+/// [`Learners`], the run's learner cores, is the source of every learner; a relay's source, a
+/// [`ForwardingSource`], is the tasks its remote learner sent (`acps-relay`).
+///
+/// The contract the server relies on, for the whole of one serve:
+/// - [`jobs`](Self::jobs), every job's [`environment`](Self::environment) and the
+///   [`identity`](Self::identity) do not change.
+/// - [`ask`](Self::ask) hands out each ready task once; a task handed out waits for its outcome
+///   until [`tell`](Self::tell) accepts one, or [`reissue`](Self::reissue) makes it ready again.
+/// - `tell` accepts the first outcome of a task that waits for one, and drops any other
+///   (returning `false`): the server counts those as duplicates.
+/// - [`jobs_done`](Self::jobs_done) never decreases; the server serves until it is `jobs`.
+/// - [`learning`](Self::learning) and [`told`](Self::told) only report.
 pub trait TaskSource {
     /// How many jobs.
     fn jobs(&self) -> usize;
@@ -128,46 +181,146 @@ pub trait TaskSource {
     /// How many jobs are done; the server serves until all are.
     fn jobs_done(&self) -> usize;
 
-    /// Training episodes and latest test scores of all jobs together.
-    fn learning(&self) -> LearningProgress {
-        LearningProgress::default()
-    }
+    /// Training episodes and latest test scores of all jobs together (none for a source that
+    /// holds no learner).
+    fn learning(&self) -> LearningProgress;
 
-    /// Tell `observer` of job `job` after it accepted an outcome.
-    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), SourceError> {
-        let _ = (job, observer);
-        Ok(())
-    }
+    /// Show `observer` job `job`'s learner after it accepted an outcome (nothing, for a source
+    /// that holds no learner).
+    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError>;
+}
 
-    /// A request of a worker that serves `serves` found no ready task for `want`: a source that
-    /// fetches its tasks from elsewhere asks for more.
+/// A [`TaskSource`] that forwards: its tasks come from elsewhere (a remote learner, for a relay)
+/// and its outcomes go there, so the server also tells it what workers lacked, gives it every
+/// pass of its loop, and asks it before it waits.
+pub trait ForwardingSource: TaskSource {
+    /// A request of a worker that serves `serves` found no ready task for `want`: ask for more.
+    fn starved(&mut self, serves: &Serves, want: usize);
+
+    /// The server refused a worker, for `reason`: tell the learner.
+    fn refused(&mut self, reason: &str);
+
+    /// Called once per pass of the server's loop, `idle` when it is about to wait for workers:
+    /// send the outcomes held, and take in the tasks that arrived. Returns whether anything
+    /// arrived (the server then looks again before it waits).
+    fn pass(&mut self, idle: bool) -> Result<bool, ForwardError>;
+
+    /// The server is about to wait for workers: whether it may (`false`: something came in
+    /// meanwhile). The source is fed from other threads, which wake the server only while it
+    /// waits, so this must say that the server sleeps.
+    fn may_wait(&mut self) -> bool;
+
+    /// The server is about to wait: at most how long (the source's outcomes fall due then);
+    /// `None`: until the next heartbeat.
+    fn wait_at_most(&self) -> Option<Duration>;
+}
+
+/// What one serve hands out: a source of its own, or one that forwards, whose extras the server
+/// calls. A source of its own lacks nothing, refuses nobody's requests, and never makes the
+/// server look again or wake early.
+pub(crate) enum Source<'s> {
+    Own(&'s mut dyn TaskSource),
+    Forwarding(&'s mut dyn ForwardingSource),
+}
+
+impl Source<'_> {
     fn starved(&mut self, serves: &Serves, want: usize) {
-        let _ = (serves, want);
+        if let Self::Forwarding(source) = self {
+            source.starved(serves, want);
+        }
     }
 
-    /// The server refused a worker, for `reason`: a relay tells its learner.
     fn refused(&mut self, reason: &str) {
-        let _ = reason;
+        if let Self::Forwarding(source) = self {
+            source.refused(reason);
+        }
     }
 
-    /// Called once per pass of the server's loop, `idle` when it is about to wait for workers: a
-    /// source that forwards outcomes sends what it holds, and one that receives tasks takes them
-    /// in. Returns whether anything arrived (the server then looks again before it waits).
-    fn pass(&mut self, idle: bool) -> Result<bool, SourceError> {
-        let _ = idle;
-        Ok(false)
+    fn pass(&mut self, idle: bool) -> Result<bool, ForwardError> {
+        match self {
+            Self::Own(_) => Ok(false),
+            Self::Forwarding(source) => source.pass(idle),
+        }
     }
 
-    /// The server is about to wait for workers: a source fed from other threads, which wake the
-    /// server only while it waits, says whether it may (`false`: something came in meanwhile).
     fn may_wait(&mut self) -> bool {
-        true
+        match self {
+            Self::Own(_) => true,
+            Self::Forwarding(source) => source.may_wait(),
+        }
     }
 
-    /// The server is about to wait: at most how long, for a source that must act by then (a
-    /// relay's outcomes are due); `None`: until the next heartbeat.
     fn wait_at_most(&self) -> Option<Duration> {
-        None
+        match self {
+            Self::Own(_) => None,
+            Self::Forwarding(source) => source.wait_at_most(),
+        }
+    }
+}
+
+/// Both kinds serve as the source they are.
+impl TaskSource for Source<'_> {
+    fn jobs(&self) -> usize {
+        match self {
+            Self::Own(source) => source.jobs(),
+            Self::Forwarding(source) => source.jobs(),
+        }
+    }
+
+    fn environment(&self, job: usize) -> EnvironmentSpec {
+        match self {
+            Self::Own(source) => source.environment(job),
+            Self::Forwarding(source) => source.environment(job),
+        }
+    }
+
+    fn identity(&self) -> u64 {
+        match self {
+            Self::Own(source) => source.identity(),
+            Self::Forwarding(source) => source.identity(),
+        }
+    }
+
+    fn ask(&mut self, job: usize) -> Option<Task> {
+        match self {
+            Self::Own(source) => source.ask(job),
+            Self::Forwarding(source) => source.ask(job),
+        }
+    }
+
+    fn tell(&mut self, job: usize, outcome: Outcome) -> bool {
+        match self {
+            Self::Own(source) => source.tell(job, outcome),
+            Self::Forwarding(source) => source.tell(job, outcome),
+        }
+    }
+
+    fn reissue(&mut self, job: usize, task_id: u64) -> bool {
+        match self {
+            Self::Own(source) => source.reissue(job, task_id),
+            Self::Forwarding(source) => source.reissue(job, task_id),
+        }
+    }
+
+    fn jobs_done(&self) -> usize {
+        match self {
+            Self::Own(source) => source.jobs_done(),
+            Self::Forwarding(source) => source.jobs_done(),
+        }
+    }
+
+    fn learning(&self) -> LearningProgress {
+        match self {
+            Self::Own(source) => source.learning(),
+            Self::Forwarding(source) => source.learning(),
+        }
+    }
+
+    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError> {
+        match self {
+            Self::Own(source) => source.told(job, observer),
+            Self::Forwarding(source) => source.told(job, observer),
+        }
     }
 }
 
@@ -212,7 +365,7 @@ impl TaskSource for Learners<'_> {
         LearningProgress::combine(self.0.iter().map(|j| j.learner.progress()))
     }
 
-    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), SourceError> {
+    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError> {
         observer.told(job, &self.0[job].learner)
     }
 }
@@ -256,13 +409,14 @@ pub enum RemoteEvent {
 pub trait Remote {
     /// Serving of `run` starts: admit peers for a source of this `identity` whose jobs need
     /// these `environments` (by job).
-    fn start(&mut self, run: &RunName, identity: u64, environments: &[EnvironmentSpec]) -> Result<(), SourceError>;
+    fn start(&mut self, run: &RunName, identity: u64, environments: &[EnvironmentSpec])
+    -> Result<(), RemoteServeError>;
 
     /// Append what happened since the last call to `events`, without blocking.
-    fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), SourceError>;
+    fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), RemoteServeError>;
 
     /// Answer `peer`'s request `request` with `tasks` (job, task): at least one.
-    fn send(&mut self, peer: PeerId, request: u64, tasks: Vec<(u32, Task)>) -> Result<(), SourceError>;
+    fn send(&mut self, peer: PeerId, request: u64, tasks: Vec<(u32, Task)>) -> Result<(), RemoteServeError>;
 
     /// `peer` is given up on (silent for `silent`): its later messages are refused, and it is
     /// told so, to join again.
@@ -333,7 +487,7 @@ pub enum FleetError {
     )]
     NoWorkers {
         /// The run.
-        run: String,
+        run: RunName,
         /// Worker processes the fleet started.
         started: usize,
         /// How long the run was without a worker.
@@ -349,13 +503,13 @@ pub enum FleetError {
     },
     /// The observer's [`Observer::told`] failed (for example writing a checkpoint).
     #[error(transparent)]
-    Observer(SourceError),
-    /// The [`TaskSource`] failed (a relay's link to its learner).
+    Observer(ObserveError),
+    /// The [`ForwardingSource`] failed (a relay's link to its learner).
     #[error(transparent)]
-    Source(SourceError),
+    Source(ForwardError),
     /// The [`Remote`] failed (the network side of a learner that serves relays).
-    #[error("remote peers: {0}")]
-    Remote(SourceError),
+    #[error("remote peers")]
+    Remote(#[source] RemoteServeError),
 }
 
 /// When the server gives up on workers. The defaults suit rollouts of up to a second or so:
@@ -411,7 +565,7 @@ pub trait Observer {
 
     /// Job `job`'s learner after every outcome it accepted: the place to write checkpoints. An
     /// error ends the run with [`FleetError::Observer`].
-    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), SourceError> {
+    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), ObserveError> {
         let _ = (job, learner);
         Ok(())
     }
@@ -486,7 +640,7 @@ impl Parked {
 /// are still running (they count as workers on their way).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn serve<'r>(
-    source: &mut dyn TaskSource,
+    source: &mut Source<'_>,
     run: &RunName,
     seat: &Seat,
     options: ServeOptions,
@@ -500,7 +654,10 @@ pub(crate) fn serve<'r>(
         .to_learner
         .listener_builder()
         .create()
-        .map_err(|e| IpcError::new("creating the learner's listener", e))?;
+        .map_err(|source| IpcError::ListenerCreate {
+            owner: "the learner",
+            source,
+        })?;
     let mut waker = Waker::new(services)?;
     let identity = options.identity;
     let mut progress = FleetProgress::default();
@@ -530,7 +687,7 @@ pub(crate) fn serve<'r>(
     let mut events = Vec::new();
     loop {
         let mut active_now = false;
-        while let Some(request) = server.receive().map_err(|e| IpcError::new("receiving a request", e))? {
+        while let Some(request) = server.receive().map_err(IpcError::RequestReceive)? {
             active_now = true;
             let client = Client::Local(request.origin());
             heard.insert(client);
@@ -767,7 +924,7 @@ pub(crate) fn serve<'r>(
                 let since = *without_workers.get_or_insert_with(Instant::now);
                 if since.elapsed() >= grace {
                     return Err(FleetError::NoWorkers {
-                        run: run.to_string(),
+                        run: run.clone(),
                         started: launched,
                         waited: since.elapsed(),
                     });
@@ -793,7 +950,13 @@ pub(crate) fn serve<'r>(
                 // run): the loop goes on, and only `stop`, which the host's Ctrl-C handler sets,
                 // ends it.
                 Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
-                Err(error) => return Err(IpcError::new("waiting for workers", error).into()),
+                Err(source) => {
+                    return Err(IpcError::ListenerWait {
+                        whom: "workers",
+                        source,
+                    }
+                    .into());
+                }
             }
         }
     }
@@ -1003,7 +1166,7 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
 /// until it has [`REMOTE_BATCH`] or has waited [`REMOTE_GATHER`].
 #[allow(clippy::too_many_arguments)]
 fn answer<'r>(
-    source: &mut dyn TaskSource,
+    source: &mut Source<'_>,
     parked: &mut VecDeque<Parked>,
     hung: &HashSet<Client>,
     holders: &mut HashMap<(u32, u64), Client>,

@@ -35,7 +35,10 @@ impl Waker {
             .to_workers
             .notifier_builder()
             .create()
-            .map_err(|e| IpcError::new("creating the learner's notifier", e))?;
+            .map_err(|source| IpcError::NotifierCreate {
+                owner: "the learner",
+                source,
+            })?;
         Ok(Self {
             notifier,
             all_woken: Instant::now(),
@@ -68,7 +71,12 @@ impl Waker {
                 Err(NotifierNotifyError::InvalidListenerKey) => {
                     self.listeners.remove(&client);
                 }
-                Err(e) => return Err(IpcError::new("waking a worker", e)),
+                Err(source) => {
+                    return Err(IpcError::NotifierNotify {
+                        whom: "a worker",
+                        source,
+                    });
+                }
             }
         }
         self.answered = answered;
@@ -94,9 +102,10 @@ impl Waker {
 
     /// Wake every worker.
     pub fn wake_all(&mut self) -> Result<(), IpcError> {
-        self.notifier
-            .notify()
-            .map_err(|e| IpcError::new("waking the workers", e))?;
+        self.notifier.notify().map_err(|source| IpcError::NotifierNotify {
+            whom: "the workers",
+            source,
+        })?;
         self.all_woken = Instant::now();
         Ok(())
     }

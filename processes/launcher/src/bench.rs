@@ -13,6 +13,7 @@ use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
 use acps_models::environment::TrivialEnvironment;
 use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
+use acps_wire::ipc::RunName;
 use anyhow::Context;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -421,12 +422,16 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
     let workers = mode.workers();
     let relayed = matches!(mode, Mode::Relay(_));
     let kind = if relayed { "relay-" } else { "" };
-    let name = format!("bench-{}-{}-{kind}{workers}", std::process::id(), workload.name());
+    let name = RunName::new(&format!(
+        "bench-{}-{}-{kind}{workers}",
+        std::process::id(),
+        workload.name()
+    ))?;
     let mut fleet_jobs = jobs(workload, options.scale)?
         .into_iter()
         .map(|j| FleetJob::new(j.learner))
         .collect::<Result<Vec<_>, _>>()?;
-    let mut builder = Fleet::builder(name.as_str()).identity(0x0bec_4000 + workers as u64);
+    let mut builder = Fleet::builder(name.clone()).identity(0x0bec_4000 + workers as u64);
     builder = if relayed {
         // The learner sees one peer: its clock starts with the relay's first request. On
         // loopback it shares the cores with the relay and its workers, so it polls only if
@@ -516,7 +521,7 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
 /// Listen for relays of run `name` on a free loopback port, and the command of `acps relay` (this
 /// executable) there with `workers` workers, its own local run named after `name`.
 fn relay_command(
-    name: &str,
+    name: &RunName,
     options: &BenchOptions,
     workers: usize,
 ) -> anyhow::Result<(acps_relay::Listener, std::process::Command)> {
@@ -540,7 +545,7 @@ fn relay_command(
         "--connect",
         &endpoint,
         "--run",
-        name,
+        name.as_str(),
         "--local-run",
         &format!("{name}-host"),
     ]);

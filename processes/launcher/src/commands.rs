@@ -190,10 +190,12 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
 /// processes simulate. The fleet removes the run's shared memory when it ends, also on errors
 /// and Ctrl-C.
 pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
-    if let Some(name) = &args.run {
-        // Before the output directory is made: the fleet would refuse the name only then.
-        RunName::new(name).with_context(|| format!("--run {name}"))?;
-    }
+    // Before the output directory is made.
+    let run = args
+        .run
+        .as_deref()
+        .map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
+        .transpose()?;
     let net = net_options(&args.net, &args.listen, &[])?;
     let Some(planned) = run_dir(&args.experiment)? else {
         return Ok(());
@@ -210,11 +212,23 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         );
     }
     let created = planned.prepare()?;
-    let name = args.run.clone().unwrap_or_else(|| {
-        // Run names take letters, digits and '-' only; problem names also '_' and '.'.
-        let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
-        format!("{experiment}-{}", std::process::id())
-    });
+    let name = match run {
+        Some(run) => run,
+        None => {
+            // Run names take letters, digits and '-' only; problem names also '_' and '.'.
+            let experiment = jobs[0].experiment.name.replace(['_', '.'], "-");
+            let name = format!("{experiment}-{}", std::process::id());
+            match RunName::new(&name) {
+                Ok(run) => run,
+                Err(error) => {
+                    for dir in &created {
+                        let _ = std::fs::remove_dir_all(dir);
+                    }
+                    return Err(anyhow::Error::new(error).context(format!("--run {name}")));
+                }
+            }
+        }
+    };
     let workers = args.started.count();
     // Once, for every experiment of the run: relays stay connected from one to the next.
     let mut listener = match &net {
@@ -236,7 +250,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         );
     }
     for (index, Job { experiment, dir, .. }) in jobs.iter().enumerate() {
-        let builder = Fleet::builder(name.as_str())
+        let builder = Fleet::builder(name.clone())
             .identity(experiment.identity())
             .ctrl_c(true);
         let mut fleet = match args.started.spawn(builder).start() {
@@ -385,15 +399,17 @@ pub(crate) fn relay(args: RelayArgs) -> anyhow::Result<()> {
     let Some(net) = net_options(&args.net, &[], &args.connect)? else {
         bail!("--connect ENDPOINT is missing: where the learner listens (its --listen)");
     };
-    if let Some(run) = &args.run {
-        RunName::new(run).with_context(|| format!("--run {run}"))?;
-    }
+    let run = args
+        .run
+        .as_deref()
+        .map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
+        .transpose()?;
     args.started.check()?;
     let local = args
         .local_run
         .clone()
         .unwrap_or_else(|| format!("relay-{}", std::process::id()));
-    let builder = Fleet::builder(local.as_str()).ctrl_c(true);
+    let builder = Fleet::builder(RunName::new(&local).with_context(|| format!("--local-run {local}"))?).ctrl_c(true);
     let mut fleet = args
         .started
         .spawn(builder)
@@ -407,7 +423,7 @@ pub(crate) fn relay(args: RelayArgs) -> anyhow::Result<()> {
     }
     let options = RelayOptions {
         net,
-        run: args.run.clone(),
+        run,
         identity: 0,
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
         wait_for_learner: Duration::from_secs_f64(args.wait_for_learner),

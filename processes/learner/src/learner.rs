@@ -33,7 +33,9 @@
 use crate::SelectorConfig;
 use crate::creps::{CReps, CRepsConfig, CRepsCreateError, CRepsRestoreError, CRepsState, Rejection, UpdateReport};
 use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
-use acps_shared::{EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed};
+use acps_shared::{
+    EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed, nearest,
+};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -884,14 +886,6 @@ impl Learner {
             self.create_training_task();
         }
     }
-}
-
-/// Index of the context nearest to `s` (ties to the lowest index).
-fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
-    let distance = |c: &Vec<f64>| c.iter().zip(s).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
-    (0..contexts.len())
-        .min_by(|&a, &b| distance(&contexts[a]).total_cmp(&distance(&contexts[b])))
-        .unwrap_or(0)
 }
 
 /// Drive `learner` to the end with `environment` in this thread; an environment other than the

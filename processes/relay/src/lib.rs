@@ -29,4 +29,5 @@ pub mod relay;
 
 pub use listener::{ListenError, Listener};
 pub use net::{NetError, NetOptions};
+pub use pump::PumpStartError;
 pub use relay::{RelayError, RelayOptions, RelayReport};

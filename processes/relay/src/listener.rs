@@ -2,7 +2,7 @@
 
 use crate::net::{self, Admission, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, Up, Welcome};
 use crate::pump::{Bell, Pump};
-use acps_fleet::{PeerId, Remote, RemoteEvent, SourceError};
+use acps_fleet::{PeerId, Remote, RemoteEvent, RemoteServeError};
 use acps_shared::{EnvironmentSpec, Serves, Task};
 use acps_wire::ipc::RunName;
 use acps_wire::wire::PROTOCOL_VERSION;
@@ -28,7 +28,7 @@ pub enum ListenError {
     )]
     Taken {
         /// The run.
-        run: String,
+        run: RunName,
         /// The other learner's key.
         other: String,
     },
@@ -58,7 +58,7 @@ struct Traffic {
 }
 
 impl Traffic {
-    fn log(&self, run: &str, host: &str) {
+    fn log(&self, run: &RunName, host: &str) {
         let per = |items: u64, messages: u64| items as f64 / messages.max(1) as f64;
         tracing::info!(
             "run '{run}': the relay on {host} sent {} messages ({:.1} outcomes each) and was sent {} ({:.1} tasks each)",
@@ -106,12 +106,12 @@ struct Serving {
 ///     lease: Duration::from_secs(3),
 ///     config_file: None,
 /// };
-/// let mut listener = Listener::open("cannon", &options)?;
+/// let mut listener = Listener::open(&"cannon".parse()?, &options)?;
 /// // fleet.serve_with(&mut acps_fleet::Learners(&mut jobs), &mut observer, Some(&mut listener))
-/// # Ok::<(), acps_relay::ListenError>(())
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub struct Listener {
-    run: String,
+    run: RunName,
     instance: u64,
     shared: Arc<Mutex<Shared>>,
     pump: Option<Pump>,
@@ -126,7 +126,7 @@ pub struct Listener {
 impl Listener {
     /// Listen for the relays of run `run` (its name) as `options` say. Refused when another
     /// learner of the run is on the network the session reaches.
-    pub fn open(run: &str, options: &NetOptions) -> Result<Self, ListenError> {
+    pub fn open(run: &RunName, options: &NetOptions) -> Result<Self, ListenError> {
         let session = net::open(options)?;
         let learner_key = net::key(run, "learner");
         let others = session
@@ -139,7 +139,7 @@ impl Listener {
             && let Ok(sample) = reply.result()
         {
             return Err(ListenError::Taken {
-                run: run.to_string(),
+                run: run.clone(),
                 other: sample.key_expr().to_string(),
             });
         }
@@ -192,7 +192,7 @@ impl Listener {
         let queryable = {
             let shared = shared.clone();
             let session = session.clone();
-            let run = run.to_string();
+            let run = run.clone();
             session
                 .clone()
                 .declare_queryable("acps/hello/**")
@@ -218,7 +218,7 @@ impl Listener {
                 .map_err(|e| NetError::zenoh("answering relays' greetings", e))?
         };
         Ok(Self {
-            run: run.to_string(),
+            run: run.clone(),
             instance,
             shared,
             pump: None,
@@ -231,7 +231,7 @@ impl Listener {
     }
 
     /// The run's name.
-    pub fn run(&self) -> &str {
+    pub fn run(&self) -> &RunName {
         &self.run
     }
 
@@ -309,7 +309,7 @@ fn instance_number() -> u64 {
 fn welcome(
     session: &zenoh::Session,
     shared: &Mutex<Shared>,
-    run: &str,
+    run: &RunName,
     asked: &str,
     instance: u64,
     host: &str,
@@ -319,7 +319,7 @@ fn welcome(
     let refused = |reason: String| {
         tracing::warn!("refused a {relay}: {reason}");
         Welcome::Refused {
-            run: run.to_string(),
+            run: run.clone(),
             reason,
         }
     };
@@ -329,16 +329,16 @@ fn welcome(
             hello.build, hello.net_protocol, hello.wire_protocol
         ));
     }
-    if asked != run && asked != "*" {
+    if asked != run.as_str() && asked != "*" {
         // Another learner of the network may serve that run: only say which this one serves.
         return Welcome::Refused {
-            run: run.to_string(),
+            run: run.clone(),
             reason: format!("it asked for run '{asked}', this learner serves run '{run}'"),
         };
     }
     let mut state = lock(shared);
     let Some(serving) = state.serving.clone() else {
-        return Welcome::NotServing { run: run.to_string() };
+        return Welcome::NotServing { run: run.clone() };
     };
     if hello.identity != 0 && hello.identity != serving.identity {
         drop(state);
@@ -370,7 +370,7 @@ fn welcome(
     );
     tracing::info!("run '{run}': admitted the {relay} as peer {peer}");
     Welcome::Accepted(Admission {
-        run: run.to_string(),
+        run: run.clone(),
         peer,
         instance,
         identity: serving.identity,
@@ -380,8 +380,13 @@ fn welcome(
 }
 
 impl Remote for Listener {
-    fn start(&mut self, run: &RunName, identity: u64, environments: &[EnvironmentSpec]) -> Result<(), SourceError> {
-        let (pump, poke) = Pump::start(run, "learner-net")?;
+    fn start(
+        &mut self,
+        run: &RunName,
+        identity: u64,
+        environments: &[EnvironmentSpec],
+    ) -> Result<(), RemoteServeError> {
+        let (pump, poke) = Pump::start(run, "learner-net").map_err(RemoteServeError::new)?;
         let mut shared = lock(&self.shared);
         shared.incoming.clear();
         shared.admitted.clear();
@@ -396,7 +401,7 @@ impl Remote for Listener {
         Ok(())
     }
 
-    fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), SourceError> {
+    fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), RemoteServeError> {
         let mut shared = lock(&self.shared);
         shared.bell.awake();
         let mut evict = Vec::new();
@@ -473,7 +478,7 @@ impl Remote for Listener {
         Ok(())
     }
 
-    fn send(&mut self, peer: PeerId, request: u64, tasks: Vec<(u32, Task)>) -> Result<(), SourceError> {
+    fn send(&mut self, peer: PeerId, request: u64, tasks: Vec<(u32, Task)>) -> Result<(), RemoteServeError> {
         self.tell(peer, &Down::Tasks { request, tasks });
         Ok(())
     }

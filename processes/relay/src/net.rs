@@ -10,6 +10,7 @@
 //! - `acps/v<N>/<run>/down/<peer>`: the learner's tasks and notices to one relay.
 
 use acps_shared::{EnvironmentSpec, Outcome, Task};
+use acps_wire::ipc::RunName;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -26,13 +27,16 @@ pub const DEFAULT_LEASE: Duration = Duration::from_secs(3);
 /// The accepted leases.
 pub const LEASES: std::ops::RangeInclusive<f64> = 0.1..=3600.0;
 
-/// The key of the handshake of `run`.
-pub fn hello_key(run: &str) -> String {
-    format!("acps/hello/{run}")
+/// The key of the handshake of `run`; `None`: of whichever run a learner serves.
+pub fn hello_key(run: Option<&RunName>) -> String {
+    match run {
+        Some(run) => format!("acps/hello/{run}"),
+        None => "acps/hello/*".to_string(),
+    }
 }
 
 /// The key of `what` in run `run`.
-pub fn key(run: &str, what: &str) -> String {
+pub fn key(run: &RunName, what: &str) -> String {
     format!("acps/v{NET_PROTOCOL}/{run}/{what}")
 }
 
@@ -59,7 +63,7 @@ pub struct Hello {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Admission {
     /// The run's name.
-    pub run: String,
+    pub run: RunName,
     /// The relay's number in this learner.
     pub peer: u32,
     /// The learner process's random instance, which the relay's messages carry.
@@ -80,12 +84,12 @@ pub enum Welcome {
     /// The learner is between two serves (one experiment ended, the next not begun): ask again.
     NotServing {
         /// The run's name.
-        run: String,
+        run: RunName,
     },
     /// Refused, and why, naming both sides.
     Refused {
         /// The learner's run.
-        run: String,
+        run: RunName,
         /// Why.
         reason: String,
     },

@@ -61,6 +61,20 @@ impl Bell {
     }
 }
 
+/// Why a pump did not start.
+#[derive(Debug, thiserror::Error)]
+pub enum PumpStartError {
+    /// Its node of the run, the run's services or its notifier could not be made.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// The operating system refused the thread.
+    #[error("starting the network's wake-up thread")]
+    ThreadSpawn(#[source] std::io::Error),
+    /// The thread ended (it panicked) before it said whether it started.
+    #[error("starting the network's wake-up thread: it ended")]
+    ThreadEnded,
+}
+
 /// The pump thread of one serve of `run`; stopped and joined when dropped.
 pub(crate) struct Pump {
     poke: Option<mpsc::Sender<()>>,
@@ -69,7 +83,7 @@ pub(crate) struct Pump {
 
 impl Pump {
     /// Start pumping wake-ups to `run`'s learner (or relay) as node `name`.
-    pub(crate) fn start(run: &RunName, name: &str) -> Result<(Self, Poke), IpcError> {
+    pub(crate) fn start(run: &RunName, name: &str) -> Result<(Self, Poke), PumpStartError> {
         let (poke, pokes) = mpsc::channel::<()>();
         let (ready, started) = mpsc::channel();
         let run = run.clone();
@@ -77,15 +91,17 @@ impl Pump {
         let thread = std::thread::Builder::new()
             .name(name.clone())
             .spawn(move || {
-                let opened = ipc::node(&run, &name).and_then(|node| {
-                    let services = ipc::open_services(&node)?;
-                    let notifier = services
-                        .to_learner
-                        .notifier_builder()
-                        .create()
-                        .map_err(|e| IpcError::new("creating the network's notifier", e))?;
-                    Ok((node, services, notifier))
-                });
+                let opened =
+                    ipc::node(&run, &name).and_then(|node| {
+                        let services = ipc::open_services(&node)?;
+                        let notifier = services.to_learner.notifier_builder().create().map_err(|source| {
+                            IpcError::NotifierCreate {
+                                owner: "the network",
+                                source,
+                            }
+                        })?;
+                        Ok((node, services, notifier))
+                    });
                 let (_node, _services, notifier) = match opened {
                     Ok(opened) => {
                         let _ = ready.send(Ok(()));
@@ -104,14 +120,14 @@ impl Pump {
                     }
                 }
             })
-            .map_err(|e| IpcError::new("starting the network's wake-up thread", e))?;
+            .map_err(PumpStartError::ThreadSpawn)?;
         match started.recv() {
             Ok(Ok(())) => {}
             Ok(Err(error)) => {
                 let _ = thread.join();
-                return Err(error);
+                return Err(error.into());
             }
-            Err(_) => return Err(IpcError::new("starting the network's wake-up thread", "it ended")),
+            Err(_) => return Err(PumpStartError::ThreadEnded),
         }
         Ok((
             Self {

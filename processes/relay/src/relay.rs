@@ -3,9 +3,13 @@
 //! that asks for tasks in batches on behalf of all of them and returns their outcomes.
 
 use crate::net::{self, Admission, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, NetOutcome, Up, Welcome};
-use crate::pump::{Bell, Pump};
-use acps_fleet::{Fleet, FleetError, FleetProgress, Observer, SourceError, TaskSource};
+use crate::pump::{Bell, Pump, PumpStartError};
+use acps_fleet::{
+    Fleet, FleetError, FleetProgress, ForwardError, ForwardingSource, LearningProgress, ObserveError, Observer,
+    TaskSource,
+};
 use acps_shared::{EnvironmentSpec, Outcome, Serves, Task};
+use acps_wire::ipc::RunName;
 use acps_wire::wire::{PROTOCOL_VERSION, check_task_sizes};
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -39,7 +43,7 @@ pub struct RelayOptions {
     /// Where the learner listens (`connect`), the lease and the Zenoh configuration file.
     pub net: NetOptions,
     /// The run to join; `None`: whichever the learner serves.
-    pub run: Option<String>,
+    pub run: Option<RunName>,
     /// The run identity to join; 0: any.
     pub identity: u64,
     /// How long to wait for the learner when the relay starts.
@@ -63,17 +67,20 @@ pub enum RelayError {
     )]
     NoLearner {
         /// The run asked for.
-        run: Option<String>,
+        run: Option<RunName>,
         /// Where.
         endpoints: String,
         /// How long the relay waited.
         waited: Duration,
     },
     /// The learner refused the relay.
-    #[error("the learner of run '{run}' refused this relay: {reason}")]
+    #[error(
+        "the learner of run '{}' refused this relay: {reason}",
+        run.as_ref().map_or("?", RunName::as_str)
+    )]
     Refused {
-        /// The learner's run.
-        run: String,
+        /// The learner's run; `None`: its answer could not be read.
+        run: Option<RunName>,
         /// Why.
         reason: String,
     },
@@ -84,20 +91,23 @@ pub enum RelayError {
     #[error("the learner of run '{run}' is gone and did not come back within {waited:?}")]
     LearnerGone {
         /// The run.
-        run: String,
+        run: RunName,
         /// How long the relay waited.
         waited: Duration,
     },
     /// Serving the host's workers failed.
     #[error(transparent)]
     Fleet(#[from] FleetError),
+    /// The thread that wakes the host's fleet when the learner's messages arrive did not start.
+    #[error("starting the relay's wake-up thread")]
+    Wake(#[source] PumpStartError),
 }
 
 /// What a relay did.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RelayReport {
     /// The run it served.
-    pub run: String,
+    pub run: RunName,
     /// Serves it took part in (experiments of the run, and rejoins).
     pub serves: usize,
     /// Outcomes it forwarded.
@@ -119,7 +129,8 @@ pub fn serve(
 ) -> Result<RelayReport, RelayError> {
     let session = net::open(&options.net)?;
     let endpoints = options.net.connect.join(", ");
-    let mut report = RelayReport::default();
+    // Once it joined a run.
+    let mut joined: Option<RelayReport> = None;
     let learner = Arc::new(AtomicU8::new(UNKNOWN));
     let mut watch = None;
     let mut deadline = Instant::now() + options.startup_timeout;
@@ -127,24 +138,28 @@ pub fn serve(
     // means the run is over, not a crash.
     let mut finished = false;
     loop {
-        let welcome = match hello(&session, options, report.run.as_str())? {
+        let welcome = match hello(&session, options, joined.as_ref().map(|report| &report.run))? {
             Greeted::Accepted(welcome) => welcome,
             Greeted::Wait(run) => {
                 if fleet.interrupted() {
                     return Err(FleetError::Interrupted.into());
                 }
                 // The learner's run ended once its token is gone after it served.
-                if finished && learner.load(Ordering::Relaxed) == GONE && run.is_none() {
+                if finished
+                    && learner.load(Ordering::Relaxed) == GONE
+                    && run.is_none()
+                    && let Some(report) = joined
+                {
                     return Ok(report);
                 }
                 if Instant::now() >= deadline {
-                    return Err(match (&run, report.serves) {
-                        (_, 0) => RelayError::NoLearner {
+                    return Err(match &joined {
+                        None => RelayError::NoLearner {
                             run: options.run.clone(),
                             endpoints,
                             waited: options.startup_timeout,
                         },
-                        _ => RelayError::LearnerGone {
+                        Some(report) => RelayError::LearnerGone {
                             run: report.run.clone(),
                             waited: options.wait_for_learner,
                         },
@@ -155,26 +170,30 @@ pub fn serve(
             }
         };
         if watch.is_none() {
-            report.run = welcome.run.clone();
             watch = Some(watch_learner(&session, &welcome.run, learner.clone())?);
         }
         // It answered: it is there, whatever its token's news in flight says.
         learner.store(PRESENT, Ordering::Relaxed);
-        if report.serves == 0 {
+        let report = joined.get_or_insert_with(|| {
             tracing::info!(
                 "relay: joined run '{}' of the learner on {} as peer {}",
                 welcome.run,
                 welcome.host,
                 welcome.peer
             );
-        }
+            RelayReport {
+                run: welcome.run.clone(),
+                serves: 0,
+                outcomes: 0,
+            }
+        });
         report.serves += 1;
         let mut source = RelaySource::new(&session, welcome, learner.clone(), options.queue, fleet.run())?;
         let mut watching = Watching {
             observer,
             status: source.status.clone(),
         };
-        let served = fleet.serve_with(&mut source, &mut watching, None);
+        let served = fleet.serve_forwarded(&mut source, &mut watching);
         report.outcomes += source.forwarded;
         source.flush_now();
         drop(source);
@@ -182,11 +201,11 @@ pub fn serve(
         match served {
             // The experiment is over; the learner may serve another, or end.
             Ok(_) => deadline = Instant::now() + options.wait_for_learner.max(options.startup_timeout),
-            Err(FleetError::Source(error)) if error.downcast_ref::<Evicted>().is_some() => {
+            Err(FleetError::Source(error @ ForwardError::Evicted { .. })) => {
                 tracing::warn!("relay: {error}; joining again");
                 deadline = Instant::now() + options.wait_for_learner;
             }
-            Err(FleetError::Source(error)) if error.downcast_ref::<Gone>().is_some() => {
+            Err(FleetError::Source(error @ ForwardError::LearnerGone { .. })) => {
                 tracing::warn!(
                     "relay: {}; waiting up to {:?} for it to come back",
                     error,
@@ -203,26 +222,22 @@ pub fn serve(
 /// serves; `None`: no learner answered).
 enum Greeted {
     Accepted(Admission),
-    Wait(Option<String>),
+    Wait(Option<RunName>),
 }
 
-/// Greet the learner(s) the session reaches.
-fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Result<Greeted, RelayError> {
-    let run = if joined.is_empty() {
-        options.run.clone()
-    } else {
-        Some(joined.to_string())
-    };
+/// Greet the learner(s) the session reaches, for the run `joined` once the relay joined one.
+fn hello(session: &zenoh::Session, options: &RelayOptions, joined: Option<&RunName>) -> Result<Greeted, RelayError> {
+    let run = joined.or(options.run.as_ref());
     let greeting = Hello {
         net_protocol: NET_PROTOCOL,
         wire_protocol: PROTOCOL_VERSION,
         build: BUILD.to_string(),
-        run: run.clone().unwrap_or_default(),
+        run: run.map(RunName::to_string).unwrap_or_default(),
         identity: options.identity,
         host: net::host_name(),
         pid: std::process::id(),
     };
-    let key = net::hello_key(run.as_deref().unwrap_or("*"));
+    let key = net::hello_key(run);
     let replies = session
         .get(&key)
         .payload(net::encode(&greeting).map_err(|e| NetError::zenoh("greeting the learner", e))?)
@@ -238,9 +253,9 @@ fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Resu
         match net::decode::<Welcome>(&sample.payload().to_bytes()) {
             Ok(Welcome::Accepted(admission)) => accepted.push(admission),
             Ok(Welcome::NotServing { run }) => waiting = Some(run),
-            Ok(Welcome::Refused { run, reason }) => refusals.push((run, reason)),
+            Ok(Welcome::Refused { run, reason }) => refusals.push((Some(run), reason)),
             Err(error) => refusals.push((
-                "?".into(),
+                None,
                 format!("its answer cannot be read ({error}): another acps build? (this relay runs acps {BUILD}, network protocol {NET_PROTOCOL})"),
             )),
         }
@@ -262,7 +277,7 @@ fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Resu
     // A refusal of the run asked for is final; a learner serving another run only says so.
     if let Some((run, reason)) = refusals
         .iter()
-        .find(|(learner, _)| run.as_deref().is_none_or(|run| run == learner))
+        .find(|(learner, _)| run.is_none_or(|run| Some(run) == learner.as_ref()))
         .or(refusals.first())
     {
         return Err(RelayError::Refused {
@@ -276,7 +291,7 @@ fn hello(session: &zenoh::Session, options: &RelayOptions, joined: &str) -> Resu
 /// Follow the learner's token of `run` into `learner`.
 fn watch_learner(
     session: &zenoh::Session,
-    run: &str,
+    run: &RunName,
     learner: Arc<AtomicU8>,
 ) -> Result<zenoh::pubsub::Subscriber<()>, NetError> {
     session
@@ -293,19 +308,6 @@ fn watch_learner(
         })
         .wait()
         .map_err(|e| NetError::zenoh("watching the learner's token", e))
-}
-
-/// The learner vanished.
-#[derive(Debug, thiserror::Error)]
-#[error("the learner of run '{0}' is gone")]
-struct Gone(String);
-
-/// The learner gave up on this relay.
-#[derive(Debug, thiserror::Error)]
-#[error("the learner of run '{run}' gave up on this relay: {reason}")]
-struct Evicted {
-    run: String,
-    reason: String,
 }
 
 /// What the local fleet reports that the relay forwards: its workers and their slowest rollout.
@@ -341,7 +343,7 @@ struct Inbox {
 
 /// The tasks a relay fetched from its learner, served to the host's workers.
 struct RelaySource {
-    run: String,
+    run: RunName,
     instance: u64,
     identity: u64,
     environments: Vec<EnvironmentSpec>,
@@ -424,11 +426,10 @@ impl RelaySource {
         welcome: Admission,
         learner: Arc<AtomicU8>,
         max_queue: usize,
-        local: &acps_wire::ipc::RunName,
+        local: &RunName,
     ) -> Result<Self, RelayError> {
         let run = welcome.run;
-        let (pump, poke) =
-            Pump::start(local, "relay-net").map_err(|e| NetError::zenoh("starting the relay's wake-up thread", e))?;
+        let (pump, poke) = Pump::start(local, "relay-net").map_err(RelayError::Wake)?;
         let inbox = Arc::new(Mutex::new(Inbox {
             messages: VecDeque::new(),
             bell: Bell::new(poke),
@@ -510,7 +511,7 @@ impl RelaySource {
     }
 
     /// Send a request for `want` tasks of `class` (0: outcomes only) with the outcomes held.
-    fn send(&mut self, want: usize, class: Serves) -> Result<(), SourceError> {
+    fn send(&mut self, want: usize, class: Serves) -> Result<(), ForwardError> {
         let status = *self.status.lock().unwrap_or_else(|p| p.into_inner());
         let request = self.next_request;
         self.next_request += 1;
@@ -530,8 +531,8 @@ impl RelaySource {
             outcomes: std::mem::take(&mut self.outgoing),
         };
         self.outgoing_since = None;
-        self.publisher.put(net::encode(&message)?).wait()?;
-        Ok(())
+        let bytes = net::encode(&message).map_err(|e| ForwardError::Link(e.into()))?;
+        self.publisher.put(bytes).wait().map_err(ForwardError::Link)
     }
 
     /// Send the outcomes held, if any (at the end of a serve).
@@ -541,7 +542,7 @@ impl RelaySource {
         }
     }
 
-    fn take(&mut self, message: Down) -> Result<(), SourceError> {
+    fn take(&mut self, message: Down) -> Result<(), ForwardError> {
         match message {
             Down::Tasks { request, tasks } => {
                 if let Some((_, _, sent)) = self.requests.remove(&request) {
@@ -549,23 +550,25 @@ impl RelaySource {
                 }
                 for (job, task) in tasks {
                     let Some(queue) = self.queues.get_mut(job as usize) else {
-                        return Err(format!(
-                            "the learner sent a task of job {job}, it has {} jobs",
-                            self.environments.len()
-                        )
-                        .into());
+                        return Err(ForwardError::Link(
+                            format!(
+                                "the learner sent a task of job {job}, it has {} jobs",
+                                self.environments.len()
+                            )
+                            .into(),
+                        ));
                     };
-                    check_task_sizes(task.context.len(), task.theta.len())?;
+                    check_task_sizes(task.context.len(), task.theta.len()).map_err(|e| ForwardError::Link(e.into()))?;
                     queue.push_back(task);
                     self.queued += 1;
                 }
             }
             Down::Done => self.done = true,
             Down::Evicted { reason } => {
-                return Err(Box::new(Evicted {
+                return Err(ForwardError::Evicted {
                     run: self.run.clone(),
                     reason,
-                }));
+                });
             }
         }
         Ok(())
@@ -634,6 +637,18 @@ impl TaskSource for RelaySource {
         if self.done { self.jobs() } else { 0 }
     }
 
+    /// The learning happens at the remote learner.
+    fn learning(&self) -> LearningProgress {
+        LearningProgress::default()
+    }
+
+    /// No learner here to show.
+    fn told(&self, _: usize, _: &mut dyn Observer) -> Result<(), ObserveError> {
+        Ok(())
+    }
+}
+
+impl ForwardingSource for RelaySource {
     fn starved(&mut self, serves: &Serves, _want: usize) {
         if !self.classes.contains(serves) {
             self.classes.push(*serves);
@@ -644,9 +659,9 @@ impl TaskSource for RelaySource {
         self.notes.push(format!("refused one of its workers: {reason}"));
     }
 
-    fn pass(&mut self, idle: bool) -> Result<bool, SourceError> {
+    fn pass(&mut self, idle: bool) -> Result<bool, ForwardError> {
         if self.learner.load(Ordering::Relaxed) == GONE {
-            return Err(Box::new(Gone(self.run.clone())));
+            return Err(ForwardError::LearnerGone { run: self.run.clone() });
         }
         let messages = {
             let mut inbox = self.inbox.lock().unwrap_or_else(|p| p.into_inner());
@@ -662,7 +677,8 @@ impl TaskSource for RelaySource {
                 instance: self.instance,
                 text,
             };
-            self.publisher.put(net::encode(&note)?).wait()?;
+            let bytes = net::encode(&note).map_err(|e| ForwardError::Link(e.into()))?;
+            self.publisher.put(bytes).wait().map_err(ForwardError::Link)?;
         }
         let target = self.pace.target(Instant::now()).min(self.max_queue.max(1));
         // Asking at half the target makes messages of about half of it.

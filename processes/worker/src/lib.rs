@@ -14,12 +14,13 @@
 //!
 //! Embedding: call [`serve`] on any thread of your program with an [`EnvironmentFactory`] (for
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
+#![warn(missing_docs)]
 
 use acps_shared::{Environment, EnvironmentSpec, Serves};
+use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, TICK};
 /// A run's name, which a worker joins by; [`RunName::from_env`] reads the one a fleet gives the
 /// worker processes it starts.
-pub use acps_wire::ipc::RunName;
-use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, TICK};
+pub use acps_wire::ipc::{RunName, RunNameParseError};
 use acps_wire::wire::{
     Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireOutcome, WireTask, WorkerMessage,
 };
@@ -39,7 +40,21 @@ pub trait EnvironmentFactory {
 
     /// The environment for `spec`, or why there is none. The worker refuses the task when the
     /// environment's own spec is not `spec`.
-    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String>;
+    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError>;
+}
+
+/// Why an [`EnvironmentFactory`] provides no environment for a spec: the factory's own error
+/// (building a simulator can fail in as many ways as there are simulators), or a spec a task
+/// carried that does not decode.
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct EnvironmentProvideError(Box<dyn std::error::Error + Send + Sync>);
+
+impl EnvironmentProvideError {
+    /// The factory's `error`.
+    pub fn new(error: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        Self(error.into())
+    }
 }
 
 /// One environment of your own: the worker serves its spec and refuses tasks of any other.
@@ -50,7 +65,7 @@ impl<E: Environment> EnvironmentFactory for Single<E> {
         Serves::One(self.0.spec())
     }
 
-    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError> {
         Ok(&mut self.0)
     }
 }
@@ -106,7 +121,7 @@ pub struct WorkerReport {
 }
 
 /// A worker that could not serve.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum WorkerError {
     /// A bad option.
     #[error("worker option {field} must be {accepted}, got {got}")]
@@ -125,7 +140,7 @@ pub enum WorkerError {
     #[error("no learner serves run '{run}' (waited {waited:?})")]
     NoLearner {
         /// The run.
-        run: String,
+        run: RunName,
         /// How long the worker waited.
         waited: Duration,
     },
@@ -133,7 +148,7 @@ pub enum WorkerError {
     #[error("the learner of run '{run}' refused this worker: {reason}")]
     Refused {
         /// The run.
-        run: String,
+        run: RunName,
         /// Why, naming both sides' protocol versions, run identities or environments.
         reason: String,
     },
@@ -163,14 +178,15 @@ pub enum WorkerError {
         provided: Box<EnvironmentSpec>,
     },
     /// A task named an environment the factory cannot provide.
-    #[error("task {task_id} of job {job}: no environment: {reason}")]
+    #[error("task {task_id} of job {job}: no environment")]
     Environment {
         /// The job.
         job: u32,
         /// The task.
         task_id: u64,
         /// The factory's reason.
-        reason: String,
+        #[source]
+        reason: EnvironmentProvideError,
     },
 }
 
@@ -250,7 +266,7 @@ pub fn serve(
                 let _ = ipc::remove_run_files(run);
             }
             return Err(WorkerError::NoLearner {
-                run: run.to_string(),
+                run: run.clone(),
                 waited,
             });
         }
@@ -263,17 +279,23 @@ pub fn serve(
         .tasks
         .client_builder()
         .create()
-        .map_err(|e| IpcError::new("creating the worker's client", e))?;
+        .map_err(IpcError::ClientCreate)?;
     let notifier = services
         .to_learner
         .notifier_builder()
         .create()
-        .map_err(|e| IpcError::new("creating the worker's notifier", e))?;
+        .map_err(|source| IpcError::NotifierCreate {
+            owner: "the worker",
+            source,
+        })?;
     let listener = services
         .to_workers
         .listener_builder()
         .create()
-        .map_err(|e| IpcError::new("creating the worker's listener", e))?;
+        .map_err(|source| IpcError::ListenerCreate {
+            owner: "the worker",
+            source,
+        })?;
     // The learner's identity, learnt from its first answer; 0 asks to join whatever runs.
     let mut identity = 0u64;
     let serves = factory.serves();
@@ -328,9 +350,7 @@ pub fn serve(
             outbox.run = identity;
             outbox.want = want as u32;
             outbox.observe_rollout(slowest);
-            let request = client
-                .send_copy(outbox)
-                .map_err(|e| IpcError::new("sending a request", e))?;
+            let request = client.send_copy(outbox).map_err(IpcError::RequestSend)?;
             *slot = Some((request, want));
             outbox = WorkerMessage::request(identity, 1, serves);
             sent = true;
@@ -338,7 +358,10 @@ pub fn serve(
         unannounced |= sent;
         let outbox_full = outbox.count as usize >= MAX_BATCH;
         if unannounced && wakes_learner(queue.len(), batching.size(), outbox_full) {
-            notifier.notify().map_err(|e| IpcError::new("waking the learner", e))?;
+            notifier.notify().map_err(|source| IpcError::NotifierNotify {
+                whom: "the learner",
+                source,
+            })?;
             unannounced = false;
         }
         // Polling every slot costs about as much as a trivial rollout, so it waits until the
@@ -347,10 +370,7 @@ pub fn serve(
         if queue.is_empty() || outbox_full {
             for slot in slots.iter_mut() {
                 let Some((request, _)) = slot.as_ref() else { continue };
-                let Some(response) = request
-                    .receive()
-                    .map_err(|e| IpcError::new("receiving a response", e))?
-                else {
+                let Some(response) = request.receive().map_err(IpcError::ResponseReceive)? else {
                     continue;
                 };
                 let answer = *response.user_header();
@@ -369,7 +389,7 @@ pub fn serve(
                     }
                     Some(Response::Refused) | None => {
                         return Err(WorkerError::Refused {
-                            run: run.to_string(),
+                            run: run.clone(),
                             reason: refusal_reason(&answer, identity, &serves),
                         });
                     }
@@ -383,12 +403,13 @@ pub fn serve(
         let next = if outbox_full { None } else { queue.pop_front() };
         if let Some(wire) = next {
             let task = wire.to_task();
-            let no_environment = |reason: String| WorkerError::Environment {
+            let no_environment = |reason| WorkerError::Environment {
                 job: wire.job,
                 task_id: task.id,
                 reason,
             };
-            let spec = EnvironmentSpec::try_from(wire.environment).map_err(|e| no_environment(e.to_string()))?;
+            let spec = EnvironmentSpec::try_from(wire.environment)
+                .map_err(|e| no_environment(EnvironmentProvideError::new(e)))?;
             let environment = factory.environment(&spec).map_err(no_environment)?;
             let provided = environment.spec();
             if provided != spec {
@@ -431,7 +452,13 @@ pub fn serve(
             Ok(woken) => woken,
             // A signal, also a pause and resume (SIGSTOP, SIGCONT): only `stop` ends the worker.
             Err(ListenerWaitError::InterruptSignal) => 0,
-            Err(error) => return Err(IpcError::new("waiting for the learner", error).into()),
+            Err(source) => {
+                return Err(IpcError::ListenerWait {
+                    whom: "the learner",
+                    source,
+                }
+                .into());
+            }
         };
         if woken > 0 {
             silence.heard();

@@ -1,10 +1,11 @@
 //! A worker refused by the learner, or refusing a task, stops with a message naming both sides;
-//! one whose environment returns more than the wire carries stops naming the limit.
+//! one whose environment returns more than the wire carries stops naming the limit; one whose
+//! factory has no environment stops with the factory's error.
 
-use acps_shared::{Environment, EnvironmentSpec, Outcome, Task, TaskKind};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task, TaskKind};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, MAX_DIAGNOSTICS, Refusal, Response, WireTask, WorkerMessage};
-use acps_worker::{Single, WorkerError, WorkerOptions, WorkerReport};
+use acps_worker::{EnvironmentFactory, EnvironmentProvideError, Single, WorkerError, WorkerOptions, WorkerReport};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
@@ -34,11 +35,11 @@ impl Environment for Zero {
     }
 }
 
-/// Serve `environment` to a stand-in learner of a run named after `test` that answers every
+/// Serve `factory`'s environments to a stand-in learner of a run named after `test` that answers every
 /// request with `answer`, until the worker stops (within 20 s, or the test fails).
 fn against_stand_in(
     test: &str,
-    environment: impl Environment + 'static,
+    mut factory: impl EnvironmentFactory + Send + 'static,
     answer: impl Fn(&WorkerMessage) -> (Answer, Vec<WireTask>),
 ) -> Result<WorkerReport, WorkerError> {
     let run = RunName::new(&format!("{test}-{}", std::process::id())).unwrap();
@@ -49,7 +50,7 @@ fn against_stand_in(
                 name: "refused".into(),
                 ..WorkerOptions::default()
             };
-            acps_worker::serve(&run, &options, &mut Single(environment), &AtomicBool::new(false))
+            acps_worker::serve(&run, &options, &mut factory, &AtomicBool::new(false))
         })
     };
     {
@@ -76,7 +77,7 @@ fn against_stand_in(
 #[test]
 fn a_worker_of_another_run_stops_and_says_why() {
     let refuse = |_: &WorkerMessage| (Answer::refused(Refusal::Run, 42, Some(spec(1.0)), 1), vec![]);
-    match against_stand_in("refused-run", Zero(spec(1.0), 0), refuse) {
+    match against_stand_in("refused-run", Single(Zero(spec(1.0), 0)), refuse) {
         Err(WorkerError::Refused { reason, .. }) => assert!(reason.contains("000000000000002a"), "{reason}"),
         other => panic!("expected a refusal, got {other:?}"),
     }
@@ -88,7 +89,7 @@ fn a_worker_serving_an_environment_no_job_needs_names_both() {
         assert_eq!(message.serves(), Ok(acps_shared::Serves::One(spec(2.0))));
         (Answer::refused(Refusal::Environment, 42, Some(spec(1.0)), 2), vec![])
     };
-    match against_stand_in("refused-environment", Zero(spec(2.0), 0), refuse) {
+    match against_stand_in("refused-environment", Single(Zero(spec(2.0), 0)), refuse) {
         Err(WorkerError::Refused { reason, .. }) => assert_eq!(
             reason,
             format!(
@@ -116,15 +117,14 @@ fn task_in(environment: EnvironmentSpec) -> WireTask {
 #[test]
 fn single_refuses_a_task_of_another_environment() {
     let hand_out = |_: &WorkerMessage| (Answer::new(Response::Task, 42), vec![task_in(spec(1.0))]);
-    let error = against_stand_in("refused-task", Zero(spec(2.0), 0), hand_out).unwrap_err();
-    assert_eq!(
-        error,
-        WorkerError::TaskRefused {
-            job: 3,
-            task_id: 9,
-            needed: Box::new(spec(1.0)),
-            provided: Box::new(spec(2.0)),
-        }
+    let error = against_stand_in("refused-task", Single(Zero(spec(2.0), 0)), hand_out).unwrap_err();
+    assert!(
+        matches!(
+            &error,
+            WorkerError::TaskRefused { job: 3, task_id: 9, needed, provided }
+                if **needed == spec(1.0) && **provided == spec(2.0)
+        ),
+        "{error:?}"
     );
     let message = error.to_string();
     assert!(
@@ -136,7 +136,7 @@ fn single_refuses_a_task_of_another_environment() {
 #[test]
 fn an_outcome_with_more_diagnostics_than_the_wire_carries_stops_the_worker() {
     let hand_out = |_: &WorkerMessage| (Answer::new(Response::Task, 42), vec![task_in(spec(1.0))]);
-    let error = against_stand_in("diagnostics", Zero(spec(1.0), MAX_DIAGNOSTICS + 1), hand_out).unwrap_err();
+    let error = against_stand_in("diagnostics", Single(Zero(spec(1.0), MAX_DIAGNOSTICS + 1)), hand_out).unwrap_err();
     assert!(
         matches!(error, WorkerError::OutcomeTooLarge { job: 3, task_id: 9, .. }),
         "{error}"
@@ -148,4 +148,30 @@ fn an_outcome_with_more_diagnostics_than_the_wire_carries_stops_the_worker() {
             MAX_DIAGNOSTICS + 1
         )
     );
+}
+
+/// A factory whose every build fails.
+struct Broken;
+
+impl EnvironmentFactory for Broken {
+    fn serves(&self) -> Serves {
+        Serves::Any
+    }
+
+    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError> {
+        Err(EnvironmentProvideError::new(std::io::Error::other("no simulator here")))
+    }
+}
+
+#[test]
+fn a_factory_without_the_environment_stops_the_worker_with_its_own_error() {
+    let hand_out = |_: &WorkerMessage| (Answer::new(Response::Task, 42), vec![task_in(spec(1.0))]);
+    let error = against_stand_in("no-environment", Broken, hand_out).unwrap_err();
+    assert!(
+        matches!(error, WorkerError::Environment { job: 3, task_id: 9, .. }),
+        "{error}"
+    );
+    assert_eq!(error.to_string(), "task 9 of job 3: no environment");
+    let source = std::error::Error::source(&error).expect("the factory's error");
+    assert_eq!(source.to_string(), "no simulator here");
 }

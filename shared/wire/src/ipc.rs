@@ -10,7 +10,16 @@
 //! - `to-workers`: event; the learner wakes workers after answering.
 
 use crate::wire::{Answer, MAX_BATCH, WireTask, WorkerMessage};
+use iceoryx2::node::{NodeCreationFailure, NodeListFailure};
+use iceoryx2::port::client::RequestSendError;
+use iceoryx2::port::listener::{ListenerCreateError, ListenerWaitError};
+use iceoryx2::port::notifier::{NotifierCreateError, NotifierNotifyError};
+use iceoryx2::port::{LoanError, ReceiveError, SendError};
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenOrCreateError;
+use iceoryx2::service::builder::request_response::RequestResponseOpenOrCreateError;
+use iceoryx2::service::port_factory::client::ClientCreateError;
+use iceoryx2::service::port_factory::server::ServerCreateError;
 use std::path::Path;
 use std::time::Duration;
 
@@ -39,24 +48,128 @@ pub type PendingTasks =
 /// An event service.
 pub type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
 
-/// An iceoryx2 operation that failed.
+/// An iceoryx2 operation of a run that failed: the object and the operation, named as iceoryx2
+/// names its errors, with iceoryx2's error as the source.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{what}: {reason}")]
-pub struct IpcError {
-    /// What was attempted.
-    pub what: String,
-    /// iceoryx2's reason.
-    pub reason: String,
-}
-
-impl IpcError {
-    /// An error for `what` with iceoryx2's `reason`.
-    pub fn new(what: impl Into<String>, reason: impl std::fmt::Debug) -> Self {
-        Self {
-            what: what.into(),
-            reason: format!("{reason:?}"),
-        }
-    }
+pub enum IpcError {
+    /// A node name iceoryx2 refuses: empty, longer than [`MAX_NODE_NAME`], or not ASCII.
+    #[error("node name: must be 1 to {MAX_NODE_NAME} ASCII characters other than NUL, got {got}")]
+    NodeNameInvalid {
+        /// The name as the message shows it: quoted, or its length when it is too long to show.
+        got: String,
+    },
+    /// iceoryx2 could not create the process's node of the run (permissions, resources).
+    #[error("creating node '{node}' of run '{run}'")]
+    NodeCreate {
+        /// The node's name.
+        node: String,
+        /// The run.
+        run: RunName,
+        /// iceoryx2's error.
+        #[source]
+        source: NodeCreationFailure,
+    },
+    /// Listing the run's nodes failed on every attempt: nodes of runs were created or removed
+    /// while each read the shared node directory, or it cannot be read.
+    #[error("listing the nodes of run '{run}'")]
+    NodeList {
+        /// The run.
+        run: RunName,
+        /// iceoryx2's error of the last attempt.
+        #[source]
+        source: NodeListFailure,
+    },
+    /// The run's task service could not be opened or created; the message says why in words,
+    /// as iceoryx2's reasons name its internals.
+    #[error("opening the task service ({})", OpenFailure::of_task_service(source).words())]
+    TaskServiceOpen {
+        /// iceoryx2's error.
+        #[source]
+        source: RequestResponseOpenOrCreateError,
+    },
+    /// An event service of the run could not be opened or created; the message says why in
+    /// words.
+    #[error("opening the event service '{service}' ({})", OpenFailure::of_event_service(source).words())]
+    EventServiceOpen {
+        /// The service's name.
+        service: &'static str,
+        /// iceoryx2's error.
+        #[source]
+        source: EventOpenOrCreateError,
+    },
+    /// The run's task server could not be created, other than because another learner holds it
+    /// ([`ServerError::Taken`]).
+    #[error("serving run '{run}'")]
+    ServerCreate {
+        /// The run.
+        run: RunName,
+        /// iceoryx2's error.
+        #[source]
+        source: ServerCreateError,
+    },
+    /// A worker's task client could not be created (the service has its most clients).
+    #[error("creating the worker's client")]
+    ClientCreate(#[source] ClientCreateError),
+    /// A notifier of an event service could not be created (the service has its most notifiers).
+    #[error("creating {owner}'s notifier")]
+    NotifierCreate {
+        /// Whose: "the learner", "the worker", ...
+        owner: &'static str,
+        /// iceoryx2's error.
+        #[source]
+        source: NotifierCreateError,
+    },
+    /// A listener of an event service could not be created (the service has its most listeners).
+    #[error("creating {owner}'s listener")]
+    ListenerCreate {
+        /// Whose: "the learner", "the worker", ...
+        owner: &'static str,
+        /// iceoryx2's error.
+        #[source]
+        source: ListenerCreateError,
+    },
+    /// A worker's request could not be sent (its active requests are all in use, or the
+    /// connection broke).
+    #[error("sending a request")]
+    RequestSend(#[source] RequestSendError),
+    /// The learner could not receive a worker's request.
+    #[error("receiving a request")]
+    RequestReceive(#[source] ReceiveError),
+    /// No memory for an answer: more tasks than an answer holds, or every chunk in use.
+    #[error("loaning an answer")]
+    AnswerLoan(#[source] LoanError),
+    /// An answer could not be sent (the worker's connection broke).
+    #[error("answering a request")]
+    AnswerSend(#[source] SendError),
+    /// A worker could not receive its answer.
+    #[error("receiving a response")]
+    ResponseReceive(#[source] ReceiveError),
+    /// A notification could not be sent.
+    #[error("waking {whom}")]
+    NotifierNotify {
+        /// Who was to be woken: "the learner", "a worker", ...
+        whom: &'static str,
+        /// iceoryx2's error.
+        #[source]
+        source: NotifierNotifyError,
+    },
+    /// Waiting on a listener failed other than by a signal.
+    #[error("waiting for {whom}")]
+    ListenerWait {
+        /// Who was waited for: "the learner", "workers".
+        whom: &'static str,
+        /// iceoryx2's error.
+        #[source]
+        source: ListenerWaitError,
+    },
+    /// A run's files cannot be removed while a node of the run is alive.
+    #[error("removing the files of run '{run}': {alive} node(s) still alive")]
+    RunFilesRemove {
+        /// The run.
+        run: RunName,
+        /// Its live nodes.
+        alive: usize,
+    },
 }
 
 /// The environment variable that names the run a started worker process joins.
@@ -136,23 +249,30 @@ pub const LIMITS: ServiceLimits = ServiceLimits {
 /// What the files of every acps run start with.
 const PREFIX: &str = "acps_";
 
-/// A run's name: it names the run's shared-memory prefix, and workers join a run by it.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+/// A run's name: it names the run's shared-memory prefix, and workers join a run by it. Parsed
+/// once where it comes in (the command line, [`RUN_ENV`], a network message), it travels as this
+/// type, so no other part validates it again.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct RunName(String);
+
+/// A run name that is not 1 to 40 characters of letters, digits and '-'.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("run name: '{got}' must be 1 to 40 characters of letters, digits and '-'")]
+pub struct RunNameParseError {
+    /// The refused name.
+    pub got: String,
+}
 
 impl RunName {
     /// A validated run name: 1 to 40 characters of `[A-Za-z0-9-]`. No `_`: the run's files are
     /// named `acps_<run>_...`, so a name without one can be read back from any of them (see
     /// [`clean_dead_runs`]).
-    pub fn new(name: &str) -> Result<Self, IpcError> {
+    pub fn new(name: &str) -> Result<Self, RunNameParseError> {
         let valid = (1..=40).contains(&name.len()) && name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-');
         if valid {
             Ok(Self(name.to_string()))
         } else {
-            Err(IpcError {
-                what: "run name".into(),
-                reason: format!("'{name}' must be 1 to 40 characters of letters, digits and '-'"),
-            })
+            Err(RunNameParseError { got: name.to_string() })
         }
     }
 
@@ -165,7 +285,7 @@ impl RunName {
 
     /// The run named by the [`RUN_ENV`] environment variable, which a fleet sets for the
     /// worker processes it starts; `None` when it is not set.
-    pub fn from_env() -> Result<Option<Self>, IpcError> {
+    pub fn from_env() -> Result<Option<Self>, RunNameParseError> {
         std::env::var(RUN_ENV).ok().map(|name| Self::new(&name)).transpose()
     }
 
@@ -180,12 +300,35 @@ impl RunName {
     }
 
     /// The iceoryx2 configuration of the run.
-    pub fn config(&self) -> Result<Config, IpcError> {
+    pub fn config(&self) -> Config {
         let mut config = Config::default();
         config.global.prefix =
-            FileName::new(self.prefix().as_bytes()).map_err(|e| IpcError::new("the run's iceoryx2 prefix", e))?;
+            FileName::new(self.prefix().as_bytes()).expect("a run name's prefix is a short file name of [A-Za-z0-9_-]");
         config.global.creation_timeout = LIMITS.creation_timeout;
-        Ok(config)
+        config
+    }
+}
+
+impl std::str::FromStr for RunName {
+    type Err = RunNameParseError;
+
+    fn from_str(name: &str) -> Result<Self, Self::Err> {
+        Self::new(name)
+    }
+}
+
+/// As a string: a network message carries it so.
+impl serde::Serialize for RunName {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(&self.0)
+    }
+}
+
+/// Parsed on the way in: a message that names no valid run does not decode.
+impl<'de> serde::Deserialize<'de> for RunName {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        Self::new(&name).map_err(serde::de::Error::custom)
     }
 }
 
@@ -215,7 +358,7 @@ pub fn quiet_iceoryx2_log() {
 /// A node of `run` named `name`. Signal handling stays with the host program (library code must
 /// not swallow SIGINT/SIGTERM).
 pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
-    node_with(run, name, &run.config()?)
+    node_with(run, name, &run.config())
 }
 
 /// A worker's node of `run`, like [`node`], that leaves looking for dead nodes to the learner.
@@ -224,7 +367,7 @@ pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
 /// or leave together spent seconds of CPU on them (docs/FLEET.md#oversubscription). The learner
 /// cleans up when it starts, on its looks for dead workers, and at the end of the run.
 pub fn worker_node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
-    let mut config = run.config()?;
+    let mut config = run.config();
     config.global.node.cleanup_dead_nodes_on_creation = false;
     config.global.node.cleanup_dead_nodes_on_destruction = false;
     config.global.service.cleanup_dead_nodes_on_open = false;
@@ -232,19 +375,17 @@ pub fn worker_node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcE
 }
 
 fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Service>, IpcError> {
-    let node_name = NodeName::new(name).map_err(|_| IpcError {
-        what: "node name".into(),
-        reason: format!(
-            "must be 1 to {MAX_NODE_NAME} ASCII characters other than NUL, got {}",
-            shown(name)
-        ),
-    })?;
+    let node_name = NodeName::new(name).map_err(|_| IpcError::NodeNameInvalid { got: shown(name) })?;
     NodeBuilder::new()
         .name(&node_name)
         .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| IpcError::new(format!("creating node '{name}' of run '{run}'"), e))
+        .map_err(|source| IpcError::NodeCreate {
+            node: name.to_string(),
+            run: run.clone(),
+            source,
+        })
 }
 
 /// Why a process could not open a service of its run, in words: iceoryx2's reasons name its
@@ -282,7 +423,7 @@ impl OpenFailure {
         }
     }
 
-    fn of_task_service(error: &iceoryx2::service::builder::request_response::RequestResponseOpenOrCreateError) -> Self {
+    fn of_task_service(error: &RequestResponseOpenOrCreateError) -> Self {
         use iceoryx2::service::builder::request_response::{
             RequestResponseCreateError as Create, RequestResponseOpenError as Open,
             RequestResponseOpenOrCreateError as Either,
@@ -318,7 +459,7 @@ impl OpenFailure {
         }
     }
 
-    fn of_event_service(error: &iceoryx2::service::builder::event::EventOpenOrCreateError) -> Self {
+    fn of_event_service(error: &EventOpenOrCreateError) -> Self {
         use iceoryx2::service::builder::event::{
             EventCreateError as Create, EventOpenError as Open, EventOpenOrCreateError as Either,
         };
@@ -353,10 +494,9 @@ impl OpenFailure {
 /// Open (or create) every service of the run on `node`.
 pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
     let nodes = LIMITS.nodes;
-    let service_name =
-        |name: &str| ServiceName::new(name).map_err(|e| IpcError::new(format!("service name '{name}'"), e));
+    let service_name = |name: &str| ServiceName::new(name).expect("the run's service names are short ASCII");
     let tasks = node
-        .service_builder(&service_name("tasks")?)
+        .service_builder(&service_name("tasks"))
         .request_response::<WorkerMessage, [WireTask]>()
         .response_user_header::<Answer>()
         .max_servers(1)
@@ -366,21 +506,15 @@ pub fn open_services(node: &Node<ipc::Service>) -> Result<Services, IpcError> {
         .max_response_buffer_size(LIMITS.response_buffer)
         .max_loaned_requests(LIMITS.loaned_requests)
         .open_or_create()
-        .map_err(|e| {
-            let why = OpenFailure::of_task_service(&e).words();
-            IpcError::new(format!("opening the task service ({why})"), e)
-        })?;
-    let event = |name: &str| {
-        node.service_builder(&service_name(name)?)
+        .map_err(|source| IpcError::TaskServiceOpen { source })?;
+    let event = |service: &'static str| {
+        node.service_builder(&service_name(service))
             .event()
             .max_listeners(nodes)
             .max_notifiers(nodes)
             .max_nodes(nodes)
             .open_or_create()
-            .map_err(|e| {
-                let why = OpenFailure::of_event_service(&e).words();
-                IpcError::new(format!("opening the event service '{name}' ({why})"), e)
-            })
+            .map_err(|source| IpcError::EventServiceOpen { service, source })
     };
     Ok(Services {
         tasks,
@@ -399,7 +533,7 @@ pub enum ServerError {
     )]
     Taken {
         /// The run.
-        run: String,
+        run: RunName,
         /// The process of the learner that serves it, when iceoryx2 can tell.
         pid: Option<i32>,
     },
@@ -412,7 +546,6 @@ pub enum ServerError {
 /// tasks, up to [`MAX_BATCH`]. Refused with [`ServerError::Taken`] while a live process serves
 /// the run; the server of a dead one is cleaned up first.
 pub fn task_server(run: &RunName, tasks: &TaskService) -> Result<TaskServer, ServerError> {
-    use iceoryx2::service::port_factory::server::ServerCreateError;
     let create = || tasks.server_builder().initial_max_slice_len(MAX_BATCH).create();
     let mut created = create();
     if matches!(created, Err(ServerCreateError::ExceedsMaxSupportedServers))
@@ -424,10 +557,14 @@ pub fn task_server(run: &RunName, tasks: &TaskService) -> Result<TaskServer, Ser
     }
     created.map_err(|e| match e {
         ServerCreateError::ExceedsMaxSupportedServers => ServerError::Taken {
-            run: run.to_string(),
+            run: run.clone(),
             pid: server_pid(tasks),
         },
-        e => IpcError::new(format!("serving run '{run}'"), e).into(),
+        source => IpcError::ServerCreate {
+            run: run.clone(),
+            source,
+        }
+        .into(),
     })
 }
 
@@ -446,10 +583,10 @@ fn server_pid(tasks: &TaskService) -> Option<i32> {
 pub fn reply(request: &TaskRequest, answer: Answer, tasks: &[WireTask]) -> Result<(), IpcError> {
     let mut response = request
         .loan_slice_uninit(tasks.len())
-        .map_err(|e| IpcError::new("loaning an answer", e))?
+        .map_err(IpcError::AnswerLoan)?
         .write_from_slice(tasks);
     *response.user_header_mut() = answer;
-    response.send().map_err(|e| IpcError::new("answering a request", e))
+    response.send().map_err(IpcError::AnswerSend)
 }
 
 /// Remove what dead processes of `run` left behind (crashed learners or workers). Returns the
@@ -477,7 +614,7 @@ fn list_nodes<T: Clone>(
     initial: T,
     mut visit: impl FnMut(&mut T, NodeState<ipc::Service>),
 ) -> Result<T, IpcError> {
-    let config = run.config()?;
+    let config = run.config();
     let mut attempt = 0;
     loop {
         let mut value = initial.clone();
@@ -488,8 +625,11 @@ fn list_nodes<T: Clone>(
         attempt += 1;
         match listed {
             Ok(()) => return Ok(value),
-            Err(error) if attempt == LIST_ATTEMPTS => {
-                return Err(IpcError::new(format!("listing the nodes of run '{run}'"), error));
+            Err(source) if attempt == LIST_ATTEMPTS => {
+                return Err(IpcError::NodeList {
+                    run: run.clone(),
+                    source,
+                });
             }
             Err(_) => std::thread::sleep(Duration::from_millis(1)),
         }
@@ -650,9 +790,9 @@ pub fn remove_run_files(run: &RunName) -> Result<usize, IpcError> {
     clean_stale(run)?;
     let alive = live_nodes(run)?;
     if alive > 0 {
-        return Err(IpcError {
-            what: format!("removing the files of run '{run}'"),
-            reason: format!("{alive} node(s) still alive"),
+        return Err(IpcError::RunFilesRemove {
+            run: run.clone(),
+            alive,
         });
     }
     let files = leftover_files(run);
@@ -684,10 +824,25 @@ mod tests {
     #[test]
     fn run_names_are_validated() {
         assert_eq!(RunName::new("grid-1").unwrap().prefix(), "acps_grid-1_");
-        for bad in ["", "a/b", "with space", &"x".repeat(41)] {
-            let error = RunName::new(bad).unwrap_err().to_string();
-            assert!(error.contains("must be 1 to 40 characters"), "{error}");
+        assert_eq!("grid-1".parse::<RunName>().unwrap().as_str(), "grid-1");
+        for bad in ["", "a/b", "with space", "a_b", &"x".repeat(41)] {
+            let error = bad.parse::<RunName>().unwrap_err();
+            assert_eq!(error, RunNameParseError { got: bad.to_string() });
+            assert_eq!(
+                error.to_string(),
+                format!("run name: '{bad}' must be 1 to 40 characters of letters, digits and '-'")
+            );
         }
+    }
+
+    #[test]
+    fn a_run_name_crosses_the_network_as_its_string_and_is_parsed_on_the_way_in() {
+        let run = RunName::new("grid-1").unwrap();
+        let json = serde_json::to_string(&run).unwrap();
+        assert_eq!(json, serde_json::to_string("grid-1").unwrap());
+        assert_eq!(serde_json::from_str::<RunName>(&json).unwrap(), run);
+        let error = serde_json::from_str::<RunName>("\"a b\"").unwrap_err().to_string();
+        assert!(error.contains("must be 1 to 40 characters"), "{error}");
     }
 
     #[test]
@@ -810,13 +965,13 @@ mod tests {
                 .request_response::<u64, u64>()
                 .open_or_create()
                 .unwrap();
-            let error = open_services(&node).err().expect("refused").to_string();
-            assert!(
-                error.starts_with(
-                    "opening the task service (a process of another acps build created it with other types or settings): "
-                ),
-                "{error}"
+            let error = open_services(&node).err().expect("refused");
+            assert_eq!(
+                error.to_string(),
+                "opening the task service (a process of another acps build created it with other types or settings)"
             );
+            let source = std::error::Error::source(&error).expect("iceoryx2's error").to_string();
+            assert!(source.starts_with("RequestResponseOpenOrCreateError::"), "{source}");
         }
         remove_run_files(&run).unwrap();
         assert!(leftover_files(&run).is_empty());
@@ -833,7 +988,7 @@ mod tests {
             assert_eq!(
                 error,
                 ServerError::Taken {
-                    run: run.to_string(),
+                    run: run.clone(),
                     pid: Some(std::process::id() as i32)
                 }
             );

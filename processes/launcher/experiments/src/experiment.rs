@@ -7,7 +7,9 @@
 use crate::checkpoints::{Checkpoints, CheckpointsError, Writer, restore};
 use crate::progress::{Progress, ScoreFormat};
 use crate::summary::{BestPolicy, MethodSummary, RunResult, Summary, UserProblem, mean, standard_error};
-use acps_fleet::{Fleet, FleetError, FleetJob, FleetJobBuildError, FleetProgress, Learners, Observer, Remote};
+use acps_fleet::{
+    Fleet, FleetError, FleetJob, FleetJobBuildError, FleetProgress, Learners, ObserveError, Observer, Remote,
+};
 use acps_learner::checkpoint::Stamp;
 use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerCreateError, LearningProgress, SelectorConfig, run_in_process,
@@ -84,11 +86,11 @@ impl<F: FnMut(&FleetProgress)> Observer for Checkpointing<F> {
         (self.observe)(progress)
     }
 
-    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), ObserveError> {
         match &mut self.writers[job] {
             Some(writer) => writer
                 .after_tell(learner, self.environments[job].as_deref())
-                .map_err(Into::into),
+                .map_err(ObserveError::new),
             None => Ok(()),
         }
     }

@@ -2,7 +2,7 @@
 //! a fleet starts them, or the user's own workers, with.
 
 use acps_shared::{Environment, EnvironmentSpec, Serves};
-use acps_worker::EnvironmentFactory;
+use acps_worker::{EnvironmentFactory, EnvironmentProvideError};
 use std::collections::HashMap;
 use std::path::Path;
 use std::process::Command;
@@ -20,9 +20,9 @@ impl EnvironmentFactory for ModelFactory {
         Serves::Any
     }
 
-    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+    fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError> {
         if !self.cache.contains_key(spec) {
-            let environment = acps_models::environment::build(spec).map_err(|e| e.to_string())?;
+            let environment = acps_models::environment::build(spec).map_err(EnvironmentProvideError::new)?;
             self.cache.insert(*spec, environment);
         }
         Ok(self.cache.get_mut(spec).expect("inserted above").as_mut())

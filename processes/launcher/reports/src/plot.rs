@@ -22,6 +22,7 @@ use acps_experiments::summary::Summary;
 use acps_models::robot::Robot;
 use acps_models::targets::Field;
 use acps_models::trajectory::JointTrajectory;
+use acps_shared::nearest;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
@@ -1094,14 +1095,6 @@ impl SelectionsOverTime {
 fn bin_width(bin: usize, bins: usize, episodes: usize) -> usize {
     let first = |b: usize| (b * episodes).div_ceil(bins);
     first(bin + 1) - first(bin)
-}
-
-/// The index of the context nearest to `s`.
-fn nearest(contexts: &[Vec<f64>], s: &[f64]) -> usize {
-    let distance = |c: &Vec<f64>| c.iter().zip(s).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
-    (0..contexts.len())
-        .min_by(|&a, &b| distance(&contexts[a]).total_cmp(&distance(&contexts[b])))
-        .unwrap_or(0)
 }
 
 impl Picture for SelectionsOverTime {

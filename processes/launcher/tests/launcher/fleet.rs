@@ -13,7 +13,7 @@ use acps_models::throw::{Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPoli
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire::{Answer, Response, WorkerMessage};
-use acps_worker::{EnvironmentFactory, Single, WorkerError, WorkerExit, WorkerOptions};
+use acps_worker::{EnvironmentFactory, EnvironmentProvideError, Single, WorkerError, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -780,7 +780,7 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
 
 /// How the tests serve in-process jobs: no polling, a fixed run identity.
 fn test_fleet(run: &RunName, start_with: usize) -> Fleet {
-    Fleet::builder(run.as_str())
+    Fleet::builder(run.clone())
         .identity(7)
         .spin(Duration::ZERO)
         .start_with(start_with)
@@ -1071,7 +1071,7 @@ fn a_hung_worker_s_tasks_go_to_another_and_the_result_is_unchanged() {
             });
             worker("healthy", &mut Single(environment()))
         });
-        let mut fleet = Fleet::builder(run.as_str())
+        let mut fleet = Fleet::builder(run.clone())
             .identity(7)
             .spin(Duration::ZERO)
             .start_with(2)
@@ -1108,7 +1108,7 @@ fn a_fleet_whose_workers_all_exit_stops_with_an_error_naming_the_run() {
     let (_, mut jobs, _) = short_grid(4);
     let run = run_name("no-workers");
     // Worker processes that exit at once, as a broken worker command would.
-    let mut fleet = Fleet::builder(run.as_str())
+    let mut fleet = Fleet::builder(run.clone())
         .spawn_workers(2, |_| Command::new("true"))
         .liveness(Liveness {
             no_workers: Some(Duration::from_millis(200)),
@@ -1209,7 +1209,7 @@ fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_lef
     // 200 runs beside the other fleet tests: one of the three nodes' files gone, the rest left
     // to the other cleaner), so the test waits for the files to go.
     let other = run_name("kill-all-next");
-    let fleet = Fleet::builder(other.as_str()).start().unwrap();
+    let fleet = Fleet::builder(other.clone()).start().unwrap();
     wait_until("the killed run's files to be removed", Duration::from_secs(20), || {
         ipc::leftover_files(&run).is_empty()
     });
@@ -1239,7 +1239,7 @@ impl EnvironmentFactory for Liar {
         Serves::Any
     }
 
-    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, String> {
+    fn environment(&mut self, _: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError> {
         Ok(&mut self.0)
     }
 }
@@ -1424,20 +1424,20 @@ fn a_fleet_is_refused_while_another_holds_its_run_and_serving_releases_it() {
     let taken = |error: &ServerError| {
         *error
             == ServerError::Taken {
-                run: run.to_string(),
+                run: run.clone(),
                 pid: Some(std::process::id() as i32),
             }
     };
     let serve = |fleet: &mut Fleet| fleet.serve(&mut [], &mut |_: &FleetProgress| {});
-    let mut first = Fleet::builder(run.as_str()).start().unwrap();
-    match Fleet::builder(run.as_str()).start() {
+    let mut first = Fleet::builder(run.clone()).start().unwrap();
+    match Fleet::builder(run.clone()).start() {
         Err(FleetStartError::Serve(error)) => assert!(taken(&error), "{error}"),
         Err(other) => panic!("expected the run to be taken, got {other}"),
         Ok(_) => panic!("two fleets hold run {run}"),
     }
     // Serving ends by releasing the run: a worker left busy in a rollout finds its learner gone.
     serve(&mut first).unwrap();
-    let second = Fleet::builder(run.as_str()).start().expect("the first serves no more");
+    let second = Fleet::builder(run.clone()).start().expect("the first serves no more");
     match serve(&mut first) {
         Err(FleetError::Seat(error)) => assert!(taken(&error), "{error}"),
         other => panic!("expected the run to be taken, got {other:?}"),

@@ -101,7 +101,7 @@ pub enum CRepsRestoreError {
     /// The saved sample memory is of another kind or size, or holds samples of other widths;
     /// says which.
     #[error("C-REPS state: the saved memory is {0}")]
-    Memory(String),
+    Memory(super::MemoryFitError),
     /// The saved update schedule is past this configuration's `update_every`.
     #[error("C-REPS state: {since_update} rollouts since the last update, but an update runs every {update_every}")]
     Schedule {

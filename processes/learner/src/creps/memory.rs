@@ -113,14 +113,21 @@ impl Memory {
     /// Whether `self` (a saved memory) can replace `fresh`, a memory built from the same
     /// configuration: the same kind and size, and samples of `context_dim` coordinates, `n_phi`
     /// features and `n_theta` parameters. Says why not.
-    pub fn check_fits(&self, fresh: &Memory, context_dim: usize, n_phi: usize, n_theta: usize) -> Result<(), String> {
+    pub fn check_fits(
+        &self,
+        fresh: &Memory,
+        context_dim: usize,
+        n_phi: usize,
+        n_theta: usize,
+    ) -> Result<(), MemoryFitError> {
         match (self, fresh) {
             (Memory::Window { capacity, samples }, Memory::Window { capacity: expected, .. }) => {
                 if capacity != expected || samples.len() > *capacity {
-                    return Err(format!(
-                        "a sliding window of {capacity} holding {}, expected one of {expected}",
-                        samples.len()
-                    ));
+                    return Err(MemoryFitError::Window {
+                        capacity: *capacity,
+                        held: samples.len(),
+                        expected: *expected,
+                    });
                 }
             }
             (
@@ -134,25 +141,70 @@ impl Memory {
                     || buckets.len() != expected_buckets.len()
                     || buckets.iter().any(|b| b.len() > *per_task)
                 {
-                    return Err(format!(
-                        "a per-task memory of {per_task} x {} tasks, expected {expected} x {}",
-                        buckets.len(),
-                        expected_buckets.len()
-                    ));
+                    return Err(MemoryFitError::PerTask {
+                        per_task: *per_task,
+                        tasks: buckets.len(),
+                        expected: *expected,
+                        expected_tasks: expected_buckets.len(),
+                    });
                 }
             }
-            _ => return Err("a memory of another kind than configured".into()),
+            _ => return Err(MemoryFitError::Kind),
         }
         if self
             .samples()
             .any(|s| s.context.len() != context_dim || s.features.len() != n_phi || s.theta.len() != n_theta)
         {
-            return Err(format!(
-                "a sample that does not have {context_dim} context coordinates, {n_phi} features and {n_theta} parameters"
-            ));
+            return Err(MemoryFitError::SampleShape {
+                context_dim,
+                n_phi,
+                n_theta,
+            });
         }
         Ok(())
     }
+}
+
+/// Why a saved sample memory cannot replace the one its configuration builds, as
+/// [`CRepsRestoreError::Memory`](super::CRepsRestoreError::Memory) reports it: each message
+/// completes "the saved memory is ...".
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum MemoryFitError {
+    /// A sliding window of another capacity, or holding more samples than its capacity.
+    #[error("a sliding window of {capacity} holding {held}, expected one of {expected}")]
+    Window {
+        /// The saved window's capacity.
+        capacity: usize,
+        /// Samples it holds.
+        held: usize,
+        /// The configured capacity.
+        expected: usize,
+    },
+    /// A per-task memory of another size or number of tasks, or with a task over its size.
+    #[error("a per-task memory of {per_task} x {tasks} tasks, expected {expected} x {expected_tasks}")]
+    PerTask {
+        /// The saved memory's samples per task.
+        per_task: usize,
+        /// Its tasks.
+        tasks: usize,
+        /// The configured samples per task.
+        expected: usize,
+        /// The configured tasks.
+        expected_tasks: usize,
+    },
+    /// A sliding window where a per-task memory is configured, or the reverse.
+    #[error("a memory of another kind than configured")]
+    Kind,
+    /// A sample of other widths than the learner's.
+    #[error("a sample that does not have {context_dim} context coordinates, {n_phi} features and {n_theta} parameters")]
+    SampleShape {
+        /// The learner's context dimension.
+        context_dim: usize,
+        /// Its number of features.
+        n_phi: usize,
+        /// Its number of parameters.
+        n_theta: usize,
+    },
 }
 
 #[cfg(test)]
@@ -207,5 +259,33 @@ mod tests {
         assert_eq!(ids(&memory), [1.0, 4.0, 2.0]);
         memory.push(0, sample(7.0, 6.0));
         assert_eq!(ids(&memory), [7.0, 1.0, 2.0]);
+    }
+
+    #[test]
+    fn a_saved_memory_that_does_not_fit_says_why() {
+        let window = |capacity| Memory::new(&MemoryConfig::SlidingWindow { capacity }, 2);
+        let per_task = |per_task, tasks| Memory::new(&MemoryConfig::BestPerTask { per_task }, tasks);
+        assert_eq!(window(3).check_fits(&window(3), 1, 1, 1), Ok(()));
+        assert_eq!(
+            window(4).check_fits(&window(3), 1, 1, 1),
+            Err(MemoryFitError::Window {
+                capacity: 4,
+                held: 0,
+                expected: 3
+            })
+        );
+        let error = per_task(2, 3).check_fits(&per_task(2, 4), 1, 1, 1).unwrap_err();
+        assert_eq!(error.to_string(), "a per-task memory of 2 x 3 tasks, expected 2 x 4");
+        assert_eq!(
+            window(3).check_fits(&per_task(3, 2), 1, 1, 1),
+            Err(MemoryFitError::Kind)
+        );
+        let mut saved = window(3);
+        saved.push(0, sample(0.0, 1.0));
+        assert_eq!(saved.check_fits(&window(3), 1, 1, 1), Ok(()));
+        assert_eq!(
+            saved.check_fits(&window(3), 2, 1, 1).unwrap_err().to_string(),
+            "a sample that does not have 2 context coordinates, 1 features and 1 parameters"
+        );
     }
 }

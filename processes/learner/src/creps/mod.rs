@@ -76,7 +76,7 @@ pub use error::{
 };
 pub use features::{CustomFeatures, FeatureFn, FeatureMap};
 pub use joint::{ContextTerm, JointDualSolution, evaluate_joint_dual, solve_joint_dual};
-pub use memory::MemoryConfig;
+pub use memory::{MemoryConfig, MemoryFitError};
 pub use policy::LinearGaussianPolicy;
 pub use snapshot::{PolicySnapshot, PolicySnapshotRestoreError, RestoredPolicy};
 pub use update::{Batch, ContextReport, UpdateReport, UpdateSettings, update, update_paced};

@@ -1,5 +1,5 @@
-//! Points of a context space: keeping a drawn point inside it, and snapping a point to the nearest
-//! training context. Shared by the selectors that draw from the continuous space.
+//! Points of a context space: keeping a drawn point inside it. Shared by the selectors that draw
+//! from the continuous space.
 
 use acps_shared::ContextSpace;
 
@@ -23,16 +23,4 @@ pub(crate) fn project(space: &ContextSpace, mut point: Vec<f64>) -> Vec<f64> {
         }
     }
     point
-}
-
-/// Index of the context nearest to `point` (Euclidean; ties to the lowest index).
-pub(crate) fn nearest(contexts: &[Vec<f64>], point: &[f64]) -> usize {
-    let distance2 = |c: &Vec<f64>| c.iter().zip(point).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
-    (0..contexts.len()).fold(0, |best, i| {
-        if distance2(&contexts[i]) < distance2(&contexts[best]) {
-            i
-        } else {
-            best
-        }
-    })
 }

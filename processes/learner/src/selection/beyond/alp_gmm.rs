@@ -21,10 +21,10 @@
 use super::gmm::{Component, Mixture};
 use super::neighbours::NeighbourIndex;
 use super::progress::proportional;
-use crate::selection::geometry::{nearest, project};
+use crate::selection::geometry::project;
 use crate::selection::validate::check_space_and_snap;
 use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
-use acps_shared::ContextSpace;
+use acps_shared::{ContextSpace, nearest};
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
