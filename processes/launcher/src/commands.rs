@@ -375,7 +375,7 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     let options = WorkerOptions {
-        in_flight: cli::deprecated("--in-flight", "--queue-depth", args.in_flight).unwrap_or(args.queue_depth),
+        queue_depth: cli::deprecated("--in-flight", "--queue-depth", args.in_flight).unwrap_or(args.queue_depth),
         name,
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
         spin: Duration::from_micros(args.spin_us),

@@ -73,11 +73,12 @@ impl<E: Environment> EnvironmentFactory for Single<E> {
 /// How a worker behaves.
 #[derive(Debug, Clone)]
 pub struct WorkerOptions {
-    /// Tasks kept in flight (asked for, queued or not yet reported), 1..=128: more hides the
-    /// wake-up latency between processes. Cheap rollouts travel in batches of up to half of them;
-    /// at most 8 requests ask for tasks at once, so rollouts that travel alone (slower than a
-    /// batch's 800 us) keep at most 8 in flight.
-    pub in_flight: usize,
+    /// The worker's queue: tasks kept asked for, queued or not yet reported, 1..=128. More
+    /// hides the wake-up latency between processes. Cheap rollouts travel in batches of up to
+    /// half of them; at most 8 requests ask for tasks at once, so rollouts that travel alone
+    /// (slower than a batch's 800 us) keep at most 8 in flight. Not the learner's window
+    /// (`LearnerConfig::in_flight`), which decides the results.
+    pub queue_depth: usize,
     /// The worker's node name (shown by iceoryx2's tools): [`ipc::WORKER_NAMES`].
     pub name: String,
     /// How long to wait for the run's learner to appear before giving up.
@@ -92,7 +93,7 @@ pub use acps_wire::ipc::DEFAULT_QUEUE_DEPTH;
 impl Default for WorkerOptions {
     fn default() -> Self {
         Self {
-            in_flight: DEFAULT_QUEUE_DEPTH,
+            queue_depth: DEFAULT_QUEUE_DEPTH,
             name: format!("worker-{}", std::process::id()),
             startup_timeout: Duration::from_secs(10),
             spin: Duration::ZERO,
@@ -234,11 +235,11 @@ pub fn serve(
     factory: &mut dyn EnvironmentFactory,
     stop: &AtomicBool,
 ) -> Result<WorkerReport, WorkerError> {
-    if !(1..=MAX_IN_FLIGHT_PER_WORKER).contains(&options.in_flight) {
+    if !(1..=MAX_IN_FLIGHT_PER_WORKER).contains(&options.queue_depth) {
         return Err(WorkerError::Option {
-            field: "in_flight",
+            field: "queue_depth",
             accepted: "in 1..=128",
-            got: options.in_flight.to_string(),
+            got: options.queue_depth.to_string(),
         });
     }
     ipc::check_worker_name(&options.name).map_err(|e| WorkerError::Option {
@@ -301,13 +302,13 @@ pub fn serve(
     let serves = factory.serves();
     // Requests in flight, each with the number of tasks it asks for; `None` is a free slot. The
     // first `asking` slots ask for tasks, the last one only delivers outcomes.
-    let asking = options.in_flight.min(MAX_ASKING_REQUESTS);
+    let asking = options.queue_depth.min(MAX_ASKING_REQUESTS);
     let mut slots: Vec<Option<(PendingTasks, usize)>> = (0..=asking).map(|_| None).collect();
     // Tasks answered by the learner and not yet simulated.
     let mut queue: VecDeque<WireTask> = VecDeque::new();
     // Outcomes not yet sent.
     let mut outbox = WorkerMessage::request(identity, 1, serves);
-    let mut batching = Batching::new(options.in_flight);
+    let mut batching = Batching::new(options.queue_depth);
     // Told to the learner, which then waits for this worker at least a few times as long.
     let mut slowest = Duration::ZERO;
     let mut rollouts = 0;
@@ -322,7 +323,7 @@ pub fn serve(
                 rollouts,
             });
         }
-        // Budget: tasks queued, unsent or asked for stay within `in_flight`. The outcomes of a
+        // Budget: tasks queued, unsent or asked for stay within `queue_depth`. The outcomes of a
         // batch go out when the batch is full or nothing else is left to simulate, and ask for
         // as many tasks as the budget then allows; a worker with room to spare asks for more.
         // Outcomes never wait for tasks: when every asking slot is taken they go out alone in
@@ -334,7 +335,7 @@ pub fn serve(
             let asked: usize = slots.iter().flatten().map(|(_, want)| want).sum();
             // Saturating: a learner that answered with more tasks than asked for cannot make
             // the budget underflow.
-            let room = options.in_flight.saturating_sub(queue.len() + asked);
+            let room = options.queue_depth.saturating_sub(queue.len() + asked);
             let batch = batching.size();
             let flush = outbox.count > 0 && (outbox.count as usize >= batch || queue.is_empty());
             let top_up = outbox.count == 0 && (room >= batch || (asked == 0 && queue.is_empty()));
@@ -395,7 +396,7 @@ pub fn serve(
                     }
                 }
                 // The answered request must be gone before the next one is sent: the service
-                // allows only `in_flight` active requests per client.
+                // allows only `queue_depth` active requests per client.
                 drop(response);
                 *slot = None;
             }

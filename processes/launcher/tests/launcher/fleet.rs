@@ -582,7 +582,7 @@ fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worke
 
     // An embedded worker on this thread serves the run to its end.
     let options = WorkerOptions {
-        in_flight: 4,
+        queue_depth: 4,
         name: "embedded".into(),
         ..WorkerOptions::default()
     };
@@ -633,7 +633,7 @@ fn an_embedded_worker_stops_cleanly_when_asked() {
     let run = run_name("stop");
     let stop = AtomicBool::new(true);
     let options = WorkerOptions {
-        in_flight: 2,
+        queue_depth: 2,
         name: "stopped".into(),
         ..WorkerOptions::default()
     };
@@ -642,7 +642,7 @@ fn an_embedded_worker_stops_cleanly_when_asked() {
     let error = acps_worker::serve(
         &run,
         &WorkerOptions {
-            in_flight: 0,
+            queue_depth: 0,
             ..options
         },
         &mut ModelFactory::default(),
@@ -650,7 +650,7 @@ fn an_embedded_worker_stops_cleanly_when_asked() {
     )
     .unwrap_err();
     assert!(
-        error.to_string().contains("in_flight must be in 1..=128, got 0"),
+        error.to_string().contains("queue_depth must be in 1..=128, got 0"),
         "{error}"
     );
     ipc::remove_run_files(&run).unwrap();
@@ -868,7 +868,7 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
     let progress = std::thread::scope(|scope| {
         let worker = scope.spawn(|| {
             let options = WorkerOptions {
-                in_flight: 64,
+                queue_depth: 64,
                 name: "sleepy".into(),
                 ..WorkerOptions::default()
             };
