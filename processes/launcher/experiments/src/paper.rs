@@ -3,7 +3,7 @@
 //! `dartboard`, Fig. 10). Every setting the paper leaves open is recorded in the summary's
 //! `settings` and explained in docs/CHOICES.md.
 
-use crate::experiment::{Experiment, Instance};
+use crate::experiment::{Experiment, Instance, InstanceFactory};
 use crate::settings::{DEFAULT_IN_FLIGHT, DEFAULT_RUNS, ExperimentFile, Memory};
 use crate::summary::{RunResult, mean};
 use acps_learner::creps::{CRepsConfig, MemoryConfig};
@@ -104,11 +104,7 @@ pub(crate) fn methods(
 
 /// `settings` with the settings of the teachers beyond the paper: `retire` always (null when
 /// off), `absolute_progress`, `alp_gmm` and `self_paced` when `methods` has them.
-pub(crate) fn with_teachers(
-    s: &ExperimentFile,
-    mut settings: serde_json::Value,
-    methods: &[SelectorConfig],
-) -> serde_json::Value {
+fn with_teachers(s: &ExperimentFile, mut settings: serde_json::Value, methods: &[SelectorConfig]) -> serde_json::Value {
     let map = settings
         .as_object_mut()
         .expect("an experiment's settings are an object");
@@ -130,6 +126,34 @@ pub(crate) fn with_teachers(
         }
     }
     settings
+}
+
+/// An experiment of the run's settings `s` with nothing problem-specific: `methods` (recorded
+/// in `settings` with the teachers' settings), the run's runs and seed, `learner` and
+/// `instance`; selection ratios over the first 250 episodes, contexts from anywhere in the
+/// space, no best policy, no detail, not a problem file's.
+pub(crate) fn experiment(
+    name: &str,
+    s: &ExperimentFile,
+    settings: serde_json::Value,
+    methods: Vec<SelectorConfig>,
+    learner: LearnerConfig,
+    instance: InstanceFactory,
+) -> Experiment {
+    Experiment {
+        name: name.into(),
+        settings: with_teachers(s, settings, &methods),
+        methods,
+        runs: s.runs.unwrap_or(DEFAULT_RUNS),
+        base_seed: learner.seed,
+        learner,
+        instance,
+        selection_window: 250,
+        detail: None,
+        best_policy: false,
+        user_problem: None,
+        continuous_contexts: true,
+    }
 }
 
 /// A panel of Fig. 2: its noise levels.
@@ -177,33 +201,25 @@ pub fn toy(model: LearningModelConfig, s: &ExperimentFile) -> Experiment {
         "sagg_riac": SaggRiacConfig::default(),
         "eval_every": learner.eval_every,
     });
+    let instance: InstanceFactory = Box::new(move |seed| {
+        let mut environment = LearningModel::new(model, seed).expect("panel noise levels are valid");
+        if let Some(factors) = learning_factors {
+            environment = environment
+                .with_learning_factors(factors)
+                .expect("the factors were validated");
+        }
+        Instance {
+            problem: environment.problem(),
+            optimal_score: Some(environment.optimal_performance()),
+            environment: Some(Box::new(environment)),
+            keeps_state: true,
+        }
+    });
     Experiment {
-        name: "toy".into(),
-        settings: with_teachers(s, settings, &methods),
-        methods,
-        runs: s.runs.unwrap_or(DEFAULT_RUNS),
-        base_seed: learner.seed,
-        learner,
-        instance: Box::new(move |seed| {
-            let mut environment = LearningModel::new(model, seed).expect("panel noise levels are valid");
-            if let Some(factors) = learning_factors {
-                environment = environment
-                    .with_learning_factors(factors)
-                    .expect("the factors were validated");
-            }
-            Instance {
-                problem: environment.problem(),
-                optimal_score: Some(environment.optimal_performance()),
-                environment: Some(Box::new(environment)),
-                keeps_state: true,
-            }
-        }),
         selection_window: episodes as usize,
-        detail: None,
-        best_policy: false,
-        user_problem: None,
         // The model's contexts are the indices of its ten: it fails any other.
         continuous_contexts: false,
+        ..experiment("toy", s, settings, methods, learner, instance)
     }
 }
 
@@ -282,23 +298,11 @@ fn function_experiment(
         "eval_every": learner.eval_every,
     });
     let methods = methods(s, defaults, |_| ducb.clone());
-    Experiment {
-        name: name.into(),
-        settings: with_teachers(s, settings, &methods),
-        methods,
-        runs: s.runs.unwrap_or(DEFAULT_RUNS),
-        base_seed: learner.seed,
-        learner,
-        instance: Box::new(move |seed| {
-            let function = ContextualFunction::new(n_s, n_theta, seed).expect("the experiment's function is valid");
-            stateless(problem(&function), Box::new(function))
-        }),
-        selection_window: 250,
-        detail: None,
-        best_policy: false,
-        user_problem: None,
-        continuous_contexts: true,
-    }
+    let instance: InstanceFactory = Box::new(move |seed| {
+        let function = ContextualFunction::new(n_s, n_theta, seed).expect("the experiment's function is valid");
+        stateless(problem(&function), Box::new(function))
+    });
+    experiment(name, s, settings, methods, learner, instance)
 }
 
 /// How throws are simulated.
@@ -389,22 +393,14 @@ pub fn grid(sim: Sim, s: &ExperimentFile) -> Experiment {
     let ducb = throwing_ducb(s);
     let learner = learner(s, 10_000, 100, Some(throwing_creps(25, s)));
     let methods = methods(s, &defaults, |_| ducb.clone());
+    let settings = throwing_settings(sim, &learner, &ducb, s);
+    let instance: InstanceFactory = Box::new(move |_| {
+        let environment = environment::grid(sim).expect("the shipped PA-10 throws");
+        stateless(grid_problem(environment.spec()), Box::new(environment))
+    });
     Experiment {
-        name: "grid".into(),
-        settings: with_teachers(s, throwing_settings(sim, &learner, &ducb, s), &methods),
-        methods,
-        runs: s.runs.unwrap_or(DEFAULT_RUNS),
-        base_seed: learner.seed,
-        learner,
-        instance: Box::new(move |_| {
-            let environment = environment::grid(sim).expect("the shipped PA-10 throws");
-            stateless(grid_problem(environment.spec()), Box::new(environment))
-        }),
-        selection_window: 250,
-        detail: None,
         best_policy: true,
-        user_problem: None,
-        continuous_contexts: true,
+        ..experiment("grid", s, settings, methods, learner, instance)
     }
 }
 
@@ -415,27 +411,21 @@ pub fn dartboard(sim: Sim, s: &ExperimentFile) -> Experiment {
     let learner = learner(s, 50_000, 1000, Some(throwing_creps(81, s)));
     let fields = environment::dartboard_fields();
     let methods = methods(s, &[Method::MonotonicProgress], |_| ducb.clone());
+    let settings = throwing_settings(sim, &learner, &ducb, s);
+    let instance: InstanceFactory = Box::new(move |_| {
+        let fields = environment::dartboard_fields();
+        let environment = environment::dartboard(sim).expect("the shipped PA-10 throws");
+        stateless(
+            dartboard_problem(&fields, fields[0].centre, environment.spec()),
+            Box::new(environment),
+        )
+    });
     Experiment {
-        name: "dartboard".into(),
-        settings: with_teachers(s, throwing_settings(sim, &learner, &ducb, s), &methods),
-        methods,
-        runs: s.runs.unwrap_or(DEFAULT_RUNS),
-        base_seed: learner.seed,
-        learner,
-        instance: Box::new(move |_| {
-            let fields = environment::dartboard_fields();
-            let environment = environment::dartboard(sim).expect("the shipped PA-10 throws");
-            stateless(
-                dartboard_problem(&fields, fields[0].centre, environment.spec()),
-                Box::new(environment),
-            )
-        }),
         selection_window: 10_000,
         detail: Some(Box::new(move |runs| dartboard_detail(&fields, runs))),
-        best_policy: false,
-        user_problem: None,
         // A throw at any point but a field's centre is a failed rollout (the fields are the contexts).
         continuous_contexts: false,
+        ..experiment("dartboard", s, settings, methods, learner, instance)
     }
 }
 

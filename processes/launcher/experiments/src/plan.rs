@@ -2,12 +2,12 @@
 //! checked once, and the experiments it runs ([`Job`]s) with their output directories and
 //! resolved files.
 
-use crate::experiment::{Experiment, Instance};
+use crate::experiment::{Experiment, Instance, InstanceFactory};
 use crate::file::{LoadedFile, describe};
 use crate::keys::{ConfigError, Kind};
 use crate::paper::{self, Sim};
 use crate::problem_file::CheckedProblem;
-use crate::settings::{DEFAULT_RUNS, ExperimentFile, ExperimentName, Memory, Resolving, SimName};
+use crate::settings::{ExperimentFile, ExperimentName, Memory, Resolving, SimName};
 use acps_learner::creps::CRepsConfig;
 use acps_learner::selection::DUcbConfig;
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
@@ -186,24 +186,17 @@ fn problem_experiment(checked: &CheckedProblem, s: &ExperimentFile) -> Experimen
         "eval_every": learner.eval_every,
     });
     let methods = paper::methods(s, &PROBLEM_METHODS, |_| ducb.clone());
+    let name = problem.name.clone();
+    let instance: InstanceFactory = Box::new(move |_| Instance {
+        problem: problem.clone(),
+        environment: None,
+        optimal_score: None,
+        keeps_state: false,
+    });
     Experiment {
-        name: problem.name.clone(),
-        settings: paper::with_teachers(s, settings, &methods),
-        methods,
-        runs: s.runs.unwrap_or(DEFAULT_RUNS),
-        base_seed: learner.seed,
-        learner,
-        instance: Box::new(move |_| Instance {
-            problem: problem.clone(),
-            environment: None,
-            optimal_score: None,
-            keeps_state: false,
-        }),
         selection_window: 250.min(episodes as usize),
-        detail: None,
-        best_policy: false,
         user_problem: Some(checked.user.clone()),
-        continuous_contexts: true,
+        ..paper::experiment(&name, s, settings, methods, learner, instance)
     }
 }
 
