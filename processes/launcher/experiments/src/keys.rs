@@ -1,10 +1,40 @@
-//! What a key of an experiment file is ([`Key`]: its name, range and reason, where it applies)
+//! The paper's experiments by name ([`ExperimentName`]), what a key of an experiment file is
+//! ([`Key`]: its name, range and reason, where it applies)
 //! and what can be wrong with its value ([`Invalid`]); [`ConfigError`] is the message a user
 //! reads, naming the option or the file and line.
 
-use crate::settings::ExperimentName;
 use acps_learner::Method;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
+
+/// The paper's experiments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExperimentName {
+    /// Section 4's model of the learning process (Fig. 2 and 3).
+    Toy,
+    /// Section 5.1.2's contextual function on a 5x5 grid of contexts (Fig. 4 and 5).
+    Function,
+    /// Section 5.1.3: the contextual function for 1 to 4 context dimensions (Fig. 6).
+    Dims,
+    /// Section 5.2.3: the PA-10 throws at a 5x5 grid of targets, tested on a 4x4 grid (Fig. 8).
+    Grid,
+    /// Section 5.2.4: the PA-10 throws at the 81 fields of a dartboard on the ground (Fig. 10).
+    Dartboard,
+}
+
+impl ExperimentName {
+    /// The name on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Toy => "toy",
+            Self::Function => "function",
+            Self::Dims => "dims",
+            Self::Grid => "grid",
+            Self::Dartboard => "dartboard",
+        }
+    }
+}
 
 /// What an experiment file describes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

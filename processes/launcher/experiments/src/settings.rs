@@ -10,6 +10,7 @@
 //! an experiment is built ([`crate::paper`], [`crate::plan`]).
 
 use crate::experiment::Experiment;
+pub use crate::keys::ExperimentName;
 use crate::keys::{ALL, ANY_METHOD, FILE, Invalid, Key, Kind, PAPER, Problem, WITH_CREPS, out_of_range};
 use crate::problem_file::{PROBLEM_KEYS, ProblemFile};
 use acps_learner::creps::{CRepsConfig, ETA_MIN_RANGE, MemoryConfig};
@@ -41,35 +42,6 @@ pub const DEFAULT_IN_FLIGHT: usize = 1;
 /// Most rollouts a C-REPS update weighs, or between two updates: the dual's cost grows with the
 /// samples, and an update that waits longer learns from rollouts of a policy long gone.
 const MAX_SAMPLES: usize = 100_000;
-
-/// The paper's experiments.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum ExperimentName {
-    /// Section 4's model of the learning process (Fig. 2 and 3).
-    Toy,
-    /// Section 5.1.2's contextual function on a 5x5 grid of contexts (Fig. 4 and 5).
-    Function,
-    /// Section 5.1.3: the contextual function for 1 to 4 context dimensions (Fig. 6).
-    Dims,
-    /// Section 5.2.3: the PA-10 throws at a 5x5 grid of targets, tested on a 4x4 grid (Fig. 8).
-    Grid,
-    /// Section 5.2.4: the PA-10 throws at the 81 fields of a dartboard on the ground (Fig. 10).
-    Dartboard,
-}
-
-impl ExperimentName {
-    /// The name on the command line and in files.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Toy => "toy",
-            Self::Function => "function",
-            Self::Dims => "dims",
-            Self::Grid => "grid",
-            Self::Dartboard => "dartboard",
-        }
-    }
-}
 
 /// How throws are simulated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
