@@ -45,7 +45,7 @@ pub(crate) enum Command {
     /// Run an experiment through a worker fleet: this process is the learner and serves tasks
     /// over iceoryx2 shared memory to worker processes it starts. Writes the same DIR/summary.json
     /// as `acps experiment` with the same --in-flight and --seed. An experiment file with a
-    /// [problem] table of your own runs here only, on your workers (--worker-command CMD, or
+    /// \[problem\] table of your own runs here only, on your workers (--worker-command CMD, or
     /// --workers 0 and start them yourself).
     Run(RunArgs),
     /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.

@@ -1,6 +1,6 @@
 //! The paper's experiments by name ([`ExperimentName`]), what a key of an experiment file is
 //! ([`Key`]: its name, range and reason, where it applies)
-//! and what can be wrong with its value ([`Invalid`]); [`ConfigError`] is the message a user
+//! and what can be wrong with its value; [`ConfigError`] is the message a user
 //! reads, naming the option or the file and line.
 
 use acps_learner::Method;

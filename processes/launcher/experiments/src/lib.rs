@@ -1,7 +1,7 @@
 //! acps experiments as a library: what the `acps` command runs, for any Rust program.
 //!
 //! - [`settings`]: every setting of an experiment, declared once with its range ([`keys`]: what
-//!   a key is and how it is refused); [`file`]: experiment files as read and written;
+//!   a key is and how it is refused); [`mod@file`]: experiment files as read and written;
 //! - [`plan`]: a request checked into a [`plan::Plan`] of [`plan::Job`]s;
 //! - [`problem_file`]: a `[problem]` table of the user's, simulated by their workers;
 //! - [`paper`]: the paper's experiments (Sections 4 and 5) as [`experiment::Experiment`]s;

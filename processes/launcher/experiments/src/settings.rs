@@ -1,6 +1,6 @@
 //! Every setting of an experiment, declared once.
 //!
-//! A setting is one entry of the [`settings!`] table below: its name (the TOML key; the option is
+//! A setting is one entry of the `settings!` table below: its name (the TOML key; the option is
 //! `--name-with-dashes`), type, default, accepted range with its reason, where it applies, which
 //! methods take it, how its value is checked and how it is read back from the experiment it
 //! built. From that entry come the field of [`ExperimentFile`] (parsed from files by serde and
