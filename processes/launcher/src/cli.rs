@@ -1,6 +1,7 @@
 //! The command line's arguments: what `acps --help` shows; `crate::commands` carries a command
 //! out.
 
+use acps_experiments::progress::PROGRESS_EVERY;
 use acps_experiments::run_dir::DEFAULT_CHECKPOINT_EVERY;
 use acps_experiments::settings::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
 use acps_fleet::processes::MAX_NICE;
@@ -174,6 +175,7 @@ impl LearnArgs {
                 out: Some(self.out),
                 checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
                 quiet: self.quiet,
+                progress_every: PROGRESS_EVERY.as_secs_f64(),
             },
             started: StartedWorkers {
                 workers: self.workers,
@@ -389,6 +391,10 @@ pub(crate) struct ExperimentArgs {
     /// No progress bar.
     #[arg(long, short)]
     pub(crate) quiet: bool,
+    /// When stderr is not a terminal (a log, a pipe): write the progress as a plain line every
+    /// this many seconds (0.1..=3600) instead of the live bar.
+    #[arg(long, value_name = "SECONDS", default_value_t = PROGRESS_EVERY.as_secs_f64(), allow_hyphen_values = true, value_parser = number("a number of seconds in 0.1..=3600", |x| (0.1..=3600.0).contains(&x)))]
+    pub(crate) progress_every: f64,
 }
 
 /// The value parser of an integer option in `low..=high`: every refusal, also of a negative or

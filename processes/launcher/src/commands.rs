@@ -160,6 +160,10 @@ fn run_dir(args: &ExperimentArgs) -> anyhow::Result<Option<RunDir>> {
         },
         _ => run,
     };
+    let run = RunDir {
+        progress_every: Duration::from_secs_f64(args.progress_every),
+        ..run
+    };
     Ok(Some(run.resuming(args.resume.as_deref(), args.checkpoint_every)?))
 }
 
@@ -279,7 +283,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
                 }
             }
         }
-        let progress = experiment.progress(args.experiment.quiet);
+        let progress = experiment.progress(args.experiment.quiet, planned.progress_every);
         let checkpoints = planned.checkpoints(dir);
         let remote = listener.as_mut().map(|l| l as &mut dyn acps_fleet::Remote);
         let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), remote, |p| {

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
 
 /// One problem instance: what the learner sees, the environment, and a known optimal score.
 pub struct Instance {
@@ -201,9 +202,16 @@ impl Experiment {
         self.learner.episodes * (self.methods.len() * self.runs) as u64
     }
 
-    /// Its progress line (hidden when `quiet`), in its scores' unit.
-    pub fn progress(&self, quiet: bool) -> Progress {
-        Progress::of(&self.name, self.total_episodes(), self.user_problem.as_ref(), quiet)
+    /// Its progress line (hidden when `quiet`; when stderr is not a terminal, a plain line
+    /// every `every`), in its scores' unit.
+    pub fn progress(&self, quiet: bool, every: Duration) -> Progress {
+        Progress::of(
+            &self.name,
+            self.total_episodes(),
+            self.user_problem.as_ref(),
+            quiet,
+            every,
+        )
     }
 
     /// How its scores read.

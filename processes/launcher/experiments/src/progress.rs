@@ -5,7 +5,9 @@
 use crate::summary::{Summary, UserProblem, mean};
 use acps_learner::LearningProgress;
 use indicatif::{ProgressBar, ProgressStyle};
-use std::time::Duration;
+use std::io::IsTerminal;
+use std::sync::{Mutex, PoisonError};
+use std::time::{Duration, Instant};
 
 /// How an experiment's score reads: its name and unit (with a leading space, or empty).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -64,18 +66,37 @@ impl ScoreFormat {
     }
 }
 
-/// A progress line for an experiment, hidden when quiet.
+/// A progress line for an experiment: a live bar on a terminal, a plain line every few seconds
+/// when stderr is a file or a pipe (a log), nothing when quiet.
 pub struct Progress {
     bar: ProgressBar,
     score: ScoreFormat,
+    /// When stderr is not a terminal: the interval of the plain lines and when the last was
+    /// written (none yet: the first report is written at once).
+    lines: Option<(Duration, Mutex<Option<Instant>>)>,
 }
+
+/// How often a run's progress is written as a plain line when stderr is not a terminal, unless
+/// set (`--progress-every`).
+pub const PROGRESS_EVERY: Duration = Duration::from_secs(5);
 
 impl Progress {
     /// A progress line for `experiment` (its name), of `total` training episodes over all its
     /// runs; nothing is drawn when `quiet`.
     pub fn new(experiment: &str, total: u64, quiet: bool) -> Self {
-        let bar = if quiet {
-            ProgressBar::hidden()
+        Self::every(experiment, total, quiet, PROGRESS_EVERY)
+    }
+
+    /// [`Progress::new`], writing a plain line every `every` when stderr is not a terminal.
+    pub fn every(experiment: &str, total: u64, quiet: bool, every: Duration) -> Self {
+        let terminal = std::io::stderr().is_terminal();
+        let lines = (!quiet && !terminal).then(|| (every, Mutex::new(None)));
+        let bar = if quiet || !terminal {
+            // Hidden, it still keeps the position, length and message the plain lines show.
+            let bar = ProgressBar::hidden();
+            bar.set_length(total);
+            bar.set_prefix(experiment.to_string());
+            bar
         } else {
             // The length is known from the start: no "0/0" bar drawn full before the first report.
             let bar = ProgressBar::new(total)
@@ -94,15 +115,16 @@ impl Progress {
         Self {
             bar,
             score: ScoreFormat::of_paper(experiment),
+            lines,
         }
     }
 
     /// A progress line for experiment `name` of `total` episodes, in the unit a problem file
     /// gives its scores (`user`).
-    pub fn of(name: &str, total: u64, user: Option<&UserProblem>, quiet: bool) -> Self {
+    pub fn of(name: &str, total: u64, user: Option<&UserProblem>, quiet: bool, every: Duration) -> Self {
         Self {
             score: ScoreFormat::of(name, user),
-            ..Self::new(name, total, quiet)
+            ..Self::every(name, total, quiet, every)
         }
     }
 
@@ -118,6 +140,20 @@ impl Progress {
         );
         if let Some(workers) = workers {
             message += &format!(", {workers} workers");
+        }
+        if let Some((every, last)) = &self.lines {
+            let mut last = last.lock().unwrap_or_else(PoisonError::into_inner);
+            let now = Instant::now();
+            if last.is_none_or(|last| now.duration_since(last) >= *every) {
+                *last = Some(now);
+                eprintln!(
+                    "{}: {}/{} episodes, {message}, {:.1} s",
+                    self.bar.prefix(),
+                    learning.episodes,
+                    learning.total_episodes,
+                    self.bar.elapsed().as_secs_f64()
+                );
+            }
         }
         self.bar.set_message(message);
     }
@@ -136,8 +172,15 @@ impl Progress {
             methods => format!(" (mean of {methods} methods)"),
         };
         self.bar.set_position(self.bar.length().unwrap_or(0));
-        self.bar
-            .finish_with_message(format!("final {} {}{of}", self.score.name, self.score.value(score)));
+        let message = format!("final {} {}{of}", self.score.name, self.score.value(score));
+        if self.lines.is_some() {
+            eprintln!(
+                "{}: done, {message}, {:.1} s",
+                self.bar.prefix(),
+                self.bar.elapsed().as_secs_f64()
+            );
+        }
+        self.bar.finish_with_message(message);
         if !self.bar.is_hidden() {
             // The bar stays; what is printed next starts below it.
             eprintln!();

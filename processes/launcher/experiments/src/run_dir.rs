@@ -24,11 +24,13 @@ use crate::experiment::{Experiment, RunError};
 use crate::file::LoadedFile;
 use crate::keys::ConfigError;
 use crate::plan::{self, Job, Plan};
+use crate::progress::PROGRESS_EVERY;
 use crate::records::{self, RecordsError};
 use crate::settings::ExperimentFile;
 use crate::summary::Summary;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
+use std::time::Duration;
 
 /// Draws a summary's pictures into its run directory (acps-reports' `plot::write_all`, or
 /// nothing).
@@ -134,6 +136,8 @@ pub struct RunDir {
     pub checkpoint_every: u64,
     /// Continue every job from its checkpoints in `out`.
     pub resume: bool,
+    /// When stderr is not a terminal, write the progress as a plain line this often.
+    pub progress_every: Duration,
 }
 
 impl RunDir {
@@ -161,6 +165,7 @@ impl RunDir {
             jobs,
             checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
             resume: false,
+            progress_every: PROGRESS_EVERY,
         })
     }
 
@@ -227,7 +232,7 @@ impl RunDir {
         }
         let mut summaries = Vec::with_capacity(self.jobs.len());
         for Job { experiment, dir, .. } in &self.jobs {
-            let progress = experiment.progress(quiet);
+            let progress = experiment.progress(quiet, self.progress_every);
             let checkpoints = self.checkpoints(dir);
             let outcome = experiment.run_until(&progress, checkpoints.as_ref(), stop);
             match &outcome {

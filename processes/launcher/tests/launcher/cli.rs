@@ -1050,3 +1050,44 @@ fn the_old_names_of_a_workers_queue_still_work_with_a_warning() {
         "{stderr}"
     );
 }
+
+/// Piped, a run writes plain progress lines (the first report at once, then every
+/// --progress-every) and its final line, instead of a terminal's bar; quiet, none.
+#[test]
+fn a_piped_run_writes_plain_progress_lines() {
+    for quiet in [false, true] {
+        let dir = temp_dir("piped");
+        let mut args: Vec<String> = [
+            "experiment",
+            "function",
+            "--method",
+            "random",
+            "--runs",
+            "2",
+            "--episodes",
+            "300",
+            "--progress-every",
+            "0.1",
+            "--out",
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect();
+        args.push(dir.to_str().unwrap().into());
+        if quiet {
+            args.push("-q".into());
+        }
+        let output = acps_strings(&args);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{stderr}");
+        let progress = stderr
+            .lines()
+            .filter(|l| l.starts_with("function: ") && l.contains("/600 episodes, test ln cost "))
+            .count();
+        let done = stderr
+            .lines()
+            .filter(|l| l.starts_with("function: done, final test ln cost "))
+            .count();
+        assert_eq!((progress >= 1, done), (!quiet, usize::from(!quiet)), "{stderr}");
+    }
+}
