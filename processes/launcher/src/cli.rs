@@ -2,7 +2,7 @@
 //! out.
 
 use acps_experiments::progress::PROGRESS_EVERY;
-use acps_experiments::run_dir::DEFAULT_CHECKPOINT_EVERY;
+use acps_experiments::run_dir::{DEFAULT_CHECKPOINT_EVERY, MAX_FAILED_SHARE};
 use acps_experiments::settings::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
 use acps_fleet::processes::MAX_NICE;
 use acps_wire::ipc::{MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS};
@@ -176,6 +176,7 @@ impl LearnArgs {
                 checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
                 quiet: self.quiet,
                 progress_every: PROGRESS_EVERY.as_secs_f64(),
+                max_failed_share: MAX_FAILED_SHARE,
             },
             started: StartedWorkers {
                 workers: self.workers,
@@ -395,6 +396,11 @@ pub(crate) struct ExperimentArgs {
     /// this many seconds (0.1..=3600) instead of the live bar.
     #[arg(long, value_name = "SECONDS", default_value_t = PROGRESS_EVERY.as_secs_f64(), allow_hyphen_values = true, value_parser = number("a number of seconds in 0.1..=3600", |x| (0.1..=3600.0).contains(&x)))]
     pub(crate) progress_every: f64,
+    /// End with an error (exit 2, the run directory written) when more than this share of a
+    /// method's rollouts, training and evaluation, failed (0..=1; 1 accepts any but a run whose
+    /// every rollout failed).
+    #[arg(long, value_name = "SHARE", default_value_t = MAX_FAILED_SHARE, allow_hyphen_values = true, value_parser = number("a share in 0..=1", |x| (0.0..=1.0).contains(&x)))]
+    pub(crate) max_failed_share: f64,
 }
 
 /// The value parser of an integer option in `low..=high`: every refusal, also of a negative or

@@ -162,6 +162,7 @@ fn run_dir(args: &ExperimentArgs) -> anyhow::Result<Option<RunDir>> {
     };
     let run = RunDir {
         progress_every: Duration::from_secs_f64(args.progress_every),
+        max_failed_share: args.max_failed_share,
         ..run
     };
     Ok(Some(run.resuming(args.resume.as_deref(), args.checkpoint_every)?))
@@ -308,6 +309,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             );
         }
         run_dir::write(experiment, &summary, dir, args.experiment.quiet, &pictures)?;
+        run_dir::check_failures(experiment, &summary, dir, planned.max_failed_share)?;
     }
     Ok(())
 }

@@ -129,6 +129,9 @@ impl Job {
             updates: learner.updates().to_vec(),
             stats: learner.stats().clone(),
             optimal_score: self.optimal_score,
+            evaluation_rollouts: learner.evaluations().iter().fold((0, 0), |(all, failed), e| {
+                (all + e.outcomes.len() as u64, failed + e.failed as u64)
+            }),
             final_outcomes: learner
                 .evaluations()
                 .last()
@@ -608,6 +611,8 @@ impl Experiment {
             updates: runs.iter().map(|r| r.stats.updates).sum(),
             rejected_updates: runs.iter().map(|r| r.stats.rejected_updates).sum(),
             failed_episodes: runs.iter().map(|r| r.stats.failed_episodes).sum(),
+            evaluation_rollouts: runs.iter().map(|r| r.evaluation_rollouts.0).sum(),
+            failed_evaluation_rollouts: runs.iter().map(|r| r.evaluation_rollouts.1).sum(),
             detail: self.detail.as_ref().map(|detail| detail(runs)).unwrap_or_default(),
         }
     }

@@ -27,7 +27,7 @@ use crate::plan::{self, Job, Plan};
 use crate::progress::PROGRESS_EVERY;
 use crate::records::{self, RecordsError};
 use crate::settings::ExperimentFile;
-use crate::summary::Summary;
+use crate::summary::{Failures, Summary};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -105,6 +105,22 @@ pub enum RunDirError {
         #[source]
         source: std::io::Error,
     },
+    /// A larger share of a method's rollouts failed than the run accepts; the run directory
+    /// holds what was measured.
+    #[error(
+        "experiment {experiment}, {failures}: more than --max-failed-share {max_share} accepts; {} holds what was measured (a failed rollout is one whose reward or score is not a finite number, or that the environment reported as failed)",
+        dir.display()
+    )]
+    TooManyFailed {
+        /// The experiment.
+        experiment: String,
+        /// The first method beyond the share, with its counts.
+        failures: Failures,
+        /// The share accepted.
+        max_share: f64,
+        /// The run directory.
+        dir: PathBuf,
+    },
     /// The pictures could not be drawn.
     #[error("plotting into {}: {message}", dir.display())]
     Pictures {
@@ -138,7 +154,14 @@ pub struct RunDir {
     pub resume: bool,
     /// When stderr is not a terminal, write the progress as a plain line this often.
     pub progress_every: Duration,
+    /// The largest share of a method's rollouts (training and evaluation) that may fail before
+    /// the run is an error ([`MAX_FAILED_SHARE`] unless set).
+    pub max_failed_share: f64,
 }
+
+/// The share of a method's rollouts that may fail unless set: a quarter. Beyond it the test
+/// means rest on too few rollouts, or the policy learnt from too few, to be read as results.
+pub const MAX_FAILED_SHARE: f64 = 0.25;
 
 impl RunDir {
     /// Check `settings` over the experiment file `config`, writing into `out` (default:
@@ -166,6 +189,7 @@ impl RunDir {
             checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
             resume: false,
             progress_every: PROGRESS_EVERY,
+            max_failed_share: MAX_FAILED_SHARE,
         })
     }
 
@@ -244,6 +268,7 @@ impl RunDir {
                 source: Box::new(source),
             })?;
             write(experiment, &summary, dir, quiet, pictures)?;
+            check_failures(experiment, &summary, dir, self.max_failed_share)?;
             summaries.push(summary);
         }
         Ok(summaries)
@@ -288,6 +313,9 @@ pub fn write(
         message: e.to_string(),
     })?;
     if !quiet {
+        for failures in summary.failures() {
+            eprintln!("warning: experiment {}, {failures}", experiment.name);
+        }
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
         let score = experiment.score_format();
         for (method, result) in &summary.methods {
@@ -296,4 +324,23 @@ pub fn write(
         }
     }
     Ok(())
+}
+
+/// Refuse a run in which more than `max_share` of a method's rollouts failed, once its
+/// directory is written.
+pub fn check_failures(
+    experiment: &Experiment,
+    summary: &Summary,
+    dir: &Path,
+    max_share: f64,
+) -> Result<(), RunDirError> {
+    match summary.failures().into_iter().find(|f| f.share() > max_share) {
+        Some(failures) => Err(RunDirError::TooManyFailed {
+            experiment: experiment.name.clone(),
+            failures,
+            max_share,
+            dir: dir.to_path_buf(),
+        }),
+        None => Ok(()),
+    }
 }

@@ -56,6 +56,8 @@ pub struct RunResult {
     pub stats: LearnerStats,
     /// The instance's optimal score.
     pub optimal_score: Option<f64>,
+    /// Evaluation rollouts of the run, and how many of them failed.
+    pub evaluation_rollouts: (u64, u64),
     /// The outcome of every test context in the last evaluation.
     pub final_outcomes: Vec<Option<acps_shared::Outcome>>,
 }
@@ -90,6 +92,10 @@ pub struct MethodSummary {
     pub rejected_updates: u64,
     /// Summed failed training rollouts over runs.
     pub failed_episodes: u64,
+    /// Summed evaluation rollouts over runs (every test context of every evaluation).
+    pub evaluation_rollouts: u64,
+    /// Summed failed evaluation rollouts over runs: left out of the test means.
+    pub failed_evaluation_rollouts: u64,
     /// Problem-specific results.
     #[serde(flatten)]
     pub detail: serde_json::Map<String, serde_json::Value>,
@@ -177,7 +183,54 @@ impl BestPolicy {
     }
 }
 
+/// A method whose share of failed rollouts is larger than a run accepts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Failures {
+    /// The method.
+    pub method: String,
+    /// Its failed and all training rollouts over runs.
+    pub training: (u64, u64),
+    /// Its failed and all evaluation rollouts over runs.
+    pub evaluation: (u64, u64),
+}
+
+impl Failures {
+    /// The share of all its rollouts that failed.
+    pub fn share(&self) -> f64 {
+        let all = self.training.1 + self.evaluation.1;
+        (self.training.0 + self.evaluation.0) as f64 / all.max(1) as f64
+    }
+}
+
+impl std::fmt::Display for Failures {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: {} of {} training and {} of {} evaluation rollouts failed ({:.1}%)",
+            self.method,
+            self.training.0,
+            self.training.1,
+            self.evaluation.0,
+            self.evaluation.1,
+            100.0 * self.share()
+        )
+    }
+}
+
 impl Summary {
+    /// Every method with a failed rollout, with its counts.
+    pub fn failures(&self) -> Vec<Failures> {
+        self.methods
+            .iter()
+            .map(|(method, m)| Failures {
+                method: method.clone(),
+                training: (m.failed_episodes, self.training_episodes * self.runs as u64),
+                evaluation: (m.failed_evaluation_rollouts, m.evaluation_rollouts),
+            })
+            .filter(|f| f.training.0 + f.evaluation.0 > 0)
+            .collect()
+    }
+
     /// Write `dir/summary.json`, creating `dir`.
     pub fn write(&self, dir: &Path) -> std::io::Result<()> {
         std::fs::create_dir_all(dir)?;

@@ -1,5 +1,6 @@
 //! The runner's refusals, through the library's public API: an environment that is not its
-//! problem's, runs whose every rollout of a kind failed, methods the environment cannot serve.
+//! problem's, runs whose every rollout of a kind failed, methods the environment cannot serve,
+//! and runs with more failed rollouts than they accept.
 
 use acps_experiments::experiment::{Instance, RunError};
 use acps_experiments::paper;
@@ -121,4 +122,89 @@ fn a_method_the_environment_cannot_serve_is_refused_before_the_run() {
     );
     // The same method on an experiment whose environment takes any context in the space.
     assert!(paper::function(&options).jobs().is_ok());
+}
+
+/// The contextual function, failing every rollout whose context's first coordinate is above
+/// `above`.
+struct FailingAbove {
+    function: ContextualFunction,
+    above: f64,
+}
+
+impl Environment for FailingAbove {
+    fn spec(&self) -> acps_shared::EnvironmentSpec {
+        self.function.spec()
+    }
+
+    fn context_dim(&self) -> usize {
+        self.function.context_dim()
+    }
+
+    fn param_dim(&self) -> usize {
+        self.function.param_dim()
+    }
+
+    fn rollout(&mut self, task: &acps_shared::Task) -> acps_shared::Outcome {
+        if task.context[0] > self.above {
+            acps_shared::Outcome::failed(task.id)
+        } else {
+            self.function.rollout(task)
+        }
+    }
+}
+
+/// Failed rollouts are counted by kind in the summary and said in a warning; beyond the share a
+/// run accepts, the run ends with an error that names the method and its counts, after the run
+/// directory is written.
+#[test]
+fn failed_rollouts_are_counted_and_too_many_end_the_run_with_an_error() {
+    use acps_experiments::run_dir::{RunDir, RunDirError};
+    use std::sync::atomic::AtomicBool;
+    let settings = ExperimentFile {
+        experiment: Some(acps_experiments::settings::ExperimentName::Function),
+        runs: Some(2),
+        episodes: Some(200),
+        methods: Some(vec![acps_learner::Method::Random]),
+        ..Default::default()
+    };
+    let out = std::env::temp_dir().join(format!("acps-failures-{}", std::process::id()));
+    for (above, max_share, refused) in [(0.0, 0.25, true), (0.0, 0.9, false), (2.0, 0.0, false)] {
+        let mut run = RunDir::plan(None, &settings, Some(out.clone())).unwrap();
+        run.max_failed_share = max_share;
+        run.checkpoint_every = 0;
+        run.jobs[0].experiment.instance = Box::new(move |seed| {
+            let function = ContextualFunction::new(2, 20, seed).unwrap();
+            Instance {
+                problem: function.grid_problem().unwrap(),
+                environment: Some(Box::new(FailingAbove { function, above })),
+                optimal_score: None,
+                keeps_state: false,
+            }
+        });
+        run.prepare().unwrap();
+        let outcome = run.in_process(true, &AtomicBool::new(false), &|_, _| Ok(()));
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        let random = &summary["methods"]["random"];
+        let (failed, evaluations) = (
+            random["failed_evaluation_rollouts"].as_u64().unwrap(),
+            random["evaluation_rollouts"].as_u64().unwrap(),
+        );
+        // 2 runs x 5 evaluations (episodes 0, 50, .., 200) of 100 test contexts.
+        assert_eq!(evaluations, 2 * 5 * 100);
+        // About half the contexts have a positive first coordinate; none is above 2.
+        let failing = above < 1.0;
+        assert_eq!(failed > 0 && random["failed_episodes"].as_u64().unwrap() > 0, failing);
+        match outcome {
+            Err(RunDirError::TooManyFailed { failures, .. }) => {
+                assert!(refused, "{failures}");
+                assert_eq!(failures.method, "random");
+                assert_eq!(failures.evaluation, (failed, evaluations));
+                assert!(failures.share() > max_share);
+            }
+            Ok(_) => assert!(!refused),
+            Err(other) => panic!("{other}"),
+        }
+        std::fs::remove_dir_all(&out).unwrap();
+    }
 }

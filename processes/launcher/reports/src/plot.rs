@@ -1877,6 +1877,8 @@ mod tests {
             updates: 0,
             rejected_updates: 0,
             failed_episodes: 0,
+            evaluation_rollouts: 0,
+            failed_evaluation_rollouts: 0,
             detail: serde_json::Map::new(),
         }
     }
