@@ -34,10 +34,10 @@ fn an_instance_whose_environment_is_not_its_problems_is_refused_in_process() {
     );
 }
 
-/// The contextual function, failing every rollout of one kind in the instance of one seed.
+/// The contextual function, failing every rollout of a task `fails` picks.
 struct Failing {
     function: ContextualFunction,
-    fails: Option<acps_shared::TaskKind>,
+    fails: Box<dyn Fn(&acps_shared::Task) -> bool + Send>,
 }
 
 impl Environment for Failing {
@@ -54,7 +54,7 @@ impl Environment for Failing {
     }
 
     fn rollout(&mut self, task: &acps_shared::Task) -> acps_shared::Outcome {
-        if Some(task.kind) == self.fails {
+        if (self.fails)(task) {
             acps_shared::Outcome::failed(task.id)
         } else {
             self.function.rollout(task)
@@ -92,7 +92,7 @@ fn a_run_whose_every_rollout_of_a_kind_failed_is_refused() {
                 problem: function.grid_problem().unwrap(),
                 environment: Some(Box::new(Failing {
                     function,
-                    fails: (seed == 4).then_some(kind),
+                    fails: Box::new(move |task| seed == 4 && task.kind == kind),
                 })),
                 optimal_score: None,
                 keeps_state: false,
@@ -124,35 +124,6 @@ fn a_method_the_environment_cannot_serve_is_refused_before_the_run() {
     assert!(paper::function(&options).jobs().is_ok());
 }
 
-/// The contextual function, failing every rollout whose context's first coordinate is above
-/// `above`.
-struct FailingAbove {
-    function: ContextualFunction,
-    above: f64,
-}
-
-impl Environment for FailingAbove {
-    fn spec(&self) -> acps_shared::EnvironmentSpec {
-        self.function.spec()
-    }
-
-    fn context_dim(&self) -> usize {
-        self.function.context_dim()
-    }
-
-    fn param_dim(&self) -> usize {
-        self.function.param_dim()
-    }
-
-    fn rollout(&mut self, task: &acps_shared::Task) -> acps_shared::Outcome {
-        if task.context[0] > self.above {
-            acps_shared::Outcome::failed(task.id)
-        } else {
-            self.function.rollout(task)
-        }
-    }
-}
-
 /// Failed rollouts are counted by kind in the summary and said in a warning; beyond the share a
 /// run accepts, the run ends with an error that names the method and its counts, after the run
 /// directory is written.
@@ -176,7 +147,10 @@ fn failed_rollouts_are_counted_and_too_many_end_the_run_with_an_error() {
             let function = ContextualFunction::new(2, 20, seed).unwrap();
             Instance {
                 problem: function.grid_problem().unwrap(),
-                environment: Some(Box::new(FailingAbove { function, above })),
+                environment: Some(Box::new(Failing {
+                    function,
+                    fails: Box::new(move |task| task.context[0] > above),
+                })),
                 optimal_score: None,
                 keeps_state: false,
             }
