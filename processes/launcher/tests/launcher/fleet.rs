@@ -301,7 +301,7 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
             run.as_str(),
             "--name",
             "victim",
-            "--in-flight",
+            "--queue-depth",
             "8",
             "-q",
         ])
