@@ -25,6 +25,6 @@ for file in "$here"/*.toml; do
     else
         "$acps" experiment "${args[@]}"
     fi
-    # What depends on the build rather than the results: the version line of config.toml.
+    # Pictures are for reading, not comparing; checkpoints carry the build that wrote them.
     find "$out/$name" \( -name '*.png' -o -name '*.svg' -o -name '*.ckpt' \) -delete
 done

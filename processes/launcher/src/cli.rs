@@ -443,9 +443,14 @@ pub(crate) struct DeprecatedWorkerInFlight {
 }
 
 impl DeprecatedWorkerInFlight {
-    /// `depth`, or the deprecated option's value with a warning that names the new one.
+    /// Say, once per command, that the deprecated option was given and what replaces it.
+    pub(crate) fn warn(&self) {
+        deprecated("--worker-in-flight", "--worker-queue-depth", self.worker_in_flight);
+    }
+
+    /// The deprecated option's value if given, else `depth`.
     pub(crate) fn or(&self, depth: usize) -> usize {
-        deprecated("--worker-in-flight", "--worker-queue-depth", self.worker_in_flight).unwrap_or(depth)
+        self.worker_in_flight.unwrap_or(depth)
     }
 }
 

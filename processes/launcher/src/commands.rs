@@ -150,22 +150,22 @@ fn run_dir(args: &ExperimentArgs) -> anyhow::Result<Option<RunDir>> {
         println!("{} -> {}", plan.name(), path.display());
         return Ok(None);
     }
-    let out = args.resume.clone().or_else(|| args.out.clone());
-    let run = RunDir::of(&plan, args.config.as_deref(), out)?;
-    // --resume DIR --out OTHER: the run's directory is OTHER, which DIR must be.
-    let run = match (&args.resume, &args.out) {
-        (Some(resume), Some(out)) if resume != out => RunDir {
-            out: out.clone(),
-            ..run
-        },
-        _ => run,
+    let out = match (&args.resume, &args.out) {
+        (Some(resume), Some(out)) if resume != out => {
+            bail!(
+                "--resume {} and --out {} name different directories; --resume DIR continues the run whose output directory is DIR",
+                resume.display(),
+                out.display()
+            )
+        }
+        (resume, out) => resume.as_ref().or(out.as_ref()).cloned(),
     };
     let run = RunDir {
         progress_every: Duration::from_secs_f64(args.progress_every),
         max_failed_share: args.max_failed_share,
-        ..run
+        ..RunDir::of(&plan, args.config.as_deref(), out)?
     };
-    Ok(Some(run.resuming(args.resume.as_deref(), args.checkpoint_every)?))
+    Ok(Some(run.checkpointing(args.checkpoint_every, args.resume.is_some())?))
 }
 
 /// The pictures of a run directory.
@@ -320,7 +320,10 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let options = crate::bench::BenchOptions {
         envs: args.env,
         max_workers: args.max_workers.unwrap_or(cores.min(ipc::MAX_WORKERS)),
-        worker_queue_depth: args.deprecated.or(args.worker_queue_depth),
+        worker_queue_depth: {
+            args.deprecated.warn();
+            args.deprecated.or(args.worker_queue_depth)
+        },
         worker_nice: args.worker_nice.worker_nice,
         scale: args.scale,
         rounds: args.rounds,
@@ -504,8 +507,9 @@ fn net_options(args: &NetArgs, listen: &[String], connect: &[String]) -> anyhow:
 }
 
 impl StartedWorkers {
-    /// Refuse a --worker-command that starts nothing.
+    /// Refuse a --worker-command that starts nothing. Also warns, once, of a deprecated option.
     fn check(&self) -> anyhow::Result<()> {
+        self.deprecated.warn();
         if let Some(command) = &self.worker_command {
             if command.trim().is_empty() {
                 bail!("--worker-command must be a command that starts your worker, got {command:?}");

@@ -58,18 +58,6 @@ pub enum RunDirError {
     /// The tables or policies could not be written.
     #[error(transparent)]
     Records(#[from] RecordsError),
-    /// `--resume` and `--out` name different directories.
-    #[error(
-        "--resume {} and --out {} name different directories; --resume DIR continues the run whose output directory is DIR",
-        resume.display(),
-        out.display()
-    )]
-    TwoDirectories {
-        /// The directory to resume.
-        resume: PathBuf,
-        /// The output directory.
-        out: PathBuf,
-    },
     /// Nothing to resume: no job's directory has checkpoints.
     #[error(
         "nothing to resume in {}: it has no checkpoints directory (was the run started with this --out and --checkpoint-every > 0?)",
@@ -166,7 +154,7 @@ pub const MAX_FAILED_SHARE: f64 = 0.25;
 impl RunDir {
     /// Check `settings` over the experiment file `config`, writing into `out` (default:
     /// `runs/STEM` for `config` STEM.toml, else `runs/NAME`); checkpoints every 10 learning
-    /// rounds, no resume (see [`RunDir::resuming`]).
+    /// rounds, no resume (see [`RunDir::checkpointing`]).
     pub fn plan(config: Option<&Path>, settings: &ExperimentFile, out: Option<PathBuf>) -> Result<Self, RunDirError> {
         let file = config.map(LoadedFile::read).transpose()?;
         let plan = Plan::new(file.as_ref(), settings)?;
@@ -193,26 +181,15 @@ impl RunDir {
         })
     }
 
-    /// The same run, continuing from the checkpoints in `resume` (which must be its output
-    /// directory) when set, writing checkpoints every `every` learning rounds.
-    pub fn resuming(mut self, resume: Option<&Path>, every: u64) -> Result<Self, RunDirError> {
+    /// The same run writing checkpoints every `every` learning rounds (0: none) and, when
+    /// `resume`, continuing every job from the checkpoints in its directory.
+    pub fn checkpointing(mut self, every: u64, resume: bool) -> Result<Self, RunDirError> {
         self.checkpoint_every = every;
-        let Some(resume) = resume else {
-            return Ok(self);
-        };
-        if resume != self.out {
-            return Err(RunDirError::TwoDirectories {
-                resume: resume.to_path_buf(),
-                out: self.out,
-            });
-        }
         // Where no run ever wrote checkpoints: a mistyped directory, or --checkpoint-every 0.
-        if !self.jobs.iter().any(|job| job.dir.join("checkpoints").is_dir()) {
-            return Err(RunDirError::NothingToResume {
-                dir: resume.to_path_buf(),
-            });
+        if resume && !self.jobs.iter().any(|job| job.dir.join("checkpoints").is_dir()) {
+            return Err(RunDirError::NothingToResume { dir: self.out });
         }
-        self.resume = true;
+        self.resume = resume;
         Ok(self)
     }
 
