@@ -187,7 +187,7 @@ pub trait TaskSource {
 
     /// Show `observer` job `job`'s learner after it accepted an outcome (nothing, for a source
     /// that holds no learner).
-    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError>;
+    fn told(&mut self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError>;
 }
 
 /// A [`TaskSource`] that forwards: its tasks come from elsewhere (a remote learner, for a relay)
@@ -316,7 +316,7 @@ impl TaskSource for Source<'_> {
         }
     }
 
-    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError> {
+    fn told(&mut self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError> {
         match self {
             Self::Own(source) => source.told(job, observer),
             Self::Forwarding(source) => source.told(job, observer),
@@ -365,8 +365,8 @@ impl TaskSource for Learners<'_> {
         LearningProgress::combine(self.0.iter().map(|j| j.learner.progress()))
     }
 
-    fn told(&self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError> {
-        observer.told(job, &self.0[job].learner)
+    fn told(&mut self, job: usize, observer: &mut dyn Observer) -> Result<(), ObserveError> {
+        observer.told(job, &mut self.0[job].learner)
     }
 }
 
@@ -563,9 +563,10 @@ pub trait Observer {
         let _ = progress;
     }
 
-    /// Job `job`'s learner after every outcome it accepted: the place to write checkpoints. An
+    /// Job `job`'s learner after every outcome it accepted: the place to take its records
+    /// ([`Learner::take_records`]) and write checkpoints; nothing else of it may change. An
     /// error ends the run with [`FleetError::Observer`].
-    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), ObserveError> {
+    fn told(&mut self, job: usize, learner: &mut Learner) -> Result<(), ObserveError> {
         let _ = (job, learner);
         Ok(())
     }

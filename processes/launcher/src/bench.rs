@@ -5,9 +5,12 @@
 //! to W times one thread (the ratio). With `--relay`, every fleet is measured again through an
 //! `acps relay` on loopback that starts the W workers, as a host of workers on the network would.
 
+use acps_experiments::checkpoints::{Checkpoints, Writer};
 use acps_experiments::paper::{self, Sim};
+use acps_experiments::run_dir::DEFAULT_CHECKPOINT_EVERY;
 use acps_experiments::settings::ExperimentFile;
 use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress, Learners};
+use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
@@ -18,7 +21,7 @@ use anyhow::Context;
 use rayon::prelude::*;
 use std::time::Instant;
 
-pub use acps_reports::bench::Row;
+pub use acps_reports::bench::{LongRun, Row};
 
 /// What a fleet row measures beyond the rate.
 #[derive(Clone, Copy)]
@@ -38,6 +41,10 @@ pub enum BenchEnv {
     Analytic,
     /// The rapier3d PA-10 throw (milliseconds).
     Rapier,
+    /// One trivial learner through 1,000,000 episodes (times `--scale`) with records and
+    /// checkpoints as `acps run` writes them: its CPU per episode at the start and the end, and
+    /// its memory.
+    LongRun,
 }
 
 /// What to measure.
@@ -328,13 +335,19 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
             [Mode::Fleet(workers)].into_iter().chain(relay)
         }))
         .collect();
-    let total = options.envs.len() * options.rounds * modes.len();
+    let workloads: Vec<Workload> = options
+        .envs
+        .iter()
+        .filter_map(|env| match env {
+            BenchEnv::Trivial => Some(Workload::Trivial),
+            BenchEnv::Analytic => Some(Workload::Throw(Sim::Analytic)),
+            BenchEnv::Rapier => Some(Workload::Throw(Sim::Rapier)),
+            BenchEnv::LongRun => None,
+        })
+        .collect();
+    let total = workloads.len() * options.rounds * modes.len();
     let mut index = 0;
-    for workload in options.envs.iter().map(|env| match env {
-        BenchEnv::Trivial => Workload::Trivial,
-        BenchEnv::Analytic => Workload::Throw(Sim::Analytic),
-        BenchEnv::Rapier => Workload::Throw(Sim::Rapier),
-    }) {
+    for workload in workloads {
         let mut measured: Vec<Vec<Measurement>> = vec![Vec::new(); modes.len()];
         for round in 1..=options.rounds {
             for (&mode, samples) in modes.iter().zip(&mut measured) {
@@ -396,6 +409,162 @@ pub fn run(options: &BenchOptions, mut report: impl FnMut(BenchEvent)) -> anyhow
         }
     }
     Ok(rows)
+}
+
+/// The long-run row's episodes at `--scale` 1.
+pub const LONG_RUN_EPISODES: f64 = 1_000_000.0;
+
+/// Measure the long-run row: a trivial learner with one training and one test context, default
+/// C-REPS (an update every 25 episodes) and an evaluation every 50, its records and a checkpoint
+/// every [`DEFAULT_CHECKPOINT_EVERY`] updates written to a temporary directory as `acps run`
+/// writes them; `report(done, episodes)` sees its progress.
+pub fn long_run(scale: f64, mut report: impl FnMut(u64, u64)) -> anyhow::Result<LongRun> {
+    let episodes = ((LONG_RUN_EPISODES * scale).round() as u64).max(1000);
+    let dir = TempDir::new("long-run")?;
+    let mut environment = TrivialEnvironment::new();
+    let problem = Problem {
+        name: "trivial".into(),
+        training_contexts: vec![vec![0.0]],
+        test_contexts: vec![vec![0.0]],
+        space: ContextSpace::new_box(vec![-1.0], vec![1.0])?,
+        theta0: vec![1.0],
+        score: ScoreAggregate::Mean,
+        metric: "none".into(),
+        environment: environment.spec(),
+    };
+    let config = LearnerConfig {
+        episodes,
+        ..Default::default()
+    };
+    let selector = Box::new(RoundRobin::all(problem.training_contexts.clone())?);
+    let mut learner = Learner::new(config, problem, selector)?;
+    let checkpoint = dir.0.join("long-run.ckpt");
+    let stamp = Stamp { identity: 0, job: 0 };
+    let mut writer = Writer::open(checkpoint.clone(), stamp, DEFAULT_CHECKPOINT_EVERY, &learner, None)?;
+    let window = episodes / 10;
+    let early_episodes = episodes.min(50_000);
+    // Thread CPU time when the run had consumed 0, window, episodes - window and all episodes.
+    let marks = [0, window, episodes - window, episodes];
+    let mut cpu = [0.0; 4];
+    let mut early_rss_mib = 0.0;
+    let start = Instant::now();
+    cpu[0] = thread_cpu_seconds()?;
+    let mut done = 0;
+    while let Some(task) = learner.ask() {
+        let outcome = environment.rollout(&task);
+        learner
+            .tell(outcome)
+            .expect("the outcome answers a task just handed out");
+        writer.after_tell(&mut learner, Some(&environment))?;
+        let now = learner.progress().episodes;
+        if now == done {
+            continue;
+        }
+        done = now;
+        if let Some(at) = marks[1..].iter().position(|&m| m == done) {
+            cpu[at + 1] = thread_cpu_seconds()?;
+        }
+        if done == early_episodes {
+            early_rss_mib = rss_mib()?;
+        }
+        if done.is_multiple_of(10_000) {
+            report(done, episodes);
+        }
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let end_rss_mib = rss_mib()?;
+    let size = |path: &std::path::Path| std::fs::metadata(path).map(|m| m.len());
+    Ok(LongRun {
+        episodes,
+        checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
+        checkpoints: writer.checkpoints_written(),
+        window,
+        start_cpu_us: 1e6 * (cpu[1] - cpu[0]) / window as f64,
+        end_cpu_us: 1e6 * (cpu[3] - cpu[2]) / window as f64,
+        early_rss_mib,
+        early_episodes,
+        end_rss_mib,
+        checkpoint_bytes: size(&checkpoint)?,
+        record_bytes: size(&Checkpoints::records_file(&checkpoint))?,
+        seconds,
+    })
+}
+
+/// A directory of this process's that goes when dropped.
+struct TempDir(std::path::PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> anyhow::Result<Self> {
+        let dir = std::env::temp_dir().join(format!("acps-bench-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(Self(dir))
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// CPU time (user and system) this thread has used.
+fn thread_cpu_seconds() -> anyhow::Result<f64> {
+    let mut now = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes the timespec it is given and nothing else.
+    let status = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut now) };
+    anyhow::ensure!(
+        status == 0,
+        "the thread's CPU clock: {}",
+        std::io::Error::last_os_error()
+    );
+    Ok(now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9)
+}
+
+/// This process's resident memory, from Linux's /proc.
+fn rss_mib() -> anyhow::Result<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").context("reading /proc/self/status")?;
+    let kib: f64 = status
+        .lines()
+        .find_map(|line| line.strip_prefix("VmRSS:"))
+        .and_then(|rest| rest.trim().trim_end_matches("kB").trim().parse().ok())
+        .context("/proc/self/status has no VmRSS line")?;
+    Ok(kib / 1024.0)
+}
+
+/// The long-run rows as a table.
+pub fn long_run_table(runs: &[LongRun]) -> String {
+    let mut text = format!(
+        "{:<9} {:>10} {:>12} {:>12} {:>8} {:>15} {:>13} {:>8} {:>11} {:>12}
+",
+        "long run",
+        "episodes",
+        "start us/ep",
+        "end us/ep",
+        "growth",
+        "RSS early MiB",
+        "RSS end MiB",
+        "growth",
+        "checkpoint",
+        "records MiB"
+    );
+    for run in runs {
+        text += &format!(
+            "{:<9} {:>10} {:>12.3} {:>12.3} {:>8.3} {:>15.1} {:>13.1} {:>8.3} {:>11} {:>12.1}
+",
+            "",
+            run.episodes,
+            run.start_cpu_us,
+            run.end_cpu_us,
+            run.cpu_growth(),
+            run.early_rss_mib,
+            run.end_rss_mib,
+            run.rss_growth(),
+            format!("{} B", run.checkpoint_bytes),
+            run.record_bytes as f64 / (1024.0 * 1024.0)
+        );
+    }
+    text
 }
 
 /// The jobs of `workload` run in this process, one after another or (`parallel`) by rayon.

@@ -217,7 +217,12 @@ pub(crate) struct BenchArgs {
     #[arg(long, default_value_t = 3, allow_hyphen_values = true, value_parser = integer::<usize>(1, 100))]
     pub(crate) rounds: usize,
     /// Environments to measure, comma separated.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "trivial,analytic,rapier")]
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "trivial,analytic,rapier,long-run"
+    )]
     pub(crate) env: Vec<crate::bench::BenchEnv>,
     #[command(flatten)]
     pub(crate) worker_nice: WorkerNiceArg,

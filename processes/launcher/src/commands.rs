@@ -329,7 +329,11 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
         rounds: args.rounds,
         relay: args.relay,
     };
-    print!("{}", crate::bench::table(&[]));
+    let long_run = options.envs.contains(&crate::bench::BenchEnv::LongRun);
+    let throughput = options.envs.len() > usize::from(long_run);
+    if throughput {
+        print!("{}", crate::bench::table(&[]));
+    }
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("[{bar:25}] {pos}/{len} measurements, {msg}, {elapsed}")
             .expect("a valid template")
@@ -353,13 +357,30 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
             bar.suspend(|| print!("{}", table.lines().nth(1).map(|l| format!("{l}\n")).unwrap_or_default()));
         }
     })?;
+    let mut long_runs = Vec::new();
+    if long_run {
+        bar.suspend(|| print!("{}", crate::bench::long_run_table(&[])));
+        for round in 1..=options.rounds {
+            let run = crate::bench::long_run(options.scale, |done, episodes| {
+                bar.set_message(format!("long run, round {round}: {done} of {episodes} episodes"));
+                bar.tick();
+            })?;
+            let table = crate::bench::long_run_table(std::slice::from_ref(&run));
+            bar.suspend(|| print!("{}", table.lines().nth(1).map(|l| format!("{l}\n")).unwrap_or_default()));
+            long_runs.push(run);
+        }
+    }
     bar.finish_and_clear();
-    let json = serde_json::to_string_pretty(&serde_json::json!({ "rows": rows }))?;
+    let json = serde_json::to_string_pretty(&serde_json::json!({ "rows": rows, "long_run": long_runs }))?;
     let path = args.out.join("bench.json");
     std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;
-    acps_reports::plot::save_bench(&rows, &args.out)
-        .map_err(|e| anyhow::anyhow!("drawing {}: {e}", args.out.join("bench.svg").display()))?;
-    println!("-> {} and bench.svg / bench.png", path.display());
+    if throughput {
+        acps_reports::plot::save_bench(&rows, &args.out)
+            .map_err(|e| anyhow::anyhow!("drawing {}: {e}", args.out.join("bench.svg").display()))?;
+        println!("-> {} and bench.svg / bench.png", path.display());
+    } else {
+        println!("-> {}", path.display());
+    }
     if let Some(warning) = crate::bench::busy_warning(&rows) {
         eprintln!("{warning}");
     }

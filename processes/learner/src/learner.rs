@@ -23,12 +23,20 @@
 //! so far in the run (0 before any). A failed evaluation rollout is left out of that evaluation's aggregate and
 //! counted in [`Evaluation::failed`].
 //!
+//! # Records
+//! What a run produces (every consumed episode, every C-REPS update, every complete
+//! evaluation) accumulates in the learner until [`Learner::take_records`] takes it. A short run
+//! can leave it there and read it at the end; a long one takes it as it goes (the run
+//! directory's record files), so that the learner's memory and its snapshots stay the size of
+//! its state however long the run. Taking records changes nothing the learner does.
+//!
 //! # Checkpoints
 //! [`Learner::snapshot`] captures everything that evolves (policy, memory, selector, random
-//! streams, counters, results, tasks not yet consumed); [`Learner::restore`] applies it to a
-//! learner freshly built from the same configuration, problem and selector, which then continues
-//! exactly as the original would have. Tasks that were handed out but whose outcome had not
-//! arrived are handed out again (same task, same seed), before the tasks never handed out.
+//! streams, counters, records not yet taken, tasks not yet consumed); [`Learner::restore`]
+//! applies it to a learner freshly built from the same configuration, problem and selector,
+//! which then continues exactly as the original would have. Tasks that were handed out but whose
+//! outcome had not arrived are handed out again (same task, same seed), before the tasks never
+//! handed out.
 
 use crate::SelectorConfig;
 use crate::creps::{CReps, CRepsConfig, CRepsCreateError, CRepsRestoreError, CRepsState, Rejection, UpdateReport};
@@ -230,6 +238,60 @@ pub struct LearnerStats {
     pub last_rejection: Option<Rejection>,
 }
 
+/// What a learner recorded since its records were last taken ([`Learner::take_records`]), in
+/// the order it recorded them.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Records {
+    /// Consumed training episodes.
+    pub episodes: Vec<Episode>,
+    /// C-REPS updates, applied or rejected.
+    pub updates: Vec<UpdateRecord>,
+    /// Complete evaluations (an evaluation is taken once its last rollout is consumed).
+    pub evaluations: Vec<Evaluation>,
+}
+
+impl Records {
+    /// Append `later`, records taken after these.
+    pub fn extend(&mut self, later: Records) {
+        self.episodes.extend(later.episodes);
+        self.updates.extend(later.updates);
+        self.evaluations.extend(later.evaluations);
+    }
+
+    /// True when it holds no record.
+    pub fn is_empty(&self) -> bool {
+        self.episodes.is_empty() && self.updates.is_empty() && self.evaluations.is_empty()
+    }
+}
+
+/// How many records of each kind a learner has handed over with [`Learner::take_records`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecordCounts {
+    /// Training episodes.
+    pub episodes: u64,
+    /// C-REPS updates.
+    pub updates: u64,
+    /// Evaluations.
+    pub evaluations: u64,
+}
+
+impl RecordCounts {
+    /// The counts of `records`.
+    pub fn of(records: &Records) -> Self {
+        Self {
+            episodes: records.episodes.len() as u64,
+            updates: records.updates.len() as u64,
+            evaluations: records.evaluations.len() as u64,
+        }
+    }
+
+    pub(crate) fn add(&mut self, other: Self) {
+        self.episodes += other.episodes;
+        self.updates += other.updates;
+        self.evaluations += other.evaluations;
+    }
+}
+
 /// One C-REPS update of a run and what it did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct UpdateRecord {
@@ -368,9 +430,14 @@ struct RunState {
     outbox: VecDeque<u64>,
     pending: BTreeMap<u64, Pending>,
     arrived: BTreeMap<u64, Outcome>,
+    /// Evaluations not taken: `Role::Evaluate`'s index minus `taken.evaluations`.
     evaluations: Vec<Evaluation>,
     episodes: Vec<Episode>,
     updates: Vec<UpdateRecord>,
+    /// Records handed over by `take_records`.
+    taken: RecordCounts,
+    /// The score of the latest complete evaluation that has one.
+    latest_score: Option<f64>,
     lowest_reward: Option<f64>,
     retried: BTreeSet<u64>,
     stats: LearnerStats,
@@ -392,6 +459,8 @@ impl RunState {
             evaluations: Vec::new(),
             episodes: Vec::new(),
             updates: Vec::new(),
+            taken: RecordCounts::default(),
+            latest_score: None,
             lowest_reward: None,
             retried: BTreeSet::new(),
             stats: LearnerStats::default(),
@@ -410,24 +479,26 @@ impl LearnerSnapshot {
     fn check(&self) -> Result<(), String> {
         let run = &self.run;
         let arms = self.fit.training_contexts as usize;
-        if run.train_consumed != run.episodes.len() as u64
+        if run.train_consumed != run.taken.episodes + run.episodes.len() as u64
             || run.train_consumed > run.train_issued
             || run.train_issued > self.fit.episodes
             || run.next_to_consume > run.next_id
         {
             return Err(format!(
-                "counters (issued {}, consumed {}, episodes {}, next id {}, next to consume {}) contradict each other",
+                "counters (issued {}, consumed {}, episodes {} + {} taken, next id {}, next to consume {}) contradict each other",
                 run.train_issued,
                 run.train_consumed,
                 run.episodes.len(),
+                run.taken.episodes,
                 run.next_id,
                 run.next_to_consume
             ));
         }
-        if run.updates.len() as u64 != run.stats.updates + run.stats.rejected_updates {
+        if run.taken.updates + run.updates.len() as u64 != run.stats.updates + run.stats.rejected_updates {
             return Err(format!(
-                "{} update reports for {} applied and {} rejected updates",
-                run.updates.len(),
+                "{} update reports ({} taken) for {} applied and {} rejected updates",
+                run.taken.updates + run.updates.len() as u64,
+                run.taken.updates,
                 run.stats.updates,
                 run.stats.rejected_updates
             ));
@@ -435,9 +506,9 @@ impl LearnerSnapshot {
         for (&id, pending) in &run.pending {
             let role_ok = match &pending.role {
                 Role::Train { bucket, choice } => *bucket < arms && choice.arm.is_none_or(|a| a < arms),
-                Role::Evaluate { evaluation, index } => run
-                    .evaluations
-                    .get(*evaluation)
+                Role::Evaluate { evaluation, index } => evaluation
+                    .checked_sub(run.taken.evaluations as usize)
+                    .and_then(|e| run.evaluations.get(e))
                     .is_some_and(|e| *index < e.outcomes.len()),
                 Role::Baseline { arm } => *arm < arms,
             };
@@ -640,19 +711,15 @@ impl Learner {
         self.run.train_consumed == self.config.episodes && self.run.pending.is_empty()
     }
 
-    /// Evaluations so far, complete ones first in episode order.
+    /// Evaluations not yet taken with [`take_records`](Self::take_records), in episode order
+    /// (all of them, if records are never taken); the last may be incomplete.
     pub fn evaluations(&self) -> &[Evaluation] {
         &self.run.evaluations
     }
 
     /// The score of the most recent complete evaluation that has one.
     pub fn latest_score(&self) -> Option<f64> {
-        self.run
-            .evaluations
-            .iter()
-            .rev()
-            .filter(|e| e.remaining == 0)
-            .find_map(|e| e.score)
+        self.run.latest_score
     }
 
     /// How far this learner is, for progress displays.
@@ -665,14 +732,64 @@ impl Learner {
         }
     }
 
-    /// The consumed training episodes in order.
+    /// The consumed training episodes not yet taken with [`take_records`](Self::take_records),
+    /// in order (all of them, if records are never taken).
     pub fn episodes(&self) -> &[Episode] {
         &self.run.episodes
     }
 
-    /// Every C-REPS update so far, in order, with its report.
+    /// The C-REPS updates not yet taken with [`take_records`](Self::take_records), in order,
+    /// with their reports (all of them, if records are never taken).
     pub fn updates(&self) -> &[UpdateRecord] {
         &self.run.updates
+    }
+
+    /// Hand over what was recorded since the last call: episodes, updates and complete
+    /// evaluations. The learner keeps only its state and what it still needs (an evaluation
+    /// with rollouts to come), so a run that takes its records as it goes has memory and
+    /// snapshots of constant size. What the learner does next is the same either way.
+    ///
+    /// ```
+    /// # use acps_learner::{Learner, LearnerConfig, SelectorConfig, Records};
+    /// # use acps_shared::{ContextSpace, EnvironmentSpec, Outcome, Problem, ScoreAggregate};
+    /// # let problem = Problem {
+    /// #     name: "line".into(),
+    /// #     training_contexts: vec![vec![0.0], vec![1.0]],
+    /// #     test_contexts: vec![vec![0.5]],
+    /// #     space: ContextSpace::new_box(vec![0.0], vec![1.0])?,
+    /// #     theta0: vec![0.0],
+    /// #     score: ScoreAggregate::Mean,
+    /// #     metric: "squared error".into(),
+    /// #     environment: EnvironmentSpec::new("line", [0; 3], &())?,
+    /// # };
+    /// let config = LearnerConfig { episodes: 300, ..Default::default() };
+    /// let mut learner = Learner::with_selector(config, problem, &SelectorConfig::default())?;
+    /// let mut all = Records::default();
+    /// while let Some(task) = learner.ask() {
+    ///     let error = (task.theta[0] - task.context[0]).powi(2);
+    ///     learner.tell(Outcome::new(task.id, -error, error))?;
+    ///     all.extend(learner.take_records()); // a long run would write these to a file
+    /// }
+    /// assert_eq!(all.episodes.len(), 300);
+    /// assert_eq!(all.evaluations.len(), 7); // before training and every 50 episodes
+    /// assert!(learner.episodes().is_empty() && learner.evaluations().is_empty());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn take_records(&mut self) -> Records {
+        let run = &mut self.run;
+        let complete = run.evaluations.iter().take_while(|e| e.remaining == 0).count();
+        let records = Records {
+            episodes: std::mem::take(&mut run.episodes),
+            updates: std::mem::take(&mut run.updates),
+            evaluations: run.evaluations.drain(..complete).collect(),
+        };
+        run.taken.add(RecordCounts::of(&records));
+        records
+    }
+
+    /// How many records of each kind [`take_records`](Self::take_records) has handed over.
+    pub fn records_taken(&self) -> RecordCounts {
+        self.run.taken
     }
 
     /// Counters of the run.
@@ -707,7 +824,7 @@ impl Learner {
         if self.policy.is_some() {
             self.run.stats.updates + self.run.stats.rejected_updates
         } else {
-            self.run.evaluations.len() as u64
+            self.run.taken.evaluations + self.run.evaluations.len() as u64
         }
     }
 
@@ -792,7 +909,7 @@ impl Learner {
         if contexts.is_empty() {
             return;
         }
-        let evaluation = self.run.evaluations.len();
+        let evaluation = self.run.taken.evaluations as usize + self.run.evaluations.len();
         self.run.evaluations.push(Evaluation {
             episode: self.run.train_consumed,
             score: None,
@@ -814,7 +931,7 @@ impl Learner {
             }
             Role::Evaluate { evaluation, index } => {
                 let aggregate = self.problem.score;
-                let evaluation = &mut self.run.evaluations[evaluation];
+                let evaluation = &mut self.run.evaluations[evaluation - self.run.taken.evaluations as usize];
                 if !outcome.is_ok() {
                     evaluation.failed += 1;
                 }
@@ -829,6 +946,9 @@ impl Learner {
                         .map(|o| o.score)
                         .collect();
                     evaluation.score = aggregate.apply(&scores);
+                    if evaluation.score.is_some() {
+                        self.run.latest_score = evaluation.score;
+                    }
                 }
             }
             Role::Train { choice, bucket } => self.consume_training(pending.task, choice, bucket, &outcome),

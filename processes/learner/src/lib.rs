@@ -28,6 +28,6 @@ pub mod selection;
 
 pub use learner::{
     Episode, Evaluation, Learner, LearnerConfig, LearnerCreateError, LearnerRestoreError, LearnerSnapshot,
-    LearnerStats, LearnerTellError, LearningProgress, UpdateRecord, run_in_process,
+    LearnerStats, LearnerTellError, LearningProgress, RecordCounts, Records, UpdateRecord, run_in_process,
 };
 pub use method::{BanditConfig, Baseline, Method, MethodParseError, SelectorConfig};

@@ -643,7 +643,7 @@ impl TaskSource for RelaySource {
     }
 
     /// No learner here to show.
-    fn told(&self, _: usize, _: &mut dyn Observer) -> Result<(), ObserveError> {
+    fn told(&mut self, _: usize, _: &mut dyn Observer) -> Result<(), ObserveError> {
         Ok(())
     }
 }

@@ -1,14 +1,20 @@
-//! Checkpoints of an experiment's jobs: one file per (method, run) job in DIR/checkpoints, in the
-//! format of [`acps_learner::checkpoint`], written every N learning rounds and when the job ends.
+//! Checkpoints of an experiment's jobs: two files per (method, run) job in DIR/checkpoints, in
+//! the formats of [`acps_learner::checkpoint`]:
+//! - `METHOD-run-R.records`, the job's record file: its learner's records (episodes, updates,
+//!   evaluations), appended as they are made, so that the learner holds only its state;
+//! - `METHOD-run-R.ckpt`, the checkpoint: that state and where the record file ended, written
+//!   every N learning rounds and when the job ends. Its cost does not grow with the run.
 //!
-//! A fresh run removes the checkpoint files it finds there first; a resumed run loads every job's
-//! file that exists (a finished job's holds its final state) and refuses files of another
-//! experiment, so the resumed run ends exactly as an uninterrupted one would.
+//! A fresh run removes the files it finds there first; a resumed run loads every job's
+//! checkpoint that exists (a finished job's holds its final state), cuts its record file back to
+//! where the checkpoint says it ended, and refuses files of another experiment, so the resumed
+//! run ends exactly as an uninterrupted one would.
 
-use acps_learner::Learner;
+use acps_learner::checkpoint::journal::{self, JournalError, JournalMark, JournalWriter};
 use acps_learner::checkpoint::{
     self, Checkpoint, CheckpointApplyError, CheckpointReadError, CheckpointWriteError, Stamp,
 };
+use acps_learner::{Learner, RecordCounts, Records};
 use acps_shared::{Environment, EnvironmentRestoreError};
 use std::path::{Path, PathBuf};
 
@@ -41,6 +47,17 @@ pub enum CheckpointsError {
         /// Why the job refused it.
         source: CheckpointApplyError,
     },
+    /// A record file could not be written, or does not reach or match its checkpoint's mark.
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    /// A checkpoint whose record file's mark is missing or does not fit its learner.
+    #[error("checkpoint {}: {reason}", path.display())]
+    RecordMark {
+        /// The checkpoint file.
+        path: PathBuf,
+        /// What does not fit.
+        reason: String,
+    },
     /// The directory could not be created, listed or cleaned.
     #[error("checkpoint directory {}: {source}", path.display())]
     Dir {
@@ -66,9 +83,14 @@ impl Checkpoints {
         self.dir.join(format!("{method}-run-{run}.ckpt"))
     }
 
-    /// Make the directory ready: for a fresh run, create it and remove old checkpoint files;
-    /// for a resumed run, refuse checkpoint files that are not among `files` (this
-    /// experiment's). A resumed run without the directory starts fresh.
+    /// The record file that goes with the checkpoint file `checkpoint`.
+    pub fn records_file(checkpoint: &Path) -> PathBuf {
+        checkpoint.with_extension("records")
+    }
+
+    /// Make the directory ready: for a fresh run, create it and remove old checkpoint and record
+    /// files; for a resumed run, refuse checkpoint and record files that are not among `files`'
+    /// (this experiment's checkpoints). A resumed run without the directory starts fresh.
     pub(crate) fn prepare(&self, files: &[PathBuf]) -> Result<(), CheckpointsError> {
         let dir_error = |source| CheckpointsError::Dir {
             path: self.dir.clone(),
@@ -82,53 +104,115 @@ impl Checkpoints {
         for entry in entries {
             let path = entry.path();
             let name = entry.file_name().to_string_lossy().into_owned();
-            let is_checkpoint = name.ends_with(".ckpt");
-            if !is_checkpoint && !name.ends_with(".ckpt.tmp") {
+            let ours = if name.ends_with(".ckpt") {
+                files.contains(&path)
+            } else if name.ends_with(".records") {
+                files.iter().any(|file| Self::records_file(file) == path)
+            } else if name.ends_with(".ckpt.tmp") {
+                true
+            } else {
                 continue;
-            }
+            };
             if !self.resume {
                 std::fs::remove_file(&path).map_err(dir_error)?;
-            } else if is_checkpoint && !files.contains(&path) {
+            } else if !ours {
                 return Err(CheckpointsError::Stray { path });
             }
         }
-        if self.every > 0 {
-            std::fs::create_dir_all(&self.dir).map_err(dir_error)?;
-        }
-        Ok(())
+        std::fs::create_dir_all(&self.dir).map_err(dir_error)
     }
 }
 
-/// Writes one job's checkpoints as it runs.
-pub(crate) struct Writer {
+/// Writes one job's records and checkpoints as it runs: what [`Experiment`](crate::experiment::Experiment)
+/// does for each of its jobs, for a loop of your own (`acps bench`'s long run is one).
+///
+/// ```
+/// use acps_experiments::checkpoints::Writer;
+/// use acps_learner::checkpoint::Stamp;
+/// use acps_learner::{Learner, LearnerConfig, SelectorConfig};
+/// use acps_models::contextual_function::ContextualFunction;
+/// use acps_shared::Environment;
+///
+/// let mut environment = ContextualFunction::new(2, 4, 0)?;
+/// let problem = environment.grid_problem()?;
+/// let config = LearnerConfig { episodes: 200, ..Default::default() };
+/// let mut learner = Learner::with_selector(config, problem, &SelectorConfig::default())?;
+/// let dir = std::env::temp_dir().join(format!("acps-doc-writer-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir)?;
+/// let stamp = Stamp { identity: 1, job: 0 };
+/// let mut writer = Writer::open(dir.join("job.ckpt"), stamp, 10, &learner, None)?;
+/// while let Some(task) = learner.ask() {
+///     learner.tell(environment.rollout(&task))?;
+///     writer.after_tell(&mut learner, Some(&environment))?; // records out, checkpoint when due
+/// }
+/// let records = writer.finish(&mut learner)?;
+/// assert_eq!(records.episodes.len(), 200);
+/// # std::fs::remove_dir_all(&dir)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub struct Writer {
     path: PathBuf,
     stamp: Stamp,
     every: u64,
     /// `rounds / every` at the last checkpoint.
     mark: u64,
+    /// Checkpoints written.
+    written: u64,
     /// Whether the final checkpoint is written.
     finished: bool,
+    journal: JournalWriter,
 }
 
 impl Writer {
-    /// A writer for the job at `path` whose learner stands where it starts (fresh or restored).
-    pub fn new(path: PathBuf, stamp: Stamp, every: u64, learner: &Learner) -> Self {
-        Self {
+    /// A writer for the job whose checkpoint is `path` and whose learner stands where it starts:
+    /// fresh (`resumed` is `None`; a new record file), or restored from a checkpoint that
+    /// recorded `resumed` (its record file is cut back to that mark). The record file is the
+    /// checkpoint's path with the extension `records`.
+    pub fn open(
+        path: PathBuf,
+        stamp: Stamp,
+        every: u64,
+        learner: &Learner,
+        resumed: Option<Option<JournalMark>>,
+    ) -> Result<Self, CheckpointsError> {
+        let records = Checkpoints::records_file(&path);
+        let journal = match resumed {
+            None => JournalWriter::create(&records, stamp)?,
+            Some(mark) => {
+                let misfit = |reason: String| CheckpointsError::RecordMark {
+                    path: path.clone(),
+                    reason,
+                };
+                let mark = mark.ok_or_else(|| misfit("it records no record file".into()))?;
+                if mark.records != learner.records_taken() {
+                    return Err(misfit(format!(
+                        "its record file mark counts {} but its learner took {}",
+                        counts(mark.records),
+                        counts(learner.records_taken())
+                    )));
+                }
+                JournalWriter::resume(&records, stamp, &mark)?
+            }
+        };
+        Ok(Self {
             path,
             stamp,
             every,
             mark: learner.rounds().checked_div(every).unwrap_or(0),
+            written: 0,
             finished: learner.is_done(),
-        }
+            journal,
+        })
     }
 
-    /// Called after every outcome told to `learner`: writes a checkpoint when the learner has
-    /// completed another `every` rounds, and once when it is done.
+    /// Called after every outcome told to `learner`: appends its new records, and writes a
+    /// checkpoint when the learner has completed another `every` rounds, and once when it is done.
     pub fn after_tell(
         &mut self,
-        learner: &Learner,
+        learner: &mut Learner,
         environment: Option<&dyn Environment>,
     ) -> Result<(), CheckpointsError> {
+        self.journal.append(&learner.take_records())?;
         if self.every == 0 || self.finished {
             return Ok(());
         }
@@ -141,37 +225,65 @@ impl Writer {
         Ok(())
     }
 
-    /// Write the checkpoint now (for example when the run is interrupted). A problem the
-    /// user's workers simulate has no environment here, and so no environment state.
-    pub fn write(&self, learner: &Learner, environment: Option<&dyn Environment>) -> Result<(), CheckpointsError> {
-        let checkpoint = match environment {
-            Some(environment) => Checkpoint::take(learner, environment),
-            None => Checkpoint {
-                learner: learner.snapshot(),
-                environment: Vec::new(),
-            },
+    /// Write the checkpoint now (for example when the run is interrupted), after the record
+    /// file. A problem the user's workers simulate has no environment here, and so no
+    /// environment state.
+    pub fn write(
+        &mut self,
+        learner: &mut Learner,
+        environment: Option<&dyn Environment>,
+    ) -> Result<(), CheckpointsError> {
+        self.journal.append(&learner.take_records())?;
+        let records = Some(self.journal.flush()?);
+        let checkpoint = Checkpoint {
+            learner: learner.snapshot(),
+            environment: environment.map(Environment::save_state).unwrap_or_default(),
+            records,
         };
-        Ok(checkpoint::write(&self.path, self.stamp, &checkpoint)?)
+        checkpoint::write(&self.path, self.stamp, &checkpoint)?;
+        self.written += 1;
+        Ok(())
+    }
+
+    /// Checkpoints this writer has written.
+    pub fn checkpoints_written(&self) -> u64 {
+        self.written
     }
 
     /// Whether checkpoints are written at all.
     pub fn enabled(&self) -> bool {
         self.every > 0
     }
+
+    /// Every record of the finished job, read back from its record file.
+    pub fn finish(mut self, learner: &mut Learner) -> Result<Records, CheckpointsError> {
+        self.journal.append(&learner.take_records())?;
+        let mark = self.journal.flush()?;
+        Ok(journal::read(self.journal.path(), self.stamp, &mark)?)
+    }
+}
+
+fn counts(records: RecordCounts) -> String {
+    format!(
+        "{} episodes, {} updates and {} evaluations",
+        records.episodes, records.updates, records.evaluations
+    )
 }
 
 /// Continue `learner` and `environment` (none for a problem the user's workers simulate, whose
 /// checkpoints hold no environment state) from the checkpoint at `path`, if there is one.
-/// Returns whether there was.
+/// Returns where the checkpoint's record file ended if there was one (`Some(None)`: a
+/// checkpoint without a record file).
 pub(crate) fn restore(
     path: &Path,
     stamp: Stamp,
     learner: &mut Learner,
     environment: Option<&mut Box<dyn Environment>>,
-) -> Result<bool, CheckpointsError> {
-    let Some(saved) = checkpoint::read(path, stamp)? else {
-        return Ok(false);
+) -> Result<Option<Option<JournalMark>>, CheckpointsError> {
+    let Some(mut saved) = checkpoint::read(path, stamp)? else {
+        return Ok(None);
     };
+    let records = saved.records.take();
     let applied = match environment {
         Some(environment) => saved.apply(learner, environment.as_mut()),
         None if !saved.environment.is_empty() => Err(EnvironmentRestoreError::Length {
@@ -185,5 +297,5 @@ pub(crate) fn restore(
         path: path.to_path_buf(),
         source,
     })?;
-    Ok(true)
+    Ok(Some(records))
 }

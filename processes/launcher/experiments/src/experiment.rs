@@ -12,7 +12,7 @@ use acps_fleet::{
 };
 use acps_learner::checkpoint::Stamp;
 use acps_learner::{
-    Episode, Learner, LearnerConfig, LearnerCreateError, LearningProgress, SelectorConfig, run_in_process,
+    Episode, Learner, LearnerConfig, LearnerCreateError, LearningProgress, Records, SelectorConfig, run_in_process,
 };
 use acps_shared::{Environment, EnvironmentMatchError, Problem};
 use rayon::prelude::*;
@@ -87,7 +87,7 @@ impl<F: FnMut(&FleetProgress)> Observer for Checkpointing<F> {
         (self.observe)(progress)
     }
 
-    fn told(&mut self, job: usize, learner: &Learner) -> Result<(), ObserveError> {
+    fn told(&mut self, job: usize, learner: &mut Learner) -> Result<(), ObserveError> {
         match &mut self.writers[job] {
             Some(writer) => writer
                 .after_tell(learner, self.environments[job].as_deref())
@@ -117,26 +117,24 @@ pub struct Job {
 }
 
 impl Job {
-    fn result(&self) -> RunResult {
+    /// The result of the finished job, whose learner recorded `records`.
+    fn result(&self, records: Records) -> RunResult {
         let learner = &self.learner;
+        let evaluations = &records.evaluations;
         RunResult {
             seed: learner.seed(),
             problem: learner.problem().clone(),
             policy: learner.policy().and_then(|p| p.snapshot()),
-            eval_episodes: learner.evaluations().iter().map(|e| e.episode).collect(),
-            scores: learner.evaluations().iter().map(|e| e.score).collect(),
-            episodes: learner.episodes().to_vec(),
-            updates: learner.updates().to_vec(),
+            eval_episodes: evaluations.iter().map(|e| e.episode).collect(),
+            scores: evaluations.iter().map(|e| e.score).collect(),
             stats: learner.stats().clone(),
             optimal_score: self.optimal_score,
-            evaluation_rollouts: learner.evaluations().iter().fold((0, 0), |(all, failed), e| {
+            evaluation_rollouts: evaluations.iter().fold((0, 0), |(all, failed), e| {
                 (all + e.outcomes.len() as u64, failed + e.failed as u64)
             }),
-            final_outcomes: learner
-                .evaluations()
-                .last()
-                .map(|e| e.outcomes.clone())
-                .unwrap_or_default(),
+            final_outcomes: evaluations.last().map(|e| e.outcomes.clone()).unwrap_or_default(),
+            episodes: records.episodes,
+            updates: records.updates,
         }
     }
 }
@@ -332,8 +330,8 @@ impl Experiment {
                 let mut unreported = 0;
                 loop {
                     if stop.load(Ordering::Relaxed) {
-                        if let Some(writer) = writer.as_ref().filter(|w| w.enabled()) {
-                            writer.write(&job.learner, Some(environment.as_ref()))?;
+                        if let Some(writer) = writer.as_mut().filter(|w| w.enabled()) {
+                            writer.write(&mut job.learner, Some(environment.as_ref()))?;
                         }
                         return Err(RunError::Interrupted);
                     }
@@ -343,7 +341,7 @@ impl Experiment {
                         .tell(outcome)
                         .expect("the outcome answers a task just handed out");
                     if let Some(writer) = writer {
-                        writer.after_tell(&job.learner, Some(environment.as_ref()))?;
+                        writer.after_tell(&mut job.learner, Some(environment.as_ref()))?;
                     }
                     unreported += 1;
                     if unreported == REPORT_EVERY {
@@ -355,27 +353,39 @@ impl Experiment {
                 Ok(())
             })
             .collect::<Result<Vec<()>, RunError>>()?;
-        let jobs: Vec<Job> = jobs.into_iter().map(|(job, _)| job).collect();
-        self.finished(&jobs)
+        self.finished(jobs)
     }
 
     /// The summary of the finished `jobs` (method-major, as [`jobs`](Self::jobs) made them),
+    /// their records read back from their writers' record files or taken from their learners,
     /// refused when one of them learnt or measured nothing.
-    fn finished(&self, jobs: &[Job]) -> Result<Summary, RunError> {
-        for (index, job) in jobs.iter().enumerate() {
+    fn finished(&self, jobs: Vec<(Job, Option<Writer>)>) -> Result<Summary, RunError> {
+        let mut results = Vec::with_capacity(jobs.len());
+        for (index, (mut job, writer)) in jobs.into_iter().enumerate() {
+            let records = match writer {
+                Some(writer) => writer.finish(&mut job.learner)?,
+                None => job.learner.take_records(),
+            };
             let method = self.methods[index / self.runs].method().name();
-            self.check_rollouts(method, index % self.runs, &job.learner)?;
+            self.check_rollouts(method, index % self.runs, &job.learner, &records)?;
+            results.push(job.result(records));
         }
-        Ok(self.summary(jobs))
+        Ok(self.summary(results))
     }
 
     /// Refuse a finished run whose every training rollout failed, or whose every evaluation had
     /// no successful rollout. Outcomes carry no reason for a failure, so the error says where
     /// the first one happened.
-    fn check_rollouts(&self, method: &'static str, run: usize, learner: &Learner) -> Result<(), RunError> {
+    fn check_rollouts(
+        &self,
+        method: &'static str,
+        run: usize,
+        learner: &Learner,
+        records: &Records,
+    ) -> Result<(), RunError> {
         let problem = learner.problem();
-        let episodes = learner.episodes();
-        let evaluations = learner.evaluations();
+        let episodes = &records.episodes;
+        let evaluations = &records.evaluations;
         let what = if !episodes.is_empty() && episodes.iter().all(|e| !e.reward.is_finite()) {
             let off = if problem.training_contexts.contains(&episodes[0].context) {
                 ""
@@ -434,7 +444,8 @@ impl Experiment {
         }
     }
 
-    /// Every job with its checkpoint writer, each continued from its checkpoint when resuming.
+    /// Every job with its checkpoint writer, each continued from its checkpoint (and its record
+    /// file from the checkpoint's mark) when resuming.
     fn resumed_jobs(&self, checkpoints: &Checkpoints) -> Result<Vec<(Job, Writer)>, RunError> {
         let files: Vec<_> = self
             .methods
@@ -447,10 +458,11 @@ impl Experiment {
             .zip(files)
             .enumerate()
             .map(|(index, (mut job, file))| {
-                if checkpoints.resume {
-                    restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())?;
-                }
-                let writer = Writer::new(file, self.stamp(index), checkpoints.every, &job.learner);
+                let resumed = match checkpoints.resume {
+                    true => restore(&file, self.stamp(index), &mut job.learner, job.environment.as_mut())?,
+                    false => None,
+                };
+                let writer = Writer::open(file, self.stamp(index), checkpoints.every, &job.learner, resumed)?;
                 Ok((job, writer))
             })
             .collect()
@@ -465,8 +477,9 @@ impl Experiment {
             .ok_or_else(|| RunError::NeedsWorkers(self.name.clone()))?;
         run_in_process(&mut job.learner, environment.as_mut())?;
         let run = seed.wrapping_sub(self.base_seed) as usize;
-        self.check_rollouts(selector.method().name(), run, &job.learner)?;
-        Ok(job.result())
+        let records = job.learner.take_records();
+        self.check_rollouts(selector.method().name(), run, &job.learner, &records)?;
+        Ok(job.result(records))
     }
 
     /// Serve every (method, run) learner through `fleet` and summarise; `observe` sees the
@@ -500,27 +513,31 @@ impl Experiment {
         let Checkpointing {
             writers, environments, ..
         } = observer;
+        let mut jobs: Vec<(Job, Option<Writer>)> = learners
+            .into_iter()
+            .zip(environments)
+            .zip(optimal)
+            .zip(writers)
+            .map(|(((fleet_job, environment), optimal_score), writer)| {
+                let job = Job {
+                    learner: fleet_job.into_learner(),
+                    environment,
+                    keeps_state: false,
+                    optimal_score,
+                };
+                (job, writer)
+            })
+            .collect();
         if let Err(FleetError::Interrupted) = served {
             // Tasks out with workers are handed out again after a restore, so nothing is lost.
-            for ((job, writer), environment) in learners.iter().zip(&writers).zip(&environments) {
-                if let Some(writer) = writer.as_ref().filter(|w| w.enabled() && !job.learner().is_done()) {
-                    writer.write(job.learner(), environment.as_deref())?;
+            for (job, writer) in &mut jobs {
+                if let Some(writer) = writer.as_mut().filter(|w| w.enabled() && !job.learner.is_done()) {
+                    writer.write(&mut job.learner, job.environment.as_deref())?;
                 }
             }
         }
         let progress = served?;
-        let jobs: Vec<Job> = learners
-            .into_iter()
-            .zip(environments)
-            .zip(optimal)
-            .map(|((fleet_job, environment), optimal_score)| Job {
-                learner: fleet_job.into_learner(),
-                environment,
-                keeps_state: false,
-                optimal_score,
-            })
-            .collect();
-        Ok((self.finished(&jobs)?, progress))
+        Ok((self.finished(jobs)?, progress))
     }
 
     /// A hash of everything that determines the run's results: workers of another run are
@@ -540,9 +557,8 @@ impl Experiment {
         acps_shared::fnv1a(acps_shared::FNV_OFFSET, description.as_bytes())
     }
 
-    fn summary(&self, jobs: &[Job]) -> Summary {
-        let mut results: Vec<RunResult> = jobs.iter().map(Job::result).collect();
-        let problem = jobs[0].learner.problem();
+    fn summary(&self, mut results: Vec<RunResult>) -> Summary {
+        let problem = results[0].problem.clone();
         let optimal: Vec<f64> = results[..self.runs].iter().filter_map(|r| r.optimal_score).collect();
         let mut methods = BTreeMap::new();
         let mut run_results = BTreeMap::new();

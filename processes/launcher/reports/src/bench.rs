@@ -53,3 +53,48 @@ impl Row {
         })
     }
 }
+
+/// The long-run row: one learner of a trivial problem through a run of many episodes, writing
+/// its record file and checkpoints as `acps run` does. Its cost per rollout must not grow with
+/// the run, nor its memory.
+#[derive(Debug, Clone, Serialize)]
+pub struct LongRun {
+    /// Training episodes of the run.
+    pub episodes: u64,
+    /// Learning rounds between two checkpoints (`acps run`'s default).
+    pub checkpoint_every: u64,
+    /// Checkpoints written.
+    pub checkpoints: u64,
+    /// Episodes in each of the two windows measured: the first and the last tenth of the run.
+    pub window: u64,
+    /// The learner thread's CPU time per training episode over the first window, microseconds
+    /// (its rollouts, evaluations, C-REPS updates, records and checkpoints included).
+    pub start_cpu_us: f64,
+    /// The same over the last window.
+    pub end_cpu_us: f64,
+    /// Resident memory of the process after `early_episodes`, MiB.
+    pub early_rss_mib: f64,
+    /// When the early resident memory was read (50,000 episodes, or the run's length if
+    /// shorter).
+    pub early_episodes: u64,
+    /// Resident memory of the process at the end of the run, MiB.
+    pub end_rss_mib: f64,
+    /// The size of the last checkpoint, bytes.
+    pub checkpoint_bytes: u64,
+    /// The size of the record file at the end, bytes.
+    pub record_bytes: u64,
+    /// Wall time of the run, seconds.
+    pub seconds: f64,
+}
+
+impl LongRun {
+    /// CPU per episode at the end over that at the start: 1 when the cost does not grow.
+    pub fn cpu_growth(&self) -> f64 {
+        self.end_cpu_us / self.start_cpu_us
+    }
+
+    /// Resident memory at the end over that early in the run.
+    pub fn rss_growth(&self) -> f64 {
+        self.end_rss_mib / self.early_rss_mib
+    }
+}

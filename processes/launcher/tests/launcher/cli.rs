@@ -262,6 +262,26 @@ fn bench_writes_its_table_and_json() {
     let rows = bench["rows"].as_array().unwrap();
     // Three environments x (one thread, rayon, a fleet of one).
     assert_eq!(rows.len(), 9);
+    // The long run, once a round: 1,000,000 x 0.01 episodes, a tenth of them in each window.
+    assert!(stdout.contains("start us/ep"), "{stdout}");
+    let long_runs = bench["long_run"].as_array().unwrap();
+    assert_eq!(long_runs.len(), 3, "{bench}");
+    for run in long_runs {
+        let number = |key: &str| run[key].as_f64().unwrap_or_else(|| panic!("{key} in {run}"));
+        assert_eq!((number("episodes"), number("window")), (10_000.0, 1000.0), "{run}");
+        for key in [
+            "start_cpu_us",
+            "end_cpu_us",
+            "early_rss_mib",
+            "end_rss_mib",
+            "checkpoint_bytes",
+            "record_bytes",
+        ] {
+            assert!(number(key) > 0.0, "{key} in {run}");
+        }
+        // At most one checkpoint every 10 updates of one every 25 episodes, and the final one.
+        assert!((10.0..=41.0).contains(&number("checkpoints")), "{run}");
+    }
     let numbers = |value: &serde_json::Value| -> Vec<f64> {
         value.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
     };
@@ -312,8 +332,9 @@ fn bench_writes_its_table_and_json() {
             "{picture}"
         );
     }
-    // --env picks environments, in its order.
+    // --env picks environments, in its order; without long-run there is none.
     run_bench(&["--env", "rapier,trivial", "--rounds", "1"]);
+    assert_eq!(summary(&dir.join("bench.json"))["long_run"], serde_json::json!([]));
     let envs: Vec<String> = summary(&dir.join("bench.json"))["rows"]
         .as_array()
         .unwrap()

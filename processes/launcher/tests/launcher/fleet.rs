@@ -136,8 +136,14 @@ pub(crate) fn wait_until(what: &str, limit: Duration, mut condition: impl FnMut(
 }
 
 /// True once `dir` holds a file.
-pub(crate) fn has_files(dir: &Path) -> bool {
-    std::fs::read_dir(dir).is_ok_and(|mut entries| entries.next().is_some())
+/// Whether the checkpoints directory `dir` holds a checkpoint (record files are there from the
+/// start; a checkpoint, once learning has begun).
+pub(crate) fn has_checkpoint(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries
+            .filter_map(Result::ok)
+            .any(|e| e.path().extension().is_some_and(|x| x == "ckpt"))
+    })
 }
 
 /// The number R of "..., N outcomes, R re-issued, ..." that a fleet run prints.
@@ -309,7 +315,7 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
         .unwrap();
     // The learner, its worker and the victim are in, and learning has begun.
     wait_until("the victim to join a learning run", Duration::from_secs(60), || {
-        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&out.join("checkpoints"))
+        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_checkpoint(&out.join("checkpoints"))
     });
     assert!(victim.try_wait().unwrap().is_none(), "the victim must still be working");
     kill(&mut victim);
@@ -384,7 +390,7 @@ fn interrupt_and_continue(command: &[&str], out: &Path) -> Vec<u8> {
         .spawn()
         .unwrap();
     wait_until("a first checkpoint", Duration::from_secs(60), || {
-        has_files(&out.join("checkpoints"))
+        has_checkpoint(&out.join("checkpoints"))
     });
     // Ctrl-C in a shell signals the whole foreground group.
     signal_group("-INT", started.id());
@@ -499,7 +505,7 @@ fn workers_leave_when_the_learner_is_killed_and_the_next_start_cleans_up() {
         })
         .collect();
     wait_until("both workers to join a learning run", Duration::from_secs(60), || {
-        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&dir.join("a").join("checkpoints"))
+        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_checkpoint(&dir.join("a").join("checkpoints"))
     });
     kill(&mut learner);
     for worker in &mut workers {
@@ -1191,7 +1197,7 @@ fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_lef
         .spawn()
         .unwrap();
     wait_until("a learning run with both workers", Duration::from_secs(60), || {
-        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_files(&dir.join("checkpoints"))
+        ipc::live_nodes(&run).unwrap_or(0) >= 3 && has_checkpoint(&dir.join("checkpoints"))
     });
     signal_group("-KILL", learner.id());
     learner.wait().unwrap();
@@ -1511,7 +1517,7 @@ fn a_fleet_run_that_fails_half_way_prints_the_command_that_continues_it() {
         .unwrap();
     let acps = watched_acps(&learner);
     wait_until("a first checkpoint", Duration::from_secs(60), || {
-        has_files(&out.join("checkpoints"))
+        has_checkpoint(&out.join("checkpoints"))
     });
     let worker = children_of(acps);
     assert_eq!(worker.len(), 1, "one started worker");

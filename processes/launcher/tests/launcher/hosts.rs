@@ -6,8 +6,7 @@
 //! the machine.
 
 use crate::fleet::{
-    GRID, SLOW, SlowRun, has_files as has_files_in, in_process, reissued, signal_group, slow_run_with, wait_for,
-    wait_until,
+    GRID, SLOW, SlowRun, has_checkpoint, in_process, reissued, signal_group, slow_run_with, wait_for, wait_until,
 };
 use crate::{assert_clean, run_name, succeeded, temp_dir, watched};
 use acps_wire::ipc::{self, RunName};
@@ -150,7 +149,7 @@ fn a_killed_relay_s_tasks_go_to_other_workers_and_a_late_relay_joins() {
     let mut victim = relay(&network, &endpoint, &first, 1, &["-q"]).spawn().unwrap();
     // The relay and its worker are in, and learning has begun.
     wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
-        ipc::live_nodes(&first).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
+        ipc::live_nodes(&first).unwrap_or(0) >= 2 && has_checkpoint(&out.join("checkpoints"))
     });
     kill_host(&mut victim);
     // A relay that joins late; its start removes what the killed one left.
@@ -218,7 +217,7 @@ fn a_frozen_relay_is_given_up_on_after_its_lease_and_the_result_is_unchanged() {
     .spawn()
     .unwrap();
     wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
-        ipc::live_nodes(&local).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
+        ipc::live_nodes(&local).unwrap_or(0) >= 2 && has_checkpoint(&out.join("checkpoints"))
     });
     signal_group("-STOP", frozen.id());
     let stdout = finished(learner);
@@ -251,7 +250,7 @@ fn a_relay_waits_for_its_killed_learner_to_resume_and_the_run_ends_as_in_process
         .spawn()
         .unwrap();
     wait_until("the first checkpoints", Duration::from_secs(60), || {
-        has_files_in(&out.join("checkpoints"))
+        has_checkpoint(&out.join("checkpoints"))
     });
     kill_host(&mut first);
     // The relay waits; the resumed learner (same run, same address) gets it back.
@@ -288,7 +287,7 @@ fn a_relay_whose_learner_is_gone_for_good_stops_its_workers_and_says_so() {
         .spawn()
         .unwrap();
     wait_until("the first checkpoints", Duration::from_secs(60), || {
-        has_files_in(&out.join("checkpoints"))
+        has_checkpoint(&out.join("checkpoints"))
     });
     kill_host(&mut learner);
     let relayed = relay.wait_with_output().unwrap();
@@ -498,7 +497,7 @@ fn a_host_cut_off_from_the_network_is_given_up_on_and_rejoins_when_the_link_is_b
     .spawn()
     .unwrap();
     wait_until("the relay to serve a learning run", Duration::from_secs(60), || {
-        ipc::live_nodes(&local).unwrap_or(0) >= 2 && has_files_in(&out.join("checkpoints"))
+        ipc::live_nodes(&local).unwrap_or(0) >= 2 && has_checkpoint(&out.join("checkpoints"))
     });
     host.connect(false);
     // Cut off, the relay loses its learner after the lease and stops its workers.

@@ -64,7 +64,7 @@ pub(crate) const LONG_BOWL: [&str; 8] = [
 /// has begun) and `also` holds; fails if that takes two minutes or the run ends first.
 pub(crate) fn wait_for_learning(learner: &mut std::process::Child, out: &Path, also: impl Fn() -> bool) {
     let start = std::time::Instant::now();
-    while !(std::fs::read_dir(out.join("checkpoints")).is_ok_and(|mut e| e.next().is_some()) && also()) {
+    while !(crate::fleet::has_checkpoint(&out.join("checkpoints")) && also()) {
         assert!(
             start.elapsed() < std::time::Duration::from_secs(120),
             "no checkpoint appeared"

@@ -1,7 +1,7 @@
 //! Checkpoint files: a learner's snapshot and its environment's state, so that a run can be
 //! resumed after it was stopped (even by `kill -9`) and end bit for bit as if it never was.
 //!
-//! # Format (version 5)
+//! # Format (version 6)
 //! A 48-byte header, all integers little-endian, then the payload:
 //!
 //! | offset | bytes | field |
@@ -20,6 +20,13 @@
 //! The version is raised whenever the payload's layout changes, since bincode is not
 //! self-describing. Files are written to a temporary file beside the target and renamed over it,
 //! so a process killed during a write leaves the previous checkpoint intact.
+//!
+//! A run that takes its learner's records as it goes ([`Learner::take_records`]) appends them
+//! to a record file ([`journal`]) and keeps in its checkpoint only where that file ended
+//! ([`Checkpoint::records`]): the checkpoint costs what the learner's state costs, however long
+//! the run.
+
+pub mod journal;
 
 use crate::learner::{Learner, LearnerRestoreError, LearnerSnapshot};
 use acps_shared::{Environment, EnvironmentRestoreError, FNV_OFFSET, fnv1a};
@@ -30,7 +37,7 @@ use std::path::{Path, PathBuf};
 /// The first eight bytes of every checkpoint file.
 pub const MAGIC: [u8; 8] = *b"ACPSCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 48;
 
@@ -41,6 +48,9 @@ pub struct Checkpoint {
     pub learner: LearnerSnapshot,
     /// The environment's state ([`Environment::save_state`]); empty for environments without.
     pub environment: Vec<u8>,
+    /// Where the job's record file ended, for a run that writes its records to one
+    /// ([`journal`]); `None` when the learner holds them all.
+    pub records: Option<journal::JournalMark>,
 }
 
 impl Checkpoint {
@@ -51,6 +61,7 @@ impl Checkpoint {
         Self {
             learner: learner.snapshot(),
             environment: environment.save_state(),
+            records: None,
         }
     }
 
@@ -120,6 +131,9 @@ pub enum CheckpointDecodeError {
     /// The file does not start with [`MAGIC`].
     #[error("not an acps checkpoint (it does not start with the magic bytes \"ACPSCKPT\")")]
     NotACheckpoint,
+    /// A record file ([`journal`]) that does not start with [`journal::JOURNAL_MAGIC`].
+    #[error("not an acps record file (it does not start with the magic bytes \"ACPSRECS\")")]
+    NotARecordFile,
     /// Another format version.
     #[error("format version {found}, but this build reads version {supported} only; start the run afresh")]
     Version {
@@ -128,8 +142,8 @@ pub enum CheckpointDecodeError {
         /// The version this build reads.
         supported: u32,
     },
-    /// Shorter than its header says.
-    #[error("truncated: {len} bytes, but the checkpoint is {expected} bytes long")]
+    /// Shorter than its header, or a record file shorter than its checkpoint, says.
+    #[error("truncated: {len} bytes, but {expected} bytes were written")]
     Truncated {
         /// The file's length.
         len: u64,
@@ -184,25 +198,8 @@ pub fn encode(stamp: Stamp, checkpoint: &Checkpoint) -> Vec<u8> {
 
 /// The checkpoint in `bytes`, if they are a complete, intact checkpoint of `stamp`.
 pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, CheckpointDecodeError> {
-    let magic_len = bytes.len().min(MAGIC.len());
-    if bytes[..magic_len] != MAGIC[..magic_len] {
-        return Err(CheckpointDecodeError::NotACheckpoint);
-    }
-    if bytes.len() < HEADER_LEN {
-        return Err(CheckpointDecodeError::Truncated {
-            len: bytes.len() as u64,
-            expected: HEADER_LEN as u64,
-        });
-    }
-    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+    check_kind(bytes, MAGIC, FORMAT_VERSION, HEADER_LEN)?;
     let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
-    let version = u32_at(8);
-    if version != FORMAT_VERSION {
-        return Err(CheckpointDecodeError::Version {
-            found: version,
-            supported: FORMAT_VERSION,
-        });
-    }
     let payload_len = u64_at(32);
     let expected = (HEADER_LEN as u64).saturating_add(payload_len);
     let len = bytes.len() as u64;
@@ -221,7 +218,50 @@ pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, CheckpointDecode
             "the checksum does not match the contents".into(),
         ));
     }
-    if u32_at(12) != 0 {
+    check_stamp(bytes, stamp)?;
+    let (checkpoint, used) = bincode::serde::decode_from_slice::<Checkpoint, _>(payload, config())
+        .map_err(|e| CheckpointDecodeError::Payload(e.to_string()))?;
+    if used != payload.len() {
+        return Err(CheckpointDecodeError::Payload(format!(
+            "{} of {} payload bytes decode to a checkpoint",
+            used,
+            payload.len()
+        )));
+    }
+    Ok(checkpoint)
+}
+
+/// The first checks of a checkpoint's or record file's header (their first 32 bytes are laid
+/// out alike): the magic, a header of `header_len` bytes, the version.
+fn check_kind(bytes: &[u8], magic: [u8; 8], version: u32, header_len: usize) -> Result<(), CheckpointDecodeError> {
+    let magic_len = bytes.len().min(magic.len());
+    if bytes[..magic_len] != magic[..magic_len] {
+        return Err(if magic == MAGIC {
+            CheckpointDecodeError::NotACheckpoint
+        } else {
+            CheckpointDecodeError::NotARecordFile
+        });
+    }
+    if bytes.len() < header_len {
+        return Err(CheckpointDecodeError::Truncated {
+            len: bytes.len() as u64,
+            expected: header_len as u64,
+        });
+    }
+    let found = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+    if found != version {
+        return Err(CheckpointDecodeError::Version {
+            found,
+            supported: version,
+        });
+    }
+    Ok(())
+}
+
+/// Whose a checkpoint or record file is (bytes 12..32 of a header [`check_kind`] accepted).
+fn check_stamp(bytes: &[u8], stamp: Stamp) -> Result<(), CheckpointDecodeError> {
+    let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+    if bytes[12..16] != [0; 4] {
         return Err(CheckpointDecodeError::Corrupt(
             "reserved header bytes are not zero".into(),
         ));
@@ -239,16 +279,7 @@ pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, CheckpointDecode
             expected: stamp.job,
         });
     }
-    let (checkpoint, used) = bincode::serde::decode_from_slice::<Checkpoint, _>(payload, config())
-        .map_err(|e| CheckpointDecodeError::Payload(e.to_string()))?;
-    if used != payload.len() {
-        return Err(CheckpointDecodeError::Payload(format!(
-            "{} of {} payload bytes decode to a checkpoint",
-            used,
-            payload.len()
-        )));
-    }
-    Ok(checkpoint)
+    Ok(())
 }
 
 /// Write `checkpoint` to `path` atomically: into `path` + ".tmp", then renamed over `path`, so a

@@ -294,3 +294,220 @@ fn a_checkpoint_of_another_learner_is_refused_by_restore() {
     let error = with_state.apply(&mut learner(7, 60), &mut Quadratic).unwrap_err();
     assert!(error.to_string().starts_with("environment state: "), "{error}");
 }
+
+/// Run `learner` to the end, taking its records after every `take_every` outcomes (0: never),
+/// and return every task it handed out and every record, in order.
+fn run_taking(mut learner: Learner, take_every: usize) -> (Vec<Task>, crate::Records, Learner) {
+    let (mut tasks, mut records, mut told) = (Vec::new(), crate::Records::default(), 0);
+    while let Some(task) = learner.ask() {
+        tasks.push(task.clone());
+        learner.tell(Quadratic.rollout(&task)).unwrap();
+        told += 1;
+        if take_every > 0 && told % take_every == 0 {
+            records.extend(learner.take_records());
+        }
+    }
+    records.extend(learner.take_records());
+    (tasks, records, learner)
+}
+
+#[test]
+fn taking_records_changes_nothing_the_learner_does() {
+    let (tasks, records, untaken) = run_taking(learner(5, 200), 0);
+    assert_eq!(records.episodes.len(), 200);
+    assert_eq!(records.evaluations.len(), 21, "before training and every 10 episodes");
+    assert!(!records.updates.is_empty());
+    for take_every in [1, 7, 50] {
+        let (tasks_taking, records_taking, taking) = run_taking(learner(5, 200), take_every);
+        assert_eq!(tasks_taking, tasks, "taking every {take_every}");
+        assert_eq!(records_taking, records, "taking every {take_every}");
+        assert_eq!(taking.latest_score(), untaken.latest_score());
+        assert_eq!(taking.rounds(), untaken.rounds());
+        assert_eq!(taking.stats(), untaken.stats());
+    }
+}
+
+#[test]
+fn a_learner_whose_records_are_taken_has_snapshots_of_constant_size() {
+    let size_after = |episodes: u64| {
+        let mut learner = learner(5, episodes);
+        while let Some(task) = learner.ask() {
+            learner.tell(Quadratic.rollout(&task)).unwrap();
+            learner.take_records();
+        }
+        encode(STAMP, &Checkpoint::take(&learner, &Quadratic)).len()
+    };
+    let untaken = |episodes: u64| {
+        let mut learner = learner(5, episodes);
+        run_in_process(&mut learner, &mut Quadratic).unwrap();
+        encode(STAMP, &Checkpoint::take(&learner, &Quadratic)).len()
+    };
+    // Only the counters' variable-length integers grow (a few bytes).
+    let (short, long) = (size_after(100), size_after(2000));
+    assert!(
+        long <= short + 32,
+        "{short} bytes after 100 episodes, {long} after 2000"
+    );
+    assert!(
+        untaken(2000) > 10 * untaken(100),
+        "the history grows the snapshot when kept"
+    );
+}
+
+#[test]
+fn a_restored_learner_continues_its_record_counts() {
+    let mut original = learner(7, 60);
+    for _ in 0..33 {
+        let task = original.ask().unwrap();
+        original.tell(Quadratic.rollout(&task)).unwrap();
+    }
+    let first = original.take_records();
+    let saved = decode(&encode(STAMP, &Checkpoint::take(&original, &Quadratic)), STAMP).unwrap();
+    let mut restored = learner(7, 60);
+    saved.apply(&mut restored, &mut Quadratic).unwrap();
+    assert_eq!(restored.records_taken(), crate::RecordCounts::of(&first));
+    let (_, rest, _) = run_taking(restored, 1);
+    let (_, all, _) = run_taking(learner(7, 60), 0);
+    let mut joined = first;
+    joined.extend(rest);
+    assert_eq!(joined, all);
+}
+
+mod journal_files {
+    use super::*;
+    use crate::checkpoint::journal::{self, JOURNAL_HEADER_LEN, JournalError, JournalMark, JournalWriter};
+
+    /// Every record of a 60-episode run, in two parts taken half way.
+    fn records() -> (crate::Records, crate::Records) {
+        let mut learner = learner(7, 60);
+        for _ in 0..40 {
+            let task = learner.ask().unwrap();
+            learner.tell(Quadratic.rollout(&task)).unwrap();
+        }
+        let first = learner.take_records();
+        run_in_process(&mut learner, &mut Quadratic).unwrap();
+        (first, learner.take_records())
+    }
+
+    /// A record file holding `first`, the mark after it, and the file's path.
+    fn written(dir: &Path, first: &crate::Records) -> (PathBuf, JournalMark) {
+        let path = dir.join("job.records");
+        let mut writer = JournalWriter::create(&path, STAMP).unwrap();
+        writer.append(first).unwrap();
+        (path.clone(), writer.flush().unwrap())
+    }
+
+    fn decode_error(error: JournalError, path: &Path) -> CheckpointDecodeError {
+        let message = error.to_string();
+        assert!(
+            message.starts_with(&format!("record file {}: ", path.display())),
+            "the message names the file: {message}"
+        );
+        match error {
+            JournalError::Decode { source, .. } => source,
+            JournalError::Io { .. } => panic!("a file that exists is read: {message}"),
+        }
+    }
+
+    #[test]
+    fn records_read_back_as_written_and_the_header_is_as_documented() {
+        let dir = temp_dir("journal-round-trip");
+        let (first, second) = records();
+        let (path, mark) = written(&dir, &first);
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(&bytes[..8], b"ACPSRECS");
+        assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), STAMP.identity);
+        assert_eq!(u64::from_le_bytes(bytes[24..32].try_into().unwrap()), STAMP.job);
+        assert_eq!(mark.len, bytes.len() as u64);
+        assert_eq!(mark.records, crate::RecordCounts::of(&first));
+        assert_eq!(journal::read(&path, STAMP, &mark).unwrap(), first);
+        // Resumed from the mark, the rest appended: both parts read back in order.
+        let mut writer = JournalWriter::resume(&path, STAMP, &mark).unwrap();
+        writer.append(&second).unwrap();
+        let end = writer.flush().unwrap();
+        let mut all = first;
+        all.extend(second);
+        assert_eq!(journal::read(&path, STAMP, &end).unwrap(), all);
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn resuming_cuts_what_was_written_after_the_mark() {
+        let dir = temp_dir("journal-cut");
+        let (first, second) = records();
+        let (path, mark) = written(&dir, &first);
+        // Records written after the checkpoint, then a kill: half a frame at the end.
+        let mut writer = JournalWriter::resume(&path, STAMP, &mark).unwrap();
+        writer.append(&second).unwrap();
+        writer.flush().unwrap();
+        let len = std::fs::metadata(&path).unwrap().len();
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&path)
+            .unwrap()
+            .set_len(len - 3)
+            .unwrap();
+        let mut writer = JournalWriter::resume(&path, STAMP, &mark).unwrap();
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), mark.len);
+        writer.append(&second).unwrap();
+        let end = writer.flush().unwrap();
+        let mut all = first;
+        all.extend(second);
+        assert_eq!(journal::read(&path, STAMP, &end).unwrap(), all);
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn truncated_corrupted_and_foreign_record_files_are_refused() {
+        let dir = temp_dir("journal-refused");
+        let (first, _) = records();
+        let (path, mark) = written(&dir, &first);
+        let good = std::fs::read(&path).unwrap();
+        for len in [
+            0,
+            5,
+            JOURNAL_HEADER_LEN - 1,
+            JOURNAL_HEADER_LEN,
+            good.len() / 2,
+            good.len() - 1,
+        ] {
+            std::fs::write(&path, &good[..len]).unwrap();
+            let kind = decode_error(JournalWriter::resume(&path, STAMP, &mark).err().unwrap(), &path);
+            // Cut inside the header, it falls short of the header; after it, of the mark.
+            let want = if len < JOURNAL_HEADER_LEN {
+                JOURNAL_HEADER_LEN as u64
+            } else {
+                mark.len
+            };
+            assert!(
+                matches!(kind, CheckpointDecodeError::Truncated { len: l, expected } if l == len as u64 && expected == want),
+                "{len} bytes: {kind}"
+            );
+            assert!(kind.to_string().contains("truncated"), "{kind}");
+            // Refused, the file is left as it was.
+            assert_eq!(std::fs::read(&path).unwrap(), &good[..len]);
+        }
+        for at in [0, 9, 20, 28, JOURNAL_HEADER_LEN, JOURNAL_HEADER_LEN + 3, good.len() - 1] {
+            let mut bad = good.clone();
+            bad[at] ^= 0x10;
+            std::fs::write(&path, &bad).unwrap();
+            let kind = decode_error(journal::read(&path, STAMP, &mark).unwrap_err(), &path);
+            let expected = match at {
+                0..8 => matches!(kind, CheckpointDecodeError::NotARecordFile),
+                8..12 => matches!(kind, CheckpointDecodeError::Version { .. }),
+                16..24 => matches!(kind, CheckpointDecodeError::Foreign { .. }),
+                24..32 => matches!(kind, CheckpointDecodeError::WrongJob { .. }),
+                _ => matches!(kind, CheckpointDecodeError::Corrupt(_)),
+            };
+            assert!(expected, "byte {at}: {kind}");
+        }
+        std::fs::write(&path, &good).unwrap();
+        let other = Stamp { job: 9, ..STAMP };
+        let kind = decode_error(journal::read(&path, other, &mark).unwrap_err(), &path);
+        assert!(
+            matches!(kind, CheckpointDecodeError::WrongJob { found: 3, expected: 9 }),
+            "{kind}"
+        );
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

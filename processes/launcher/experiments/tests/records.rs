@@ -1,0 +1,118 @@
+//! Record files and checkpoints through the library's run directory: a run resumed from its
+//! checkpoints writes the same bytes whatever was appended to its record files after them, and
+//! record files cut short of, or changed before, their checkpoint's mark are refused by name.
+
+use acps_experiments::run_dir::{RunDir, RunDirError};
+use acps_experiments::settings::ExperimentFile;
+use acps_learner::Method;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+const OUTPUTS: [&str; 5] = [
+    "summary.json",
+    "curves.csv",
+    "runs.csv",
+    "selections.csv",
+    "updates.csv",
+];
+
+fn settings() -> ExperimentFile {
+    ExperimentFile {
+        runs: Some(2),
+        episodes: Some(300),
+        methods: Some(vec![Method::Random, Method::MonotonicProgress]),
+        ..Default::default()
+    }
+}
+
+fn out(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("acps-records-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// Run the function experiment into `dir` with a checkpoint every round, resuming if asked.
+fn run(dir: &Path, resume: bool) -> Result<(), RunDirError> {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../experiments/function-fig4.toml");
+    let run = RunDir::plan(Some(&file), &settings(), Some(dir.to_path_buf()))?.checkpointing(1, resume)?;
+    run.prepare()?;
+    run.in_process(true, &AtomicBool::new(false), &|_, _| Ok(()))?;
+    Ok(())
+}
+
+fn outputs(dir: &Path) -> Vec<Vec<u8>> {
+    OUTPUTS
+        .iter()
+        .map(|name| std::fs::read(dir.join(name)).unwrap())
+        .collect()
+}
+
+/// Every record file of the run in `dir`.
+fn record_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir.join("checkpoints"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "records"))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn records_appended_after_the_checkpoint_are_cut_on_resume() {
+    let dir = out("appended");
+    run(&dir, false).unwrap();
+    let reference = outputs(&dir);
+    let files = record_files(&dir);
+    assert_eq!(files.len(), 2 * 2, "one per method and run");
+    // As if the process had written records after its last checkpoint and then been killed:
+    // whole frames and a cut one.
+    for file in &files {
+        let mut bytes = std::fs::read(file).unwrap();
+        let tail = bytes[bytes.len() - 50..].to_vec();
+        bytes.extend_from_slice(&tail);
+        bytes.extend_from_slice(&tail[..7]);
+        std::fs::write(file, bytes).unwrap();
+    }
+    run(&dir, true).unwrap();
+    assert!(outputs(&dir) == reference, "the resumed run writes the same bytes");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn record_files_cut_short_of_or_changed_before_their_mark_are_refused_by_name() {
+    let dir = out("refused");
+    run(&dir, false).unwrap();
+    let victim = record_files(&dir)[1].clone();
+    let good = std::fs::read(&victim).unwrap();
+    let cases: [(&str, Vec<u8>); 3] = [
+        ("truncated", good[..good.len() - 10].to_vec()),
+        ("corrupted", {
+            let mut bad = good.clone();
+            let middle = bad.len() / 2;
+            bad[middle] ^= 0x04;
+            bad
+        }),
+        ("another experiment", {
+            let mut bad = good.clone();
+            bad[16] ^= 0x01;
+            bad
+        }),
+    ];
+    for (what, bytes) in cases {
+        std::fs::write(&victim, &bytes).unwrap();
+        let error = run(&dir, true).unwrap_err();
+        let message = format!(
+            "{error}: {}",
+            error.run_error().map_or(String::new(), |e| e.to_string())
+        );
+        assert!(
+            message.contains(&victim.display().to_string()) && message.contains(what),
+            "{what}: {message}"
+        );
+    }
+    // Put back, it resumes.
+    std::fs::write(&victim, &good).unwrap();
+    run(&dir, true).unwrap();
+    let _ = std::fs::remove_dir_all(dir);
+}
