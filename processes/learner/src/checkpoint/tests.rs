@@ -421,14 +421,20 @@ mod journal_files {
         assert_eq!(mark.len, bytes.len() as u64);
         assert_eq!(mark.records, crate::RecordCounts::of(&first));
         assert_eq!(journal::read(&path, STAMP, &mark).unwrap(), first);
-        // Resumed from the mark, the rest appended: both parts read back in order.
-        let mut writer = JournalWriter::resume(&path, STAMP, &mark).unwrap();
+        resume_and_finish(&path, &mark, first, second);
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// Resume the record file at `path` from `mark` (after `first`), append `second`, and check
+    /// that both parts read back in order.
+    fn resume_and_finish(path: &Path, mark: &JournalMark, first: crate::Records, second: crate::Records) {
+        let mut writer = JournalWriter::resume(path, STAMP, mark).unwrap();
+        assert_eq!(std::fs::metadata(path).unwrap().len(), mark.len, "cut back to the mark");
         writer.append(&second).unwrap();
         let end = writer.flush().unwrap();
         let mut all = first;
         all.extend(second);
-        assert_eq!(journal::read(&path, STAMP, &end).unwrap(), all);
-        let _ = std::fs::remove_dir_all(dir);
+        assert_eq!(journal::read(path, STAMP, &end).unwrap(), all);
     }
 
     #[test]
@@ -447,13 +453,7 @@ mod journal_files {
             .unwrap()
             .set_len(len - 3)
             .unwrap();
-        let mut writer = JournalWriter::resume(&path, STAMP, &mark).unwrap();
-        assert_eq!(std::fs::metadata(&path).unwrap().len(), mark.len);
-        writer.append(&second).unwrap();
-        let end = writer.flush().unwrap();
-        let mut all = first;
-        all.extend(second);
-        assert_eq!(journal::read(&path, STAMP, &end).unwrap(), all);
+        resume_and_finish(&path, &mark, first, second);
         let _ = std::fs::remove_dir_all(dir);
     }
 
