@@ -8,7 +8,7 @@ use acps_experiments::checkpoints::Checkpoints;
 use acps_experiments::experiment::RunError;
 use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::{Job, Plan};
-use acps_experiments::run_dir::{self, RunDir, RunDirError};
+use acps_experiments::run_dir::{self, RunDir, RunDirError, RunReport};
 use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetBuilder, FleetProgress};
@@ -294,21 +294,11 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
             Ok((summary, _)) => progress.finish(summary),
             Err(_) => progress.abandon(),
         }
-        let (summary, report) = outcome
+        let (summary, fleet_progress) = outcome
             .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
             .map_err(|e| stopped(e, checkpoints.as_ref(), out, true))?;
-        if !args.experiment.quiet {
-            let relays = if listener.is_some() {
-                " and relays of other hosts"
-            } else {
-                ""
-            };
-            println!(
-                "{} on {workers} workers{relays}: {} outcomes, {} re-issued, {} duplicates dropped, {} refused",
-                experiment.name, report.outcomes, report.reissued, report.duplicates, report.refused
-            );
-        }
-        run_dir::write(experiment, &summary, dir, args.experiment.quiet, &pictures)?;
+        let report = RunReport::of(&progress, &summary, Some(&fleet_progress), planned.resume);
+        run_dir::write(experiment, &summary, &report, dir, args.experiment.quiet, &pictures)?;
         run_dir::check_failures(experiment, &summary, dir, planned.max_failed_share)?;
     }
     Ok(())

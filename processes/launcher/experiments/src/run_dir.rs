@@ -24,10 +24,12 @@ use crate::experiment::{Experiment, RunError};
 use crate::file::LoadedFile;
 use crate::keys::ConfigError;
 use crate::plan::{self, Job, Plan};
-use crate::progress::PROGRESS_EVERY;
+use crate::progress::{PROGRESS_EVERY, Progress};
 use crate::records::{self, RecordsError};
 use crate::settings::ExperimentFile;
 use crate::summary::{Failures, Summary};
+use acps_fleet::FleetProgress;
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -244,7 +246,8 @@ impl RunDir {
                 experiment: experiment.name.clone(),
                 source: Box::new(source),
             })?;
-            write(experiment, &summary, dir, quiet, pictures)?;
+            let report = RunReport::of(&progress, &summary, None, self.resume);
+            write(experiment, &summary, &report, dir, quiet, pictures)?;
             check_failures(experiment, &summary, dir, self.max_failed_share)?;
             summaries.push(summary);
         }
@@ -271,11 +274,110 @@ pub fn output_dir(dir: &Path) -> Result<(), RunDirError> {
     std::fs::remove_file(&probe).map_err(|e| fail("write into it", e))
 }
 
-/// Write the run directory's results (its config.toml was written before the run) and, unless
-/// `quiet`, say where they are and the final scores.
+/// What a run did in this process, which `summary.json` cannot say: it must be the same bytes
+/// after a resume, while these figures depend on the machine, the workers and the moment. Written
+/// to `DIR/run.json` and as the run's first final line.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunReport {
+    /// `in-process` or `fleet`.
+    pub mode: &'static str,
+    /// Whether the run continued from checkpoints (then the counts below are this process's
+    /// part of it).
+    pub resumed: bool,
+    /// Training episodes of all jobs together.
+    pub episodes: u64,
+    /// Rollouts (training, evaluation and first-visit baselines) this process consumed.
+    pub rollouts: u64,
+    /// Wall-clock seconds from the experiment's start in this process to its last outcome (a
+    /// fleet's workers' start-up included).
+    pub seconds: f64,
+    /// `rollouts / seconds`.
+    pub rollouts_per_s: f64,
+    /// A fleet's most workers connected at once (those behind relays included); in-process, the
+    /// threads that ran the jobs.
+    pub workers: usize,
+    /// `rollouts_per_s / workers`.
+    pub rollouts_per_s_per_worker: f64,
+    /// Failed training rollouts of all jobs (after their retry), as in `summary.json`.
+    pub failed_training: u64,
+    /// Failed evaluation rollouts of all jobs, as in `summary.json`.
+    pub failed_evaluation: u64,
+    /// Fleet only: tasks handed out again because their worker died or fell silent.
+    pub reissued: Option<u64>,
+    /// Fleet only: outcomes dropped because their task had been answered (a re-issued task
+    /// answered twice).
+    pub duplicates: Option<u64>,
+    /// Fleet only: requests refused (another build, run or environment).
+    pub refused: Option<u64>,
+}
+
+impl RunReport {
+    /// The report of a run that showed `progress` and ended with `summary`: on a fleet whose
+    /// last progress was `fleet`, or in this process (`None`); `resumed` from checkpoints.
+    pub fn of(progress: &Progress, summary: &Summary, fleet: Option<&FleetProgress>, resumed: bool) -> Self {
+        let (rollouts, seconds, most_workers) = progress.done();
+        let jobs = summary.runs * summary.methods.len();
+        let workers = match fleet {
+            Some(fleet) => most_workers.unwrap_or(fleet.workers).max(fleet.workers),
+            None => rayon::current_num_threads().min(jobs),
+        };
+        let rollouts = fleet.map_or(rollouts, |f| f.outcomes);
+        let rollouts_per_s = rollouts as f64 / seconds.max(1e-9);
+        let sum = |count: fn(&crate::summary::MethodSummary) -> u64| summary.methods.values().map(count).sum();
+        Self {
+            mode: if fleet.is_some() { "fleet" } else { "in-process" },
+            resumed,
+            episodes: summary.training_episodes * jobs as u64,
+            rollouts,
+            seconds,
+            rollouts_per_s,
+            workers,
+            rollouts_per_s_per_worker: rollouts_per_s / workers.max(1) as f64,
+            failed_training: sum(|m| m.failed_episodes),
+            failed_evaluation: sum(|m| m.failed_evaluation_rollouts),
+            reissued: fleet.map(|f| f.reissued),
+            duplicates: fleet.map(|f| f.duplicates),
+            refused: fleet.map(|f| f.refused),
+        }
+    }
+
+    /// The final line of experiment `name`.
+    pub fn line(&self, name: &str) -> String {
+        let unit = if self.mode == "fleet" { "worker" } else { "thread" };
+        let resumed = if self.resumed {
+            " (resumed: this process's part)"
+        } else {
+            ""
+        };
+        let mut line = format!(
+            "{name} on {} {unit}s: {} episodes, {} rollouts{resumed} in {:.1} s ({:.0}/s, {:.0}/s per {unit})",
+            self.workers,
+            self.episodes,
+            self.rollouts,
+            self.seconds,
+            self.rollouts_per_s,
+            self.rollouts_per_s_per_worker
+        );
+        if let (Some(reissued), Some(duplicates), Some(refused)) = (self.reissued, self.duplicates, self.refused) {
+            line += &format!(", {reissued} re-issued, {duplicates} duplicates dropped, {refused} refused");
+        }
+        line += &format!(
+            ", {} failed ({} training, {} evaluation)",
+            self.failed_training + self.failed_evaluation,
+            self.failed_training,
+            self.failed_evaluation
+        );
+        line
+    }
+}
+
+/// Write the run directory's results (its config.toml was written before the run) with the
+/// run's `report` in `run.json` and, unless `quiet`, say what the run did, where the results
+/// are and the final scores.
 pub fn write(
     experiment: &Experiment,
     summary: &Summary,
+    report: &RunReport,
     dir: &Path,
     quiet: bool,
     pictures: Pictures,
@@ -284,6 +386,9 @@ pub fn write(
         path: dir.join("summary.json"),
         source,
     })?;
+    let run_json = dir.join("run.json");
+    let json = serde_json::to_string_pretty(report).expect("a run report always serialises");
+    std::fs::write(&run_json, json).map_err(|source| RunDirError::Summary { path: run_json, source })?;
     records::write(summary, dir)?;
     pictures(summary, dir).map_err(|e| RunDirError::Pictures {
         dir: dir.to_path_buf(),
@@ -293,6 +398,7 @@ pub fn write(
         for failures in summary.failures() {
             eprintln!("warning: experiment {}, {failures}", experiment.name);
         }
+        println!("{}", report.line(&experiment.name));
         println!("{} -> {}", experiment.name, dir.join("summary.json").display());
         let score = experiment.score_format();
         for (method, result) in &summary.methods {

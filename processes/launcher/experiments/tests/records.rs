@@ -76,6 +76,52 @@ fn records_appended_after_the_checkpoint_are_cut_on_resume() {
     }
     run(&dir, true).unwrap();
     assert!(outputs(&dir) == reference, "the resumed run writes the same bytes");
+    // Resumed after every job had finished, this process performed nothing.
+    let report = json(&dir.join("run.json"));
+    assert_eq!(
+        (report["resumed"].as_bool(), report["rollouts"].as_u64()),
+        (Some(true), Some(0))
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+#[test]
+fn run_json_says_what_the_run_did() {
+    let dir = out("report");
+    run(&dir, false).unwrap();
+    let (report, summary) = (json(&dir.join("run.json")), json(&dir.join("summary.json")));
+    let methods = summary["methods"].as_object().unwrap();
+    let evaluations: u64 = methods
+        .values()
+        .map(|m| m["evaluation_rollouts"].as_u64().unwrap())
+        .sum();
+    // Monotonic progress first rolls out the initial policy once on every training context.
+    let baselines = 2 * summary["training_contexts"].as_array().unwrap().len() as u64;
+    assert_eq!(report["mode"], "in-process");
+    assert_eq!(report["resumed"], false);
+    assert_eq!(report["episodes"], 2 * 2 * 300);
+    assert_eq!(
+        report["rollouts"].as_u64().unwrap(),
+        1200 + evaluations + baselines,
+        "{report}"
+    );
+    let (rate, seconds) = (
+        report["rollouts_per_s"].as_f64().unwrap(),
+        report["seconds"].as_f64().unwrap(),
+    );
+    assert!((rate * seconds - report["rollouts"].as_f64().unwrap()).abs() < 1e-6 * rate * seconds);
+    let workers = report["workers"].as_f64().unwrap();
+    assert!(workers >= 1.0);
+    assert!((report["rollouts_per_s_per_worker"].as_f64().unwrap() * workers - rate).abs() < 1e-9 * rate);
+    assert_eq!(
+        (report["failed_training"].as_u64(), report["failed_evaluation"].as_u64()),
+        (Some(0), Some(0))
+    );
+    assert!(report["reissued"].is_null(), "{report}");
     let _ = std::fs::remove_dir_all(dir);
 }
 

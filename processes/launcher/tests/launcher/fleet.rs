@@ -122,6 +122,26 @@ fn learn_is_the_fleet_run_of_monotonic_progress_it_documents() {
             .unwrap(),
     );
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    // What each run did: the same rollouts, counted by the fleet and by the in-process loop.
+    let report = |dir: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join("run.json")).unwrap()).unwrap()
+    };
+    let (fleet, local) = (report(&out), report(&dir.join("in-process")));
+    assert_eq!(
+        (fleet["mode"].as_str(), local["mode"].as_str()),
+        (Some("fleet"), Some("in-process"))
+    );
+    assert_eq!(fleet["episodes"], 600);
+    assert_eq!(fleet["rollouts"], local["rollouts"], "{fleet}\n{local}");
+    assert!(
+        fleet["rollouts"].as_u64().unwrap() > 600,
+        "training and evaluation rollouts: {fleet}"
+    );
+    assert!((1..=2).contains(&fleet["workers"].as_u64().unwrap()), "{fleet}");
+    assert_eq!(
+        (fleet["reissued"].as_u64(), local["reissued"].as_u64()),
+        (Some(0), None)
+    );
     assert_clean(&run);
 }
 
@@ -135,7 +155,6 @@ pub(crate) fn wait_until(what: &str, limit: Duration, mut condition: impl FnMut(
     }
 }
 
-/// True once `dir` holds a file.
 /// Whether the checkpoints directory `dir` holds a checkpoint (record files are there from the
 /// start; a checkpoint, once learning has begun).
 pub(crate) fn has_checkpoint(dir: &Path) -> bool {

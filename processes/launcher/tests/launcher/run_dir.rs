@@ -638,3 +638,50 @@ fn evaluate_refuses_edited_policy_files_naming_the_file_and_field() {
         assert!(error.contains(expected), "{expected}\n{error}");
     }
 }
+
+/// The README's run-directory section, where every file's fields are documented.
+fn readme_run_directory() -> String {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md")).unwrap();
+    let start = readme
+        .find("### Run directory")
+        .expect("README has a run-directory section");
+    let end = readme[start..]
+        .find("**Replaying a policy.**")
+        .map_or(readme.len(), |e| start + e);
+    readme[start..end].to_string()
+}
+
+#[test]
+fn every_field_of_summary_json_and_run_json_is_documented_in_the_readme() {
+    let section = readme_run_directory();
+    let undocumented = |value: &serde_json::Value| -> Vec<String> {
+        value
+            .as_object()
+            .unwrap()
+            .keys()
+            .filter(|key| !section.contains(&format!("`{key}`")))
+            .cloned()
+            .collect()
+    };
+    for (dir, method) in [
+        (grid(), "monotonic-progress"),
+        (experiment("dartboard", "random", "60"), "random"),
+    ] {
+        let summary = summary(&dir);
+        assert_eq!(undocumented(&summary), Vec::<String>::new(), "summary.json");
+        assert_eq!(
+            undocumented(&summary["methods"][method]),
+            Vec::<String>::new(),
+            "a method's"
+        );
+        if summary["best_policy"].is_object() {
+            assert_eq!(
+                undocumented(&summary["best_policy"]),
+                Vec::<String>::new(),
+                "best_policy"
+            );
+        }
+        let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("run.json")).unwrap()).unwrap();
+        assert_eq!(undocumented(&report), Vec::<String>::new(), "run.json");
+    }
+}
