@@ -297,7 +297,8 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         let (summary, fleet_progress) = outcome
             .with_context(|| format!("experiment {} on run '{run}'", experiment.name))
             .map_err(|e| stopped(e, checkpoints.as_ref(), out, true))?;
-        let report = RunReport::of(&progress, &summary, Some(&fleet_progress), planned.resume);
+        let report =
+            RunReport::of(&progress, &summary, Some(&fleet_progress), planned.resume).with_relays(listener.is_some());
         run_dir::write(experiment, &summary, &report, dir, args.experiment.quiet, &pictures)?;
         run_dir::check_failures(experiment, &summary, dir, planned.max_failed_share)?;
     }

@@ -296,6 +296,8 @@ pub struct RunReport {
     /// A fleet's most workers connected at once (those behind relays included); in-process, the
     /// threads that ran the jobs.
     pub workers: usize,
+    /// Whether the run served relays of other hosts (`--listen`).
+    pub relays: bool,
     /// `rollouts_per_s / workers`.
     pub rollouts_per_s_per_worker: f64,
     /// Failed training rollouts of all jobs (after their retry), as in `summary.json`.
@@ -332,6 +334,7 @@ impl RunReport {
             seconds,
             rollouts_per_s,
             workers,
+            relays: false,
             rollouts_per_s_per_worker: rollouts_per_s / workers.max(1) as f64,
             failed_training: sum(|m| m.failed_episodes),
             failed_evaluation: sum(|m| m.failed_evaluation_rollouts),
@@ -341,8 +344,14 @@ impl RunReport {
         }
     }
 
+    /// The same report of a run that served relays of other hosts.
+    pub fn with_relays(self, relays: bool) -> Self {
+        Self { relays, ..self }
+    }
+
     /// The final line of experiment `name`.
     pub fn line(&self, name: &str) -> String {
+        let relays = if self.relays { " and relays of other hosts" } else { "" };
         let unit = if self.mode == "fleet" { "worker" } else { "thread" };
         let resumed = if self.resumed {
             " (resumed: this process's part)"
@@ -350,7 +359,7 @@ impl RunReport {
             ""
         };
         let mut line = format!(
-            "{name} on {} {unit}s: {} episodes, {} rollouts{resumed} in {:.1} s ({:.0}/s, {:.0}/s per {unit})",
+            "{name} on {} {unit}s{relays}: {} episodes, {} rollouts{resumed} in {:.1} s ({:.0}/s, {:.0}/s per {unit})",
             self.workers,
             self.episodes,
             self.rollouts,
