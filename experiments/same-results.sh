@@ -25,6 +25,8 @@ for file in "$here"/*.toml; do
     else
         "$acps" experiment "${args[@]}"
     fi
-    # Pictures are for reading, not comparing; checkpoints carry the build that wrote them.
-    find "$out/$name" \( -name '*.png' -o -name '*.svg' -o -name '*.ckpt' \) -delete
+    # Pictures are for reading, not comparing; checkpoints carry the build that wrote them; a
+    # fleet's record files group each batch of records by kind as the outcomes happened to
+    # arrive (read back, the records are the same); run.json holds the wall-clock figures.
+    find "$out/$name" \( -name '*.png' -o -name '*.svg' -o -name '*.ckpt' -o -name '*.records' -o -name run.json \) -delete
 done

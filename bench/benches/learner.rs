@@ -6,15 +6,21 @@
 //! its update (the joint dual and both bounded fits) beside plain C-REPS' at the PA-10 scale. The
 //! learner must stay far below the time of the rollouts it serves.
 //!
+//! The learner's own cost per rollout (ask, tell, the C-REPS updates, no simulation), as in
+//! `acps bench --env trivial`'s in-process rows, guards the transport's figures against
+//! regressions of the core: 2000 trivial rollouts with P = 1 and P = 64.
+//!
 //! Before measuring, the Newton steps per update of 200 seeded data sets of each scale are
 //! printed.
 
 use acps_learner::creps::{CReps, CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{
     AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, Choice, ContextSelector,
-    DUcbConfig, FirstVisit, IntrinsicReward, RetireConfig, SelfPaced, SelfPacedConfig,
+    DUcbConfig, FirstVisit, IntrinsicReward, RetireConfig, RoundRobin, SelfPaced, SelfPacedConfig,
 };
-use acps_shared::ContextSpace;
+use acps_learner::{Learner, LearnerConfig, run_in_process};
+use acps_models::environment::TrivialEnvironment;
+use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -287,5 +293,61 @@ fn self_paced(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, creps_update, selector_steps, alp_gmm, self_paced);
+/// A learner of `acps bench`'s trivial problem (one context, one parameter, no evaluation, an
+/// update every 1000 rollouts on a window of 1000) for 2000 episodes with P = `in_flight`.
+fn trivial_learner(in_flight: usize) -> Learner {
+    let environment = TrivialEnvironment::new();
+    let problem = Problem {
+        name: "trivial".into(),
+        training_contexts: vec![vec![0.0]],
+        test_contexts: Vec::new(),
+        space: ContextSpace::new_box(vec![-1.0], vec![1.0]).unwrap(),
+        theta0: vec![1.0],
+        score: ScoreAggregate::Mean,
+        metric: "none".into(),
+        environment: environment.spec(),
+    };
+    let creps = CRepsConfig {
+        epsilon: 1.0,
+        eta_min: DEFAULT_ETA_MIN,
+        ridge: 1e-4,
+        update_every: 1000,
+        memory: MemoryConfig::SlidingWindow { capacity: 1000 },
+        features: FeatureMap::Affine,
+        initial_sigma: 1.0,
+    };
+    let config = LearnerConfig {
+        seed: 0,
+        episodes: 2000,
+        in_flight,
+        eval_every: u64::MAX,
+        creps: Some(creps),
+    };
+    let selector = Box::new(RoundRobin::all(problem.training_contexts.clone()).unwrap());
+    Learner::new(config, problem, selector).unwrap()
+}
+
+fn learner_rollouts(c: &mut Criterion) {
+    for in_flight in [1, 64] {
+        c.bench_function(&format!("learner_2000_trivial_rollouts_p{in_flight}"), |b| {
+            b.iter_batched(
+                || (trivial_learner(in_flight), TrivialEnvironment::new()),
+                |(mut learner, mut environment)| {
+                    run_in_process(&mut learner, &mut environment).unwrap();
+                    black_box(learner.stats().updates)
+                },
+                BatchSize::SmallInput,
+            )
+        });
+    }
+}
+
+criterion_group!(
+    benches,
+    creps_update,
+    selector_steps,
+    alp_gmm,
+    self_paced,
+    learner_rollouts
+);
 criterion_main!(benches);

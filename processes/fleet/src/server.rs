@@ -440,6 +440,9 @@ pub struct FleetProgress {
     pub outcomes: u64,
     /// Connected workers, those behind remote peers included.
     pub workers: usize,
+    /// The most workers connected at once so far (counted every tick, and at the end from the
+    /// workers heard from): a run shorter than a tick still counts its workers.
+    pub most_workers: usize,
     /// Connected remote peers (relays of other hosts).
     pub relays: usize,
     /// The slowest rollout any worker reported.
@@ -855,6 +858,8 @@ pub(crate) fn serve<'r>(
         progress.jobs_done = source.jobs_done();
         let serving = || serving_since.map_or(0.0, |since: Instant| since.elapsed().as_secs_f64());
         if progress.jobs_done == source.jobs() {
+            let heard_locally = last_heard.keys().filter(|c| matches!(c, Client::Local(_))).count();
+            progress.most_workers = progress.most_workers.max(heard_locally + peers.values().sum::<usize>());
             progress.serving_seconds = serving();
             progress.learning = source.learning();
             // Before the workers are told to stop: a host that watches whether its workers are
@@ -898,6 +903,7 @@ pub(crate) fn serve<'r>(
             };
             progress.relays = peers.len();
             progress.workers = local + peers.values().sum::<usize>();
+            progress.most_workers = progress.most_workers.max(progress.workers);
             let deadline = options
                 .liveness
                 .silence

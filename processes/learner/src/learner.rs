@@ -47,7 +47,7 @@ use acps_shared::{
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::collections::VecDeque;
 
 /// How the learner runs, independent of the selection method.
 ///
@@ -333,10 +333,17 @@ enum Role {
     Baseline { arm: usize },
 }
 
+/// A task created and not yet consumed, with where it stands.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct Pending {
     task: Task,
     role: Role,
+    /// In the outbox (to be handed out, again after a retry or a reissue).
+    queued: bool,
+    /// Its outcome, once it arrived ahead of an earlier task's.
+    arrived: Option<Outcome>,
+    /// Whether its failed outcome was already given a second chance.
+    retried: bool,
 }
 
 /// What a learner must be to take a snapshot: the configuration and problem dimensions.
@@ -428,8 +435,9 @@ struct RunState {
     /// Tasks to hand out, in order. In a snapshot, those out without an outcome come first, so
     /// that a restored learner hands them out again before the queue.
     outbox: VecDeque<u64>,
-    pending: BTreeMap<u64, Pending>,
-    arrived: BTreeMap<u64, Outcome>,
+    /// Every task created and not consumed: ids `next_to_consume..next_id`, in order (tasks are
+    /// numbered as created and consumed in that order, so the window has no gaps).
+    pending: VecDeque<Pending>,
     /// Evaluations not taken: `Role::Evaluate`'s index minus `taken.evaluations`.
     evaluations: Vec<Evaluation>,
     episodes: Vec<Episode>,
@@ -439,11 +447,16 @@ struct RunState {
     /// The score of the latest complete evaluation that has one.
     latest_score: Option<f64>,
     lowest_reward: Option<f64>,
-    retried: BTreeSet<u64>,
     stats: LearnerStats,
 }
 
 impl RunState {
+    /// Task `id`, if it is pending.
+    fn pending_mut(&mut self, id: u64) -> Option<&mut Pending> {
+        let index = usize::try_from(id.checked_sub(self.next_to_consume)?).ok()?;
+        self.pending.get_mut(index)
+    }
+
     /// A run that has not started, its random streams seeded from `seed`.
     fn start(seed: u64) -> Self {
         Self {
@@ -454,15 +467,13 @@ impl RunState {
             train_consumed: 0,
             next_to_consume: 0,
             outbox: VecDeque::new(),
-            pending: BTreeMap::new(),
-            arrived: BTreeMap::new(),
+            pending: VecDeque::new(),
             evaluations: Vec::new(),
             episodes: Vec::new(),
             updates: Vec::new(),
             taken: RecordCounts::default(),
             latest_score: None,
             lowest_reward: None,
-            retried: BTreeSet::new(),
             stats: LearnerStats::default(),
         }
     }
@@ -503,7 +514,15 @@ impl LearnerSnapshot {
                 run.stats.rejected_updates
             ));
         }
-        for (&id, pending) in &run.pending {
+        if run.next_to_consume + run.pending.len() as u64 != run.next_id {
+            return Err(format!(
+                "{} tasks pending between task {} and task {}",
+                run.pending.len(),
+                run.next_to_consume,
+                run.next_id
+            ));
+        }
+        for (id, pending) in (run.next_to_consume..).zip(&run.pending) {
             let role_ok = match &pending.role {
                 Role::Train { bucket, choice } => *bucket < arms && choice.arm.is_none_or(|a| a < arms),
                 Role::Evaluate { evaluation, index } => evaluation
@@ -512,18 +531,13 @@ impl LearnerSnapshot {
                     .is_some_and(|e| *index < e.outcomes.len()),
                 Role::Baseline { arm } => *arm < arms,
             };
-            if pending.task.id != id || id < run.next_to_consume || id >= run.next_id || !role_ok {
+            let queued = run.outbox.iter().filter(|&&queued| queued == id).count();
+            if pending.task.id != id || !role_ok || queued != usize::from(pending.queued) {
                 return Err(format!("pending task {id} does not fit the run"));
             }
         }
-        let unknown = run
-            .outbox
-            .iter()
-            .chain(run.arrived.keys())
-            .chain(&run.retried)
-            .find(|id| !run.pending.contains_key(id));
-        if let Some(id) = unknown {
-            return Err(format!("task {id} is queued or answered but not pending"));
+        if run.outbox.len() != run.pending.iter().filter(|p| p.queued).count() {
+            return Err("a queued task is not pending".into());
         }
         Ok(())
     }
@@ -661,16 +675,20 @@ impl Learner {
     /// outcomes, or the run is done).
     pub fn ask(&mut self) -> Option<Task> {
         let id = self.run.outbox.pop_front()?;
-        Some(self.run.pending[&id].task.clone())
+        let pending = self.run.pending_mut(id).expect("queued tasks are pending");
+        pending.queued = false;
+        Some(pending.task.clone())
     }
 
     /// Hand a task out again (for example after the worker that had it died). Returns false when
     /// the task is not waiting for an outcome.
     pub fn reissue(&mut self, task_id: u64) -> bool {
-        let waiting = self.run.pending.contains_key(&task_id)
-            && !self.run.arrived.contains_key(&task_id)
-            && !self.run.outbox.contains(&task_id);
+        let Some(pending) = self.run.pending_mut(task_id) else {
+            return false;
+        };
+        let waiting = pending.arrived.is_none() && !pending.queued;
         if waiting {
+            pending.queued = true;
             self.run.outbox.push_back(task_id);
         }
         waiting
@@ -680,26 +698,32 @@ impl Learner {
     /// order, and consuming them may create new tasks.
     pub fn tell(&mut self, outcome: Outcome) -> Result<(), LearnerTellError> {
         let task_id = outcome.task_id;
-        if !self.run.pending.contains_key(&task_id) {
+        let run = &mut self.run;
+        let Some(pending) = run.pending_mut(task_id) else {
             return Err(LearnerTellError::UnknownTask { task_id });
-        }
-        if self.run.arrived.contains_key(&task_id) {
+        };
+        if pending.arrived.is_some() {
             return Err(LearnerTellError::Duplicate { task_id });
         }
-        self.run.outbox.retain(|id| *id != task_id);
-        if !outcome.is_ok() && self.run.retried.insert(task_id) {
-            self.run.stats.retries += 1;
-            self.run.outbox.push_back(task_id);
+        // Still queued only when it was handed out again (reissued, or restored) and an earlier
+        // copy answered: it need not go out once more.
+        let was_queued = std::mem::take(&mut pending.queued);
+        if !outcome.is_ok() && !pending.retried {
+            pending.retried = true;
+            pending.queued = true;
+            run.stats.retries += 1;
+            if !was_queued {
+                run.outbox.push_back(task_id);
+            }
             return Ok(());
         }
-        self.run.arrived.insert(task_id, outcome);
-        while let Some(outcome) = self.run.arrived.remove(&self.run.next_to_consume) {
-            let pending = self
-                .run
-                .pending
-                .remove(&self.run.next_to_consume)
-                .expect("arrived outcomes belong to pending tasks");
-            self.run.retried.remove(&self.run.next_to_consume);
+        pending.arrived = Some(outcome);
+        if was_queued {
+            run.outbox.retain(|id| *id != task_id);
+        }
+        while self.run.pending.front().is_some_and(|p| p.arrived.is_some()) {
+            let mut pending = self.run.pending.pop_front().expect("a front task");
+            let outcome = pending.arrived.take().expect("its outcome arrived");
             self.run.next_to_consume += 1;
             self.consume(pending, outcome);
         }
@@ -831,20 +855,22 @@ impl Learner {
     /// The whole evolving state, for a checkpoint. Tasks handed out whose outcome has not
     /// arrived are recorded as to be handed out again, ahead of the queue.
     pub fn snapshot(&self) -> LearnerSnapshot {
-        let run = &self.run;
-        let out = run
+        let mut run = self.run.clone();
+        let out: Vec<u64> = run
             .pending
-            .keys()
-            .copied()
-            .filter(|id| !run.arrived.contains_key(id) && !run.outbox.contains(id));
+            .iter_mut()
+            .filter(|p| p.arrived.is_none() && !p.queued)
+            .map(|p| {
+                p.queued = true;
+                p.task.id
+            })
+            .collect();
+        run.outbox = out.into_iter().chain(self.run.outbox.iter().copied()).collect();
         LearnerSnapshot {
             fit: Fit::of(self),
             selector: self.selector.save_state(),
             policy: self.policy.as_ref().map(CReps::state),
-            run: RunState {
-                outbox: out.chain(run.outbox.iter().copied()).collect(),
-                ..run.clone()
-            },
+            run,
         }
     }
 
@@ -891,7 +917,13 @@ impl Learner {
             context,
             theta,
         };
-        self.run.pending.insert(id, Pending { task, role });
+        self.run.pending.push_back(Pending {
+            task,
+            role,
+            queued: true,
+            arrived: None,
+            retried: false,
+        });
         self.run.outbox.push_back(id);
     }
 

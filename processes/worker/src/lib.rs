@@ -22,7 +22,8 @@ use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORK
 /// worker processes it starts.
 pub use acps_wire::ipc::{RunName, RunNameParseError};
 use acps_wire::wire::{
-    Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireOutcome, WireTask, WorkerMessage,
+    Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireEnvironment, WireOutcome, WireTask,
+    WorkerMessage,
 };
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -312,6 +313,10 @@ pub fn serve(
     // Told to the learner, which then waits for this worker at least a few times as long.
     let mut slowest = Duration::ZERO;
     let mut rollouts = 0;
+    // The environment the last task needed, once its spec was read and the factory's environment
+    // found to be it: tasks of one environment follow each other, and reading and checking the
+    // spec again for each would cost a tenth of a trivial rollout.
+    let mut checked: Option<(WireEnvironment, EnvironmentSpec)> = None;
     let mut idle_since = None;
     let mut silence = Silence::default();
     // Requests sent since the learner was last woken.
@@ -409,17 +414,26 @@ pub fn serve(
                 task_id: task.id,
                 reason,
             };
-            let spec = EnvironmentSpec::try_from(wire.environment)
-                .map_err(|e| no_environment(EnvironmentProvideError::new(e)))?;
+            let known = checked
+                .filter(|(seen, _)| *seen == wire.environment)
+                .map(|(_, spec)| spec);
+            let spec = match known {
+                Some(spec) => spec,
+                None => EnvironmentSpec::try_from(wire.environment)
+                    .map_err(|e| no_environment(EnvironmentProvideError::new(e)))?,
+            };
             let environment = factory.environment(&spec).map_err(no_environment)?;
-            let provided = environment.spec();
-            if provided != spec {
-                return Err(WorkerError::TaskRefused {
-                    job: wire.job,
-                    task_id: task.id,
-                    needed: Box::new(spec),
-                    provided: Box::new(provided),
-                });
+            if known.is_none() {
+                let provided = environment.spec();
+                if provided != spec {
+                    return Err(WorkerError::TaskRefused {
+                        job: wire.job,
+                        task_id: task.id,
+                        needed: Box::new(spec),
+                        provided: Box::new(provided),
+                    });
+                }
+                checked = Some((wire.environment, spec));
             }
             let started = Instant::now();
             let outcome = environment.rollout(&task);

@@ -6,7 +6,7 @@ use crate::summary::{Summary, UserProblem, mean};
 use acps_learner::LearningProgress;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -75,9 +75,8 @@ pub struct Progress {
     /// When stderr is not a terminal: the interval of the plain lines and when the last was
     /// written (none yet: the first report is written at once).
     lines: Option<(Duration, Mutex<Option<Instant>>)>,
-    /// The rollouts it was last shown, and the most workers (0: none shown, in-process).
+    /// The rollouts it was last shown.
     rollouts: AtomicU64,
-    workers: AtomicUsize,
 }
 
 /// How often a run's progress is written as a plain line when stderr is not a terminal, unless
@@ -121,7 +120,6 @@ impl Progress {
             score: ScoreFormat::of_paper(experiment),
             lines,
             rollouts: AtomicU64::new(0),
-            workers: AtomicUsize::new(0),
         }
     }
 
@@ -137,7 +135,6 @@ impl Progress {
     /// Show `learning`, with `rollouts` done so far and, for fleets, the live `workers`.
     pub fn show(&self, learning: &LearningProgress, rollouts: u64, workers: Option<usize>) {
         self.rollouts.store(rollouts, Ordering::Relaxed);
-        self.workers.fetch_max(workers.unwrap_or(0), Ordering::Relaxed);
         self.bar.set_length(learning.total_episodes);
         self.bar.set_position(learning.episodes);
         let rate = rollouts as f64 / self.bar.elapsed().as_secs_f64().max(1e-3);
@@ -195,15 +192,9 @@ impl Progress {
         }
     }
 
-    /// Rollouts done so far (the last count shown), the seconds since the line was made, and
-    /// the most workers shown at once (`None` for an in-process run, which shows none).
-    pub fn done(&self) -> (u64, f64, Option<usize>) {
-        let workers = self.workers.load(Ordering::Relaxed);
-        (
-            self.rollouts.load(Ordering::Relaxed),
-            self.bar.elapsed().as_secs_f64(),
-            (workers > 0).then_some(workers),
-        )
+    /// Rollouts done so far (the last count shown) and the seconds since the line was made.
+    pub fn done(&self) -> (u64, f64) {
+        (self.rollouts.load(Ordering::Relaxed), self.bar.elapsed().as_secs_f64())
     }
 
     /// Remove the line (the run failed or was stopped).

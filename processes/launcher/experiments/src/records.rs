@@ -21,7 +21,8 @@ use crate::summary::{RunResult, Summary, UserProblem};
 use acps_learner::creps::{PolicySnapshot, PolicySnapshotRestoreError, Rejection, RestoredPolicy};
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
-use std::fmt::Write as _;
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 /// The header of `runs.csv`, which `acps compare` reads back.
@@ -385,70 +386,74 @@ fn read_regular(path: &Path) -> Result<String, RecordsError> {
 
 /// Write the CSV tables and the policy files of `summary` into `dir` (which exists).
 pub fn write(summary: &Summary, dir: &Path) -> Result<(), RecordsError> {
-    let file = |name: &str, text: String| {
+    // Streamed through a buffer: a long run's tables are far larger than its summary.
+    let file = |name: &str, table: fn(&Summary, &mut dyn Write) -> std::io::Result<()>| {
         let path = dir.join(name);
-        std::fs::write(&path, text).map_err(io("writing", &path))
+        let written = File::create(&path).and_then(|file| {
+            let mut out = BufWriter::new(file);
+            table(summary, &mut out)?;
+            out.flush()
+        });
+        written.map_err(io("writing", &path))
     };
-    file("curves.csv", curves_csv(summary))?;
-    file("runs.csv", runs_csv(summary))?;
-    file("selections.csv", selections_csv(summary))?;
-    file("updates.csv", updates_csv(summary))?;
+    file("curves.csv", curves_csv)?;
+    file("runs.csv", runs_csv)?;
+    file("selections.csv", selections_csv)?;
+    file("updates.csv", updates_csv)?;
     write_policies(summary, dir)
 }
 
-fn curves_csv(summary: &Summary) -> String {
-    let mut csv = String::from("method,episode,mean,sem\n");
+fn curves_csv(summary: &Summary, csv: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(csv, "method,episode,mean,sem")?;
     for (method, m) in &summary.methods {
         for ((episode, mean), sem) in m.episodes.iter().zip(&m.mean).zip(&m.sem) {
-            writeln!(csv, "{method},{episode},{},{}", field(*mean), field(*sem)).expect("writing to a string");
+            writeln!(csv, "{method},{episode},{},{}", field(*mean), field(*sem))?;
         }
     }
-    csv
+    Ok(())
 }
 
-fn runs_csv(summary: &Summary) -> String {
-    let mut csv = format!("{RUNS_CSV_HEADER}\n");
+fn runs_csv(summary: &Summary, csv: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(csv, "{RUNS_CSV_HEADER}")?;
     for (method, runs) in &summary.run_results {
         for (index, run) in runs.iter().enumerate() {
             for (episode, score) in run.eval_episodes.iter().zip(&run.scores) {
-                writeln!(csv, "{method},{index},{},{episode},{}", run.seed, field(*score))
-                    .expect("writing to a string");
+                writeln!(csv, "{method},{index},{},{episode},{}", run.seed, field(*score))?;
             }
         }
     }
-    csv
+    Ok(())
 }
 
-fn selections_csv(summary: &Summary) -> String {
+fn selections_csv(summary: &Summary, csv: &mut dyn Write) -> std::io::Result<()> {
     let dim = summary.training_contexts.first().map_or(0, Vec::len);
-    let mut csv = String::from("method,episode,arm");
+    write!(csv, "method,episode,arm")?;
     for d in 0..dim {
-        write!(csv, ",s{d}").expect("writing to a string");
+        write!(csv, ",s{d}")?;
     }
-    csv.push_str(",reward\n");
+    writeln!(csv, ",reward")?;
     for (method, runs) in &summary.run_results {
         for (episode, e) in runs[0].episodes.iter().enumerate() {
             write!(
                 csv,
                 "{method},{episode},{}",
                 e.arm.map(|a| a.to_string()).unwrap_or_default()
-            )
-            .expect("writing to a string");
+            )?;
             for s in &e.context {
-                write!(csv, ",{s}").expect("writing to a string");
+                write!(csv, ",{s}")?;
             }
             let reward = Some(e.reward).filter(|r| r.is_finite());
-            writeln!(csv, ",{}", field(reward)).expect("writing to a string");
+            writeln!(csv, ",{}", field(reward))?;
         }
     }
-    csv
+    Ok(())
 }
 
 /// The header of `updates.csv`.
 pub const UPDATES_HEADER: &str = "method,run,update,episode,samples,eta,eta_at_bound,kl,epsilon,ess,dual,optimality,iterations,logdet_sigma,trace_sigma,rejected,alpha,context_eta,context_kl,context_ess,nu";
 
-fn updates_csv(summary: &Summary) -> String {
-    let mut csv = format!("{UPDATES_HEADER}\n");
+fn updates_csv(summary: &Summary, csv: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(csv, "{UPDATES_HEADER}")?;
     for (method, runs) in &summary.run_results {
         for (index, run) in runs.iter().enumerate() {
             for (update, record) in run.updates.iter().enumerate() {
@@ -475,12 +480,11 @@ fn updates_csv(summary: &Summary) -> String {
                     field(c.map(|c| c.kl)),
                     field(c.map(|c| c.ess)),
                     field(c.and_then(|c| c.nu)),
-                )
-                .expect("writing to a string");
+                )?;
             }
         }
     }
-    csv
+    Ok(())
 }
 
 /// A CSV field: the shortest text that parses back to the same f64, or empty.

@@ -317,10 +317,10 @@ impl RunReport {
     /// The report of a run that showed `progress` and ended with `summary`: on a fleet whose
     /// last progress was `fleet`, or in this process (`None`); `resumed` from checkpoints.
     pub fn of(progress: &Progress, summary: &Summary, fleet: Option<&FleetProgress>, resumed: bool) -> Self {
-        let (rollouts, seconds, most_workers) = progress.done();
+        let (rollouts, seconds) = progress.done();
         let jobs = summary.runs * summary.methods.len();
         let workers = match fleet {
-            Some(fleet) => most_workers.unwrap_or(fleet.workers).max(fleet.workers),
+            Some(fleet) => fleet.most_workers,
             None => rayon::current_num_threads().min(jobs),
         };
         let rollouts = fleet.map_or(rollouts, |f| f.outcomes);

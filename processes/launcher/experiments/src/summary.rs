@@ -234,8 +234,10 @@ impl Summary {
     /// Write `dir/summary.json`, creating `dir`.
     pub fn write(&self, dir: &Path) -> std::io::Result<()> {
         std::fs::create_dir_all(dir)?;
-        let json = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
-        std::fs::write(dir.join("summary.json"), json)
+        // Streamed: a long run's selections make the text large.
+        let mut out = std::io::BufWriter::new(std::fs::File::create(dir.join("summary.json"))?);
+        serde_json::to_writer_pretty(&mut out, self).map_err(std::io::Error::other)?;
+        std::io::Write::flush(&mut out)
     }
 }
 

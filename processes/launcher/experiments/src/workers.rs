@@ -4,6 +4,7 @@
 use acps_shared::{Environment, EnvironmentSpec, Serves};
 use acps_worker::{EnvironmentFactory, EnvironmentProvideError};
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 use std::path::Path;
 use std::process::Command;
 
@@ -21,11 +22,13 @@ impl EnvironmentFactory for ModelFactory {
     }
 
     fn environment(&mut self, spec: &EnvironmentSpec) -> Result<&mut dyn Environment, EnvironmentProvideError> {
-        if !self.cache.contains_key(spec) {
-            let environment = acps_models::environment::build(spec).map_err(EnvironmentProvideError::new)?;
-            self.cache.insert(*spec, environment);
-        }
-        Ok(self.cache.get_mut(spec).expect("inserted above").as_mut())
+        let environment = match self.cache.entry(*spec) {
+            Entry::Occupied(built) => built.into_mut(),
+            Entry::Vacant(slot) => {
+                slot.insert(acps_models::environment::build(spec).map_err(EnvironmentProvideError::new)?)
+            }
+        };
+        Ok(environment.as_mut())
     }
 }
 

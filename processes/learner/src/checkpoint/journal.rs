@@ -10,7 +10,7 @@
 //! |---|---|
 //! | 1 | kind: 0 episode, 1 update, 2 evaluation |
 //! | 4 | payload length (u32, little-endian) |
-//! | n | payload: the [`Episode`], [`UpdateRecord`] or [`Evaluation`] in bincode 2's standard encoding |
+//! | n | payload: the [`Episode`](crate::Episode), [`UpdateRecord`](crate::UpdateRecord) or [`Evaluation`](crate::Evaluation) in bincode 2's standard encoding |
 //!
 //! A [`JournalMark`] is the file's length, the FNV-1a 64 hash of all its bytes and the records
 //! of each kind up to that length. Resuming from a mark checks the header (another file, run or
@@ -19,11 +19,11 @@
 //! there. Every error names the file.
 
 use super::{CheckpointDecodeError, Stamp, check_kind, check_stamp};
-use crate::learner::{Episode, Evaluation, RecordCounts, Records, UpdateRecord};
+use crate::learner::{RecordCounts, Records};
 use acps_shared::{FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
 use std::fs::File;
-use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
+use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 /// The first eight bytes of every record file.
@@ -130,7 +130,7 @@ impl JournalWriter {
             .write(true)
             .open(path)
             .map_err(io(path))?;
-        read_prefix(path, &mut file, stamp, mark)?;
+        scan(path, &mut file, stamp, mark, |_, _, _| Ok(()))?;
         file.set_len(mark.len).map_err(io(path))?;
         file.seek(SeekFrom::End(0)).map_err(io(path))?;
         Ok(Self::at(path, file, mark.len, mark.hash, mark.records))
@@ -206,72 +206,89 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> JournalError + '_ {
     }
 }
 
-/// The first `mark.len` bytes of `file`, checked against `stamp` and `mark`.
-fn read_prefix(path: &Path, file: &mut File, stamp: Stamp, mark: &JournalMark) -> Result<Vec<u8>, JournalError> {
+/// Read the first `mark.len` bytes of `file` through a buffer, checking them against `stamp`
+/// and `mark` (header, length, hash), and hand every record frame to `frame` (its kind, payload
+/// and offset; an `Err` is a corrupted record) as it goes. Nothing `frame` made may be used
+/// unless this returns `Ok`: the hash is checked at the end.
+fn scan(
+    path: &Path,
+    file: &mut File,
+    stamp: Stamp,
+    mark: &JournalMark,
+    mut frame: impl FnMut(u8, &[u8], u64) -> Result<(), String>,
+) -> Result<(), JournalError> {
     let decode = |source| JournalError::Decode {
         path: path.to_path_buf(),
         source,
     };
-    let mut bytes = Vec::new();
-    Read::by_ref(file)
-        .take(mark.len)
-        .read_to_end(&mut bytes)
+    let len = file.metadata().map_err(io(path))?.len();
+    let mut reader = BufReader::with_capacity(1 << 16, Read::by_ref(file).take(mark.len));
+    let mut header = Vec::with_capacity(JOURNAL_HEADER_LEN);
+    Read::by_ref(&mut reader)
+        .take(JOURNAL_HEADER_LEN as u64)
+        .read_to_end(&mut header)
         .map_err(io(path))?;
-    check_kind(&bytes, JOURNAL_MAGIC, JOURNAL_VERSION, JOURNAL_HEADER_LEN).map_err(decode)?;
-    check_stamp(&bytes, stamp).map_err(decode)?;
-    if (bytes.len() as u64) < mark.len {
+    check_kind(&header, JOURNAL_MAGIC, JOURNAL_VERSION, JOURNAL_HEADER_LEN).map_err(decode)?;
+    check_stamp(&header, stamp).map_err(decode)?;
+    if len < mark.len {
         return Err(decode(CheckpointDecodeError::Truncated {
-            len: bytes.len() as u64,
+            len,
             expected: mark.len,
         }));
     }
-    if fnv1a(FNV_OFFSET, &bytes) != mark.hash {
-        return Err(decode(CheckpointDecodeError::Corrupt(format!(
+    let corrupt = |what: String| decode(CheckpointDecodeError::Corrupt(what));
+    let mut hash = fnv1a(FNV_OFFSET, &header);
+    let mut at = JOURNAL_HEADER_LEN as u64;
+    let mut payload = Vec::new();
+    while at < mark.len {
+        let mut head = [0; FRAME_LEN];
+        if mark.len - at < FRAME_LEN as u64 {
+            return Err(corrupt(format!("a record's header is cut at byte {at}")));
+        }
+        reader.read_exact(&mut head).map_err(io(path))?;
+        let size = u64::from(u32::from_le_bytes(head[1..].try_into().expect("4 bytes")));
+        if mark.len - at - (FRAME_LEN as u64) < size {
+            return Err(corrupt(format!("the record at byte {at} is cut")));
+        }
+        payload.resize(size as usize, 0);
+        reader.read_exact(&mut payload).map_err(io(path))?;
+        hash = fnv1a(fnv1a(hash, &head), &payload);
+        frame(head[0], &payload, at).map_err(|what| corrupt(format!("the record at byte {at}: {what}")))?;
+        at += FRAME_LEN as u64 + size;
+    }
+    if hash != mark.hash {
+        return Err(corrupt(format!(
             "its first {} bytes are not the ones the checkpoint recorded",
             mark.len
-        ))));
+        )));
     }
-    Ok(bytes)
+    Ok(())
 }
 
 /// The records in the record file at `path` up to `mark`, checked as
-/// [`JournalWriter::resume`] checks it.
+/// [`JournalWriter::resume`] checks it; read through a buffer, so only the records take memory.
 pub fn read(path: &Path, stamp: Stamp, mark: &JournalMark) -> Result<Records, JournalError> {
     let mut file = File::open(path).map_err(io(path))?;
-    let bytes = read_prefix(path, &mut file, stamp, mark)?;
-    let corrupt = |what: String| JournalError::Decode {
-        path: path.to_path_buf(),
-        source: CheckpointDecodeError::Corrupt(what),
-    };
     let mut records = Records::default();
-    let mut at = JOURNAL_HEADER_LEN;
-    while at < bytes.len() {
-        let frame = bytes
-            .get(at..at + FRAME_LEN)
-            .ok_or_else(|| corrupt(format!("a record's header is cut at byte {at}")))?;
-        let len = u32::from_le_bytes(frame[1..].try_into().expect("4 bytes")) as usize;
-        let payload = bytes
-            .get(at + FRAME_LEN..at + FRAME_LEN + len)
-            .ok_or_else(|| corrupt(format!("the record at byte {at} is cut")))?;
-        let undecodable = |e: bincode::error::DecodeError| corrupt(format!("the record at byte {at}: {e}"));
-        match frame[0] {
-            0 => records.episodes.push(decode::<Episode>(payload).map_err(undecodable)?),
-            1 => records
-                .updates
-                .push(decode::<UpdateRecord>(payload).map_err(undecodable)?),
-            2 => records
-                .evaluations
-                .push(decode::<Evaluation>(payload).map_err(undecodable)?),
-            kind => return Err(corrupt(format!("the record at byte {at} is of unknown kind {kind}"))),
+    scan(path, &mut file, stamp, mark, |kind, payload, _| {
+        let undecodable = |e: bincode::error::DecodeError| e.to_string();
+        match kind {
+            0 => records.episodes.push(decode(payload).map_err(undecodable)?),
+            1 => records.updates.push(decode(payload).map_err(undecodable)?),
+            2 => records.evaluations.push(decode(payload).map_err(undecodable)?),
+            kind => return Err(format!("unknown kind {kind}")),
         }
-        at += FRAME_LEN + len;
-    }
+        Ok(())
+    })?;
     if RecordCounts::of(&records) != mark.records {
-        return Err(corrupt(format!(
-            "it holds {:?}, the checkpoint recorded {:?}",
-            RecordCounts::of(&records),
-            mark.records
-        )));
+        return Err(JournalError::Decode {
+            path: path.to_path_buf(),
+            source: CheckpointDecodeError::Corrupt(format!(
+                "it holds {:?}, the checkpoint recorded {:?}",
+                RecordCounts::of(&records),
+                mark.records
+            )),
+        });
     }
     Ok(records)
 }

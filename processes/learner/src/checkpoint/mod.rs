@@ -1,7 +1,7 @@
 //! Checkpoint files: a learner's snapshot and its environment's state, so that a run can be
 //! resumed after it was stopped (even by `kill -9`) and end bit for bit as if it never was.
 //!
-//! # Format (version 6)
+//! # Format (version 7)
 //! A 48-byte header, all integers little-endian, then the payload:
 //!
 //! | offset | bytes | field |
@@ -37,7 +37,7 @@ use std::path::{Path, PathBuf};
 /// The first eight bytes of every checkpoint file.
 pub const MAGIC: [u8; 8] = *b"ACPSCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 48;
 
