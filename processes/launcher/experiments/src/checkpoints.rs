@@ -10,7 +10,7 @@
 //! where the checkpoint says it ended, and refuses files of another experiment, so the resumed
 //! run ends exactly as an uninterrupted one would.
 
-use acps_learner::checkpoint::journal::{self, JournalError, JournalMark, JournalWriter};
+use acps_learner::checkpoint::journal::{self, JournalError, JournalMark, JournalWriter, Record};
 use acps_learner::checkpoint::{
     self, Checkpoint, CheckpointApplyError, CheckpointReadError, CheckpointWriteError, Stamp,
 };
@@ -255,11 +255,24 @@ impl Writer {
         self.every > 0
     }
 
-    /// Every record of the finished job, read back from its record file.
+    /// Every record of the finished job, read back from its record file; of the evaluations'
+    /// outcomes, only the first's and the last's (where failures began, the final test
+    /// rollouts): a long run's would hold every test rollout of the run.
     pub fn finish(mut self, learner: &mut Learner) -> Result<Records, CheckpointsError> {
         self.journal.append(&learner.take_records())?;
         let mark = self.journal.flush()?;
-        Ok(journal::read(self.journal.path(), self.stamp, &mark)?)
+        let mut records = Records::default();
+        journal::read_each(self.journal.path(), self.stamp, &mark, |record| match record {
+            Record::Episode(episode) => records.episodes.push(episode),
+            Record::Update(update) => records.updates.push(update),
+            Record::Evaluation(evaluation) => {
+                if let [_, .., last] = records.evaluations.as_mut_slice() {
+                    last.outcomes = Vec::new();
+                }
+                records.evaluations.push(evaluation);
+            }
+        })?;
+        Ok(records)
     }
 }
 

@@ -129,9 +129,12 @@ impl Job {
             scores: evaluations.iter().map(|e| e.score).collect(),
             stats: learner.stats().clone(),
             optimal_score: self.optimal_score,
-            evaluation_rollouts: evaluations.iter().fold((0, 0), |(all, failed), e| {
-                (all + e.outcomes.len() as u64, failed + e.failed as u64)
-            }),
+            // Every evaluation rolls out every test context once (a record file's keeps the
+            // outcomes of its first and last evaluations only).
+            evaluation_rollouts: (
+                (evaluations.len() * learner.problem().test_contexts.len()) as u64,
+                evaluations.iter().map(|e| e.failed as u64).sum(),
+            ),
             final_outcomes: evaluations.last().map(|e| e.outcomes.clone()).unwrap_or_default(),
             episodes: records.episodes,
             updates: records.updates,

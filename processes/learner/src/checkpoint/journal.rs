@@ -19,7 +19,7 @@
 //! there. Every error names the file.
 
 use super::{CheckpointDecodeError, Stamp, check_kind, check_stamp};
-use crate::learner::{RecordCounts, Records};
+use crate::learner::{Episode, Evaluation, RecordCounts, Records, UpdateRecord};
 use acps_shared::{FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
 use std::fs::File;
@@ -268,29 +268,63 @@ fn scan(
 /// The records in the record file at `path` up to `mark`, checked as
 /// [`JournalWriter::resume`] checks it; read through a buffer, so only the records take memory.
 pub fn read(path: &Path, stamp: Stamp, mark: &JournalMark) -> Result<Records, JournalError> {
-    let mut file = File::open(path).map_err(io(path))?;
     let mut records = Records::default();
+    read_each(path, stamp, mark, |record| match record {
+        Record::Episode(episode) => records.episodes.push(episode),
+        Record::Update(update) => records.updates.push(update),
+        Record::Evaluation(evaluation) => records.evaluations.push(evaluation),
+    })?;
+    Ok(records)
+}
+
+/// One record of a record file.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Record {
+    /// A consumed training episode.
+    Episode(Episode),
+    /// A C-REPS update.
+    Update(UpdateRecord),
+    /// A complete evaluation.
+    Evaluation(Evaluation),
+}
+
+/// [`read`], handing each record to `each` as it is read (in the file's order) instead of
+/// collecting them, for a reader that keeps less of them. `each` must not be trusted with what
+/// it saw unless this returns `Ok`: the file's hash is checked at its end.
+pub fn read_each(
+    path: &Path,
+    stamp: Stamp,
+    mark: &JournalMark,
+    mut each: impl FnMut(Record),
+) -> Result<(), JournalError> {
+    let mut file = File::open(path).map_err(io(path))?;
+    let mut counts = RecordCounts::default();
     scan(path, &mut file, stamp, mark, |kind, payload, _| {
         let undecodable = |e: bincode::error::DecodeError| e.to_string();
-        match kind {
-            0 => records.episodes.push(decode(payload).map_err(undecodable)?),
-            1 => records.updates.push(decode(payload).map_err(undecodable)?),
-            2 => records.evaluations.push(decode(payload).map_err(undecodable)?),
+        let record = match kind {
+            0 => Record::Episode(decode(payload).map_err(undecodable)?),
+            1 => Record::Update(decode(payload).map_err(undecodable)?),
+            2 => Record::Evaluation(decode(payload).map_err(undecodable)?),
             kind => return Err(format!("unknown kind {kind}")),
+        };
+        match record {
+            Record::Episode(_) => counts.episodes += 1,
+            Record::Update(_) => counts.updates += 1,
+            Record::Evaluation(_) => counts.evaluations += 1,
         }
+        each(record);
         Ok(())
     })?;
-    if RecordCounts::of(&records) != mark.records {
+    if counts != mark.records {
         return Err(JournalError::Decode {
             path: path.to_path_buf(),
             source: CheckpointDecodeError::Corrupt(format!(
-                "it holds {:?}, the checkpoint recorded {:?}",
-                RecordCounts::of(&records),
+                "it holds {counts:?}, the checkpoint recorded {:?}",
                 mark.records
             )),
         });
     }
-    Ok(records)
+    Ok(())
 }
 
 fn decode<T: serde::de::DeserializeOwned>(payload: &[u8]) -> Result<T, bincode::error::DecodeError> {
