@@ -20,7 +20,7 @@ use acps_learner::selection::{
 };
 use acps_learner::{Learner, LearnerConfig, run_in_process};
 use acps_models::environment::TrivialEnvironment;
-use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
+use acps_shared::ContextSpace;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -296,32 +296,13 @@ fn self_paced(c: &mut Criterion) {
 /// A learner of `acps bench`'s trivial problem (one context, one parameter, no evaluation, an
 /// update every 1000 rollouts on a window of 1000) for 2000 episodes with P = `in_flight`.
 fn trivial_learner(in_flight: usize) -> Learner {
-    let environment = TrivialEnvironment::new();
-    let problem = Problem {
-        name: "trivial".into(),
-        training_contexts: vec![vec![0.0]],
-        test_contexts: Vec::new(),
-        space: ContextSpace::new_box(vec![-1.0], vec![1.0]).unwrap(),
-        theta0: vec![1.0],
-        score: ScoreAggregate::Mean,
-        metric: "none".into(),
-        environment: environment.spec(),
-    };
-    let creps = CRepsConfig {
-        epsilon: 1.0,
-        eta_min: DEFAULT_ETA_MIN,
-        ridge: 1e-4,
-        update_every: 1000,
-        memory: MemoryConfig::SlidingWindow { capacity: 1000 },
-        features: FeatureMap::Affine,
-        initial_sigma: 1.0,
-    };
+    let problem = TrivialEnvironment::new().problem(Vec::new());
     let config = LearnerConfig {
-        seed: 0,
         episodes: 2000,
         in_flight,
         eval_every: u64::MAX,
-        creps: Some(creps),
+        creps: Some(CRepsConfig::batches(1.0, 1000)),
+        ..Default::default()
     };
     let selector = Box::new(RoundRobin::all(problem.training_contexts.clone()).unwrap());
     Learner::new(config, problem, selector).unwrap()

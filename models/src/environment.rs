@@ -125,6 +125,21 @@ impl TrivialEnvironment {
             spec: EnvironmentSpec::new(TRIVIAL_ENVIRONMENT, [0; 3], &()).expect("a valid name"),
         }
     }
+
+    /// A problem for it, as the benchmarks pose it: one training context, 0 in [-1, 1], one
+    /// parameter starting at 1, and `test_contexts` (none: no evaluation costs).
+    pub fn problem(&self, test_contexts: Vec<Vec<f64>>) -> acps_shared::Problem {
+        acps_shared::Problem {
+            name: "trivial".into(),
+            training_contexts: vec![vec![0.0]],
+            test_contexts,
+            space: acps_shared::ContextSpace::new_box(vec![-1.0], vec![1.0]).expect("a valid box"),
+            theta0: vec![1.0],
+            score: acps_shared::ScoreAggregate::Mean,
+            metric: "none".into(),
+            environment: self.spec,
+        }
+    }
 }
 
 impl Default for TrivialEnvironment {

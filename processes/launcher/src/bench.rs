@@ -11,11 +11,11 @@ use acps_experiments::run_dir::DEFAULT_CHECKPOINT_EVERY;
 use acps_experiments::settings::ExperimentFile;
 use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress, Learners};
 use acps_learner::checkpoint::Stamp;
-use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
+use acps_learner::creps::CRepsConfig;
 use acps_learner::selection::RoundRobin;
 use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
 use acps_models::environment::TrivialEnvironment;
-use acps_shared::{ContextSpace, Environment, Problem, ScoreAggregate};
+use acps_shared::Environment;
 use acps_wire::ipc::RunName;
 use anyhow::Context;
 use rayon::prelude::*;
@@ -101,31 +101,13 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                 // One context, one parameter, no evaluation: the learner's cost stays small so
                 // that the fleet rows measure the transport.
                 let environment = TrivialEnvironment::new();
-                let problem = Problem {
-                    name: "trivial".into(),
-                    training_contexts: vec![vec![0.0]],
-                    test_contexts: Vec::new(),
-                    space: ContextSpace::new_box(vec![-1.0], vec![1.0]).expect("a valid box"),
-                    theta0: vec![1.0],
-                    score: ScoreAggregate::Mean,
-                    metric: "none".into(),
-                    environment: environment.spec(),
-                };
-                let creps = CRepsConfig {
-                    epsilon: 1.0,
-                    eta_min: DEFAULT_ETA_MIN,
-                    ridge: 1e-4,
-                    update_every: 1000,
-                    memory: MemoryConfig::SlidingWindow { capacity: 1000 },
-                    features: FeatureMap::Affine,
-                    initial_sigma: 1.0,
-                };
+                let problem = environment.problem(Vec::new());
                 let config = LearnerConfig {
                     seed: seed as u64,
                     episodes: episodes(60_000.0),
                     in_flight: IN_FLIGHT,
                     eval_every: u64::MAX,
-                    creps: Some(creps),
+                    creps: Some(CRepsConfig::batches(1.0, 1000)),
                 };
                 let selector = Box::new(RoundRobin::all(problem.training_contexts.clone())?);
                 Ok(Job {
@@ -422,16 +404,7 @@ pub fn long_run(scale: f64, mut report: impl FnMut(u64, u64)) -> anyhow::Result<
     let episodes = ((LONG_RUN_EPISODES * scale).round() as u64).max(1000);
     let dir = TempDir::new("long-run")?;
     let mut environment = TrivialEnvironment::new();
-    let problem = Problem {
-        name: "trivial".into(),
-        training_contexts: vec![vec![0.0]],
-        test_contexts: vec![vec![0.0]],
-        space: ContextSpace::new_box(vec![-1.0], vec![1.0])?,
-        theta0: vec![1.0],
-        score: ScoreAggregate::Mean,
-        metric: "none".into(),
-        environment: environment.spec(),
-    };
+    let problem = environment.problem(vec![vec![0.0]]);
     let config = LearnerConfig {
         episodes,
         ..Default::default()

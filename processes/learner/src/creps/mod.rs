@@ -145,6 +145,25 @@ impl Default for CRepsConfig {
 }
 
 impl CRepsConfig {
+    /// Updates on disjoint batches: an update every `batch` rollouts on exactly those rollouts
+    /// (BOLeRo's `n_samples_per_update` with an update per batch), with `epsilon` and the other
+    /// settings at their defaults.
+    ///
+    /// ```
+    /// use acps_learner::creps::{CRepsConfig, MemoryConfig};
+    ///
+    /// let config = CRepsConfig::batches(1.0, 1000);
+    /// assert_eq!((config.update_every, config.memory), (1000, MemoryConfig::SlidingWindow { capacity: 1000 }));
+    /// ```
+    pub fn batches(epsilon: f64, batch: usize) -> Self {
+        Self {
+            epsilon,
+            update_every: batch,
+            memory: MemoryConfig::SlidingWindow { capacity: batch },
+            ..Self::default()
+        }
+    }
+
     /// The paper's Sec. 5.1.2 (Fig. 4): epsilon 2, the last 50 rollouts, an update every 25,
     /// quadratic features, Sigma_0 = I.
     pub fn paper_function() -> Self {
