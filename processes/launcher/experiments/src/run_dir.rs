@@ -352,6 +352,7 @@ impl RunReport {
     /// The final line of experiment `name`.
     pub fn line(&self, name: &str) -> String {
         let relays = if self.relays { " and relays of other hosts" } else { "" };
+        let plural = if self.workers == 1 { "" } else { "s" };
         let unit = if self.mode == "fleet" { "worker" } else { "thread" };
         let resumed = if self.resumed {
             " (resumed: this process's part)"
@@ -359,7 +360,7 @@ impl RunReport {
             ""
         };
         let mut line = format!(
-            "{name} on {} {unit}s{relays}: {} episodes, {} rollouts{resumed} in {:.1} s ({:.0}/s, {:.0}/s per {unit})",
+            "{name} on {} {unit}{plural}{relays}: {} episodes, {} rollouts{resumed} in {:.1} s ({:.0}/s, {:.0}/s per {unit})",
             self.workers,
             self.episodes,
             self.rollouts,

@@ -341,7 +341,7 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
     let output = learner.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    // "grid on 1 workers: N outcomes, R re-issued, ...": the victim held tasks when it died.
+    // "grid on 1 worker: E episodes, N rollouts ..., R re-issued, ...": the victim held tasks when it died.
     assert!(reissued(&stdout) >= 1, "{stdout}");
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
