@@ -257,11 +257,6 @@ impl Records {
         self.updates.extend(later.updates);
         self.evaluations.extend(later.evaluations);
     }
-
-    /// True when it holds no record.
-    pub fn is_empty(&self) -> bool {
-        self.episodes.is_empty() && self.updates.is_empty() && self.evaluations.is_empty()
-    }
 }
 
 /// How many records of each kind a learner has handed over with [`Learner::take_records`].

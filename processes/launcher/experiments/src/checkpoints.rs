@@ -165,34 +165,30 @@ pub struct Writer {
 
 impl Writer {
     /// A writer for the job whose checkpoint is `path` and whose learner stands where it starts:
-    /// fresh (`resumed` is `None`; a new record file), or restored from a checkpoint that
-    /// recorded `resumed` (its record file is cut back to that mark). The record file is the
+    /// fresh (`resumed` is `None`; a new record file), or restored from a checkpoint whose
+    /// record file ended at `resumed` (the file is cut back to that mark). The record file is the
     /// checkpoint's path with the extension `records`.
     pub fn open(
         path: PathBuf,
         stamp: Stamp,
         every: u64,
         learner: &Learner,
-        resumed: Option<Option<JournalMark>>,
+        resumed: Option<JournalMark>,
     ) -> Result<Self, CheckpointsError> {
         let records = Checkpoints::records_file(&path);
         let journal = match resumed {
             None => JournalWriter::create(&records, stamp)?,
-            Some(mark) => {
-                let misfit = |reason: String| CheckpointsError::RecordMark {
-                    path: path.clone(),
-                    reason,
-                };
-                let mark = mark.ok_or_else(|| misfit("it records no record file".into()))?;
-                if mark.records != learner.records_taken() {
-                    return Err(misfit(format!(
+            Some(mark) if mark.records != learner.records_taken() => {
+                return Err(CheckpointsError::RecordMark {
+                    reason: format!(
                         "its record file mark counts {} but its learner took {}",
                         counts(mark.records),
                         counts(learner.records_taken())
-                    )));
-                }
-                JournalWriter::resume(&records, stamp, &mark)?
+                    ),
+                    path,
+                });
             }
+            Some(mark) => JournalWriter::resume(&records, stamp, &mark)?,
         };
         Ok(Self {
             path,
@@ -285,18 +281,21 @@ fn counts(records: RecordCounts) -> String {
 
 /// Continue `learner` and `environment` (none for a problem the user's workers simulate, whose
 /// checkpoints hold no environment state) from the checkpoint at `path`, if there is one.
-/// Returns where the checkpoint's record file ended if there was one (`Some(None)`: a
-/// checkpoint without a record file).
+/// Returns where the checkpoint's record file ended, if there was a checkpoint; one that
+/// records no record file (an experiment's always do) is refused.
 pub(crate) fn restore(
     path: &Path,
     stamp: Stamp,
     learner: &mut Learner,
     environment: Option<&mut Box<dyn Environment>>,
-) -> Result<Option<Option<JournalMark>>, CheckpointsError> {
+) -> Result<Option<JournalMark>, CheckpointsError> {
     let Some(mut saved) = checkpoint::read(path, stamp)? else {
         return Ok(None);
     };
-    let records = saved.records.take();
+    let records = saved.records.take().ok_or_else(|| CheckpointsError::RecordMark {
+        path: path.to_path_buf(),
+        reason: "it records no record file".into(),
+    })?;
     let applied = match environment {
         Some(environment) => saved.apply(learner, environment.as_mut()),
         None if !saved.environment.is_empty() => Err(EnvironmentRestoreError::Length {

@@ -162,3 +162,41 @@ fn record_files_cut_short_of_or_changed_before_their_mark_are_refused_by_name() 
     run(&dir, true).unwrap();
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn a_checkpoint_whose_record_mark_is_missing_or_does_not_fit_its_learner_is_refused_by_name() {
+    use acps_learner::checkpoint::{self, Stamp};
+    let dir = out("mark");
+    run(&dir, false).unwrap();
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../experiments/function-fig4.toml");
+    let planned = RunDir::plan(Some(&file), &settings(), Some(dir.clone())).unwrap();
+    // Jobs are method-major: random's two runs, then monotonic progress's.
+    let stamp = Stamp {
+        identity: planned.jobs[0].experiment.identity(),
+        job: 2,
+    };
+    let path = dir.join("checkpoints").join("monotonic-progress-run-0.ckpt");
+    let good = checkpoint::read(&path, stamp).unwrap().unwrap();
+    let mut counted_wrong = good.clone();
+    counted_wrong.records.as_mut().unwrap().records.episodes += 1;
+    let mut unmarked = good.clone();
+    unmarked.records = None;
+    for (bad, says) in [
+        (counted_wrong, "its record file mark counts 301 episodes"),
+        (unmarked, "it records no record file"),
+    ] {
+        checkpoint::write(&path, stamp, &bad).unwrap();
+        let error = run(&dir, true).unwrap_err();
+        let message = format!(
+            "{error}: {}",
+            error.run_error().map_or(String::new(), |e| e.to_string())
+        );
+        assert!(
+            message.contains(&path.display().to_string()) && message.contains(says),
+            "{message}"
+        );
+    }
+    checkpoint::write(&path, stamp, &good).unwrap();
+    run(&dir, true).unwrap();
+    let _ = std::fs::remove_dir_all(dir);
+}
