@@ -14,12 +14,15 @@
 //! - [`creps`]: contextual relative entropy policy search (paper Appendix A): the upper-level
 //!   policy, its sample memory and its update; and SPRL's joint update of the policy with a
 //!   context distribution ([`creps::joint`]).
+//! - [`ccmaes`]: contextual CMA-ES (Abdolmaleki et al. 2017), the second upper-level learner,
+//!   with the same policy class.
 //! - [`checkpoint`]: a learner's state in a file, to resume a run bit for bit.
 //!
 //! Every fallible operation has an error type of its own, named after the object and the
 //! operation (`LearnerCreateError`, `SelectorCreateError`, `CRepsUpdateError`, ...).
 #![warn(missing_docs)]
 
+pub mod ccmaes;
 pub mod checkpoint;
 pub mod creps;
 pub mod learner;

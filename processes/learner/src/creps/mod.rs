@@ -85,7 +85,7 @@ use nalgebra::{DMatrix, DVector};
 use rand::RngCore;
 use serde::{Deserialize, Serialize};
 
-use error::{check_at_least_one, check_finite, check_non_negative, check_positive};
+pub(crate) use error::{check_at_least_one, check_finite, check_non_negative, check_positive, check_range};
 use memory::{Memory, Sample};
 
 /// C-REPS settings. [`Default`] is BOLeRo's `CREPSOptimizer`; the paper's three settings are

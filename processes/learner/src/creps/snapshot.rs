@@ -41,14 +41,7 @@ pub struct RestoredPolicy {
 impl CReps {
     /// The current policy as data; `None` for a user-supplied feature map, which is code.
     pub fn snapshot(&self) -> Option<PolicySnapshot> {
-        let features = feature_map_name(&self.config().features)?;
-        let rows = |m: &DMatrix<f64>| (0..m.nrows()).map(|i| m.row(i).iter().copied().collect()).collect();
-        Some(PolicySnapshot {
-            features: features.to_string(),
-            context_dim: self.context_dim(),
-            weights: rows(self.policy().weights()),
-            covariance: rows(self.policy().covariance()),
-        })
+        PolicySnapshot::of(&self.config().features, self.context_dim(), self.policy())
     }
 }
 
@@ -62,6 +55,19 @@ fn feature_map_name(features: &FeatureMap) -> Option<&'static str> {
 }
 
 impl PolicySnapshot {
+    /// `policy` on `features` of `context_dim`-dimensional contexts as data; `None` for a
+    /// user-supplied feature map, which is code.
+    pub(crate) fn of(features: &FeatureMap, context_dim: usize, policy: &LinearGaussianPolicy) -> Option<Self> {
+        let features = feature_map_name(features)?;
+        let rows = |m: &DMatrix<f64>| (0..m.nrows()).map(|i| m.row(i).iter().copied().collect()).collect();
+        Some(Self {
+            features: features.to_string(),
+            context_dim,
+            weights: rows(policy.weights()),
+            covariance: rows(policy.covariance()),
+        })
+    }
+
     /// The policy of `n_theta` parameters this snapshot describes, after checking every shape
     /// and value: a known feature map valid for `context_dim`, W of as many rows as features and
     /// `n_theta` columns, Sigma `n_theta` x `n_theta`, finite, symmetric and positive

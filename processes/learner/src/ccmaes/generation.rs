@@ -1,0 +1,236 @@
+//! One C-CMA-ES generation: from the rollouts of the current policy to the next step size,
+//! shape, paths and policy.
+
+use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
+
+use super::{CCmaesReport, Strategy};
+use crate::creps::{LinearGaussianPolicy, PolicyCreateError, Rejection};
+
+/// The step size, the covariance's shape and the two evolution paths, after `count`
+/// generations.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Generation {
+    pub(super) sigma: f64,
+    pub(super) shape: DMatrix<f64>,
+    pub(super) p_sigma: DVector<f64>,
+    pub(super) p_c: DVector<f64>,
+    pub(super) count: u64,
+}
+
+/// A generation's rollouts, one row each: policy features, baseline features, parameters and
+/// returns, all finite.
+pub(super) struct Data<'a> {
+    pub(super) phi: &'a DMatrix<f64>,
+    pub(super) psi: &'a DMatrix<f64>,
+    pub(super) thetas: &'a DMatrix<f64>,
+    pub(super) returns: &'a [f64],
+}
+
+/// The largest change of `ln sigma` in one generation. The first generations' regression can
+/// move the mean by many sigma (it fits the context coefficients from scratch), and an uncapped
+/// path would then multiply sigma by e^that.
+const MAX_LOG_STEP: f64 = 1.0;
+
+impl Generation {
+    /// Generation 0: `sigma_0`, `C = I`, both paths 0.
+    pub(super) fn start(sigma: f64, n_theta: usize) -> Self {
+        Self {
+            sigma,
+            shape: DMatrix::identity(n_theta, n_theta),
+            p_sigma: DVector::zeros(n_theta),
+            p_c: DVector::zeros(n_theta),
+            count: 0,
+        }
+    }
+
+    /// The policy `N(W^T phi, sigma^2 C)` with mean coefficients `weights`.
+    pub(super) fn policy(&self, weights: DMatrix<f64>) -> Result<LinearGaussianPolicy, PolicyCreateError> {
+        LinearGaussianPolicy::new(weights, &self.shape * (self.sigma * self.sigma))
+    }
+
+    /// The next generation and its policy from the rollouts `data` of `policy` (this
+    /// generation's), or why the update is rejected.
+    pub(super) fn next(
+        &self,
+        strategy: &Strategy,
+        ridge: f64,
+        policy: &LinearGaussianPolicy,
+        data: &Data,
+    ) -> Result<(Self, LinearGaussianPolicy, CCmaesReport), Rejection> {
+        let n = data.returns.len();
+        let weights = rank_weights(&advantages(data.psi, data.returns, ridge), &strategy.weights);
+        let old_w = policy.weights();
+        let new_w = ridge_solve(data.phi, &weights, data.thetas, ridge).ok_or(Rejection::SingularRegression)?;
+        if !new_w.iter().all(|w| w.is_finite()) {
+            return Err(Rejection::MeanNotFinite);
+        }
+        let mean_phi = data.phi.row_mean().transpose();
+        let shift = (&new_w - old_w).tr_mul(&mean_phi) / self.sigma;
+
+        let eigen = SymmetricEigen::new(self.shape.clone());
+        if eigen.eigenvalues.min() <= 0.0 {
+            return Err(Rejection::CovarianceNotPositiveSemiDefinite);
+        }
+        let inverse_roots = eigen.eigenvalues.map(|d| 1.0 / d.sqrt());
+        let inverse_sqrt =
+            &eigen.eigenvectors * DMatrix::from_diagonal(&inverse_roots) * eigen.eigenvectors.transpose();
+        let whitened_shift = inverse_sqrt * &shift;
+
+        let (c_sigma, c_c) = (strategy.c_sigma, strategy.c_c);
+        let count = self.count + 1;
+        let p_sigma =
+            &self.p_sigma * (1.0 - c_sigma) + &whitened_shift * (c_sigma * (2.0 - c_sigma) * strategy.mu_eff).sqrt();
+        let unbiased = p_sigma.norm() / (1.0 - (1.0 - c_sigma).powf(2.0 * count as f64)).sqrt();
+        let h_sigma = unbiased < strategy.h_sigma_threshold * strategy.chi_n;
+        let mut p_c = &self.p_c * (1.0 - c_c);
+        if h_sigma {
+            p_c += &shift * (c_c * (2.0 - c_c) * strategy.mu_eff).sqrt();
+        }
+
+        let residuals = (data.thetas - data.phi * old_w) / self.sigma;
+        let mut weighted = residuals.clone();
+        for (i, w) in weights.iter().enumerate() {
+            weighted.row_mut(i).scale_mut(*w);
+        }
+        let rank_mu = residuals.tr_mul(&weighted);
+        let lost = if h_sigma { 0.0 } else { c_c * (2.0 - c_c) };
+        let (c_1, c_mu) = (strategy.c_1, strategy.c_mu);
+        let shape = &self.shape * (1.0 - c_1 - c_mu + c_1 * lost) + &p_c * p_c.transpose() * c_1 + rank_mu * c_mu;
+        let shape = (&shape + shape.transpose()) * 0.5;
+        if !shape.iter().all(|c| c.is_finite()) {
+            return Err(Rejection::CovarianceNotFinite);
+        }
+        let log_step = (c_sigma / strategy.d_sigma) * (p_sigma.norm() / strategy.chi_n - 1.0);
+        let sigma = self.sigma * log_step.min(MAX_LOG_STEP).exp();
+        let next = Self {
+            sigma,
+            shape,
+            p_sigma,
+            p_c,
+            count,
+        };
+        let policy = next
+            .policy(new_w)
+            .map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)?;
+        let mut report = next.report(&policy, n, None);
+        report.h_sigma = h_sigma;
+        report.mean_shift = whitened_shift.norm();
+        Ok((next, policy, report))
+    }
+
+    /// The report of an update that leaves this generation with `policy` (mean shift 0 and
+    /// h_sigma false until the caller says otherwise).
+    pub(super) fn report(
+        &self,
+        policy: &LinearGaussianPolicy,
+        samples: usize,
+        rejected: Option<Rejection>,
+    ) -> CCmaesReport {
+        // The sampling factor's columns are the eigenvectors of Sigma scaled by the roots of
+        // their eigenvalues, and C's eigenvalues are Sigma's over sigma^2.
+        let eigenvalues: Vec<f64> = policy
+            .sampling_factor()
+            .column_iter()
+            .map(|c| c.norm_squared())
+            .collect();
+        let largest = eigenvalues.iter().copied().fold(0.0, f64::max);
+        let smallest = eigenvalues.iter().copied().fold(f64::INFINITY, f64::min);
+        CCmaesReport {
+            samples,
+            sigma: self.sigma,
+            p_sigma: self.p_sigma.norm() / expected_norm(self.p_sigma.len()),
+            p_c: self.p_c.norm(),
+            h_sigma: false,
+            mean_shift: 0.0,
+            condition: largest / smallest,
+            logdet_sigma: policy.log_det_covariance(),
+            trace_sigma: policy.covariance().trace(),
+            rejected,
+        }
+    }
+}
+
+/// `E ||N(0, I_n)||`, Hansen's approximation.
+pub(super) fn expected_norm(n: usize) -> f64 {
+    let k = n as f64;
+    k.sqrt() * (1.0 - 1.0 / (4.0 * k) + 1.0 / (21.0 * k * k))
+}
+
+/// The returns, standardised, minus their ridge fit on the baseline features `psi`: what is
+/// left of each return after what its context makes of it. All 0 when the returns are equal.
+fn advantages(psi: &DMatrix<f64>, returns: &[f64], ridge: f64) -> Vec<f64> {
+    let n = returns.len() as f64;
+    let mean = returns.iter().sum::<f64>() / n;
+    let spread = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
+    if spread == 0.0 {
+        return vec![0.0; returns.len()];
+    }
+    let standardised = DMatrix::from_iterator(returns.len(), 1, returns.iter().map(|r| (r - mean) / spread));
+    let ones = vec![1.0; returns.len()];
+    match ridge_solve(psi, &ones, &standardised, ridge) {
+        Some(beta) => (&standardised - psi * beta).iter().copied().collect(),
+        // Features that are all 0: no baseline to take.
+        None => standardised.iter().copied().collect(),
+    }
+}
+
+/// The weight of each rollout: `ranked[k]` for the rollout of the (k+1)-th largest advantage,
+/// 0 beyond them; equal advantages rank in rollout order.
+fn rank_weights(advantages: &[f64], ranked: &[f64]) -> Vec<f64> {
+    let mut order: Vec<usize> = (0..advantages.len()).collect();
+    order.sort_by(|&a, &b| advantages[b].total_cmp(&advantages[a]).then(a.cmp(&b)));
+    let mut weights = vec![0.0; advantages.len()];
+    for (&i, &w) in order.iter().zip(ranked) {
+        weights[i] = w;
+    }
+    weights
+}
+
+/// `(X^T D X + r I)^-1 X^T D Y` with `D = diag(weights)` and `r = ridge` times the mean diagonal
+/// of `X^T D X`; `None` when that matrix is not positive definite.
+fn ridge_solve(x: &DMatrix<f64>, weights: &[f64], y: &DMatrix<f64>, ridge: f64) -> Option<DMatrix<f64>> {
+    let mut weighted = x.clone();
+    for (i, w) in weights.iter().enumerate() {
+        weighted.row_mut(i).scale_mut(*w);
+    }
+    let mut normal = weighted.tr_mul(x);
+    let r = ridge * normal.trace() / normal.nrows() as f64;
+    for i in 0..normal.nrows() {
+        normal[(i, i)] += r;
+    }
+    Some(Cholesky::new(normal)?.solve(&weighted.tr_mul(y)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn equal_advantages_rank_in_rollout_order_and_the_rest_get_nothing() {
+        let weights = rank_weights(&[1.0, 3.0, 1.0, 3.0, -2.0], &[0.5, 0.3, 0.2]);
+        assert_eq!(weights, vec![0.2, 0.5, 0.0, 0.3, 0.0]);
+    }
+
+    #[test]
+    fn the_baseline_takes_out_what_the_context_explains() {
+        // Returns = 10 s + an own part orthogonal to the features [s, 1]: the advantages are the
+        // own parts, in the standardised returns' units.
+        let contexts = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+        let own = [0.1, -0.2, 0.1, 0.1, -0.2, 0.1];
+        let psi = DMatrix::from_fn(6, 2, |i, j| if j == 0 { contexts[i] } else { 1.0 });
+        let returns: Vec<f64> = contexts.iter().zip(&own).map(|(s, o)| 10.0 * s + o).collect();
+        let advantages = advantages(&psi, &returns, 0.0);
+        let scale = advantages[0] / own[0];
+        assert!(scale > 0.0);
+        for (a, o) in advantages.iter().zip(&own) {
+            assert!((a - scale * o).abs() < 1e-9 * scale, "{advantages:?}");
+        }
+    }
+
+    #[test]
+    fn the_expected_norm_is_hansens_approximation() {
+        // E||N(0, I_n)|| = sqrt(2) Gamma((n+1)/2) / Gamma(n/2): 1.25331 for n = 2, 4.41661 for 20.
+        assert!((expected_norm(2) - 1.25331).abs() < 1e-3);
+        assert!((expected_norm(20) - 4.41661).abs() < 1e-3);
+    }
+}
