@@ -1,7 +1,7 @@
 //! The ask/tell core: determinism, in-flight window, reordering, bad input.
 
 use acps_learner::creps::{CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
-use acps_learner::{Learner, LearnerConfig, LearnerTellError, Method, SelectorConfig};
+use acps_learner::{Learner, LearnerConfig, LearnerTellError, Method, SearchConfig, SelectorConfig};
 use acps_models::contextual_function::ContextualFunction;
 use acps_shared::{Environment, Outcome, TaskKind};
 use rand::SeedableRng;
@@ -25,7 +25,7 @@ fn function_learner(method: Method, seed: u64, in_flight: usize, episodes: u64) 
         episodes,
         in_flight,
         eval_every: 50,
-        creps: Some(creps),
+        search: Some(SearchConfig::CReps(creps)),
     };
     (Learner::new(config, problem, selector).unwrap(), function)
 }
@@ -201,7 +201,7 @@ fn bad_configs_are_refused_with_the_field_name() {
         episodes: 10,
         in_flight: 0,
         eval_every: 5,
-        creps: None,
+        search: None,
     };
     let error = Learner::new(config, problem.clone(), selector())
         .err()
@@ -213,13 +213,13 @@ fn bad_configs_are_refused_with_the_field_name() {
         episodes: 10,
         in_flight: 1,
         eval_every: 5,
-        creps: None,
+        search: None,
     };
     let error = Learner::new(config, problem.clone(), selector())
         .err()
         .unwrap()
         .to_string();
-    assert!(error.contains("no C-REPS configuration"), "{error}");
+    assert!(error.contains("no policy search"), "{error}");
 }
 
 #[test]
@@ -357,7 +357,9 @@ fn self_paced_moves_its_contexts_towards_high_returns_within_both_bounds() {
         acps_learner::run_in_process(&mut learner, &mut function).unwrap();
         assert_eq!(learner.updates().len(), 20);
         for record in learner.updates() {
-            let report = &record.report;
+            let acps_learner::SearchReport::CReps(report) = &record.report else {
+                panic!("self-paced runs C-REPS")
+            };
             let context = report
                 .context
                 .as_ref()
@@ -390,7 +392,7 @@ fn self_paced_needs_a_policy() {
     let problem = model.problem();
     let selector = SelectorConfig::from(Method::SelfPaced).build(&problem).unwrap();
     let config = LearnerConfig {
-        creps: None,
+        search: None,
         ..LearnerConfig::default()
     };
     let error = Learner::new(config, problem, selector).err().unwrap().to_string();

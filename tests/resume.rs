@@ -2,10 +2,11 @@
 //! point (before training, between tells, mid-window with P > 1 while tasks are out and outcomes
 //! wait in the reorder buffer, after the end) finishes bit for bit as the uninterrupted run.
 
+use acps_learner::ccmaes::CCmaesConfig;
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use acps_learner::selection::{AbsoluteProgressConfig, AlpGmmConfig, EmaRates, RetireConfig, SelfPacedConfig};
-use acps_learner::{BanditConfig, Learner, LearnerConfig, Method, SelectorConfig, run_in_process};
+use acps_learner::{BanditConfig, Learner, LearnerConfig, Method, SearchConfig, SelectorConfig, run_in_process};
 use acps_models::contextual_function::ContextualFunction;
 use acps_models::learning_model::{LearningModel, LearningModelConfig};
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
@@ -51,6 +52,12 @@ enum Setup {
         seed: u64,
         in_flight: usize,
         per_task: bool,
+    },
+    /// The contextual function as `Function`'s, learned by C-CMA-ES (generations of 20).
+    CCmaes {
+        method: Method,
+        seed: u64,
+        in_flight: usize,
     },
     /// The Section 4 model: no policy, and an environment that keeps state.
     Toy {
@@ -125,10 +132,35 @@ impl Setup {
                     episodes: 240,
                     in_flight,
                     eval_every: 40,
-                    creps: Some(creps),
+                    search: Some(SearchConfig::CReps(creps)),
                 };
                 let environment = Flaky(function);
                 (Learner::new(config, problem, selector).unwrap(), Box::new(environment))
+            }
+            Setup::CCmaes {
+                method,
+                seed,
+                in_flight,
+            } => {
+                let function = ContextualFunction::new(2, 6, seed).unwrap();
+                let problem = function.grid_problem().unwrap();
+                let selector = selector(method, false, false).build(&problem).unwrap();
+                let ccmaes = CCmaesConfig {
+                    population: Some(20),
+                    features: FeatureMap::Quadratic,
+                    ..CCmaesConfig::default()
+                };
+                let config = LearnerConfig {
+                    seed,
+                    episodes: 240,
+                    in_flight,
+                    eval_every: 40,
+                    search: Some(SearchConfig::CCmaes(ccmaes)),
+                };
+                (
+                    Learner::new(config, problem, selector).unwrap(),
+                    Box::new(Flaky(function)),
+                )
             }
             Setup::Toy {
                 method,
@@ -151,7 +183,7 @@ impl Setup {
                     episodes: 200,
                     in_flight,
                     eval_every: 10,
-                    creps: None,
+                    search: None,
                 };
                 (Learner::new(config, problem, selector).unwrap(), Box::new(model))
             }
@@ -161,7 +193,7 @@ impl Setup {
     /// Whether tasks may be out, or told out of order, when the checkpoint is taken: not with
     /// an environment whose rollouts change it.
     fn stateless(self) -> bool {
-        matches!(self, Setup::Function { .. })
+        matches!(self, Setup::Function { .. } | Setup::CCmaes { .. })
     }
 }
 
@@ -283,6 +315,31 @@ fn resumed_function_runs_are_bit_identical_for_every_selector() {
         in_flight: 3,
         per_task: true,
     });
+}
+
+#[test]
+fn resumed_c_cmaes_runs_are_bit_identical_for_every_selector_that_takes_it() {
+    for method in Method::ALL.into_iter().filter(|&m| m != Method::SelfPaced) {
+        for (seed, in_flight) in [(0, 1), (1, 4)] {
+            check(Setup::CCmaes {
+                method,
+                seed,
+                in_flight,
+            });
+        }
+    }
+    // Self-paced moves its contexts in C-REPS' joint dual, which C-CMA-ES does not have.
+    let function = ContextualFunction::new(2, 6, 0).unwrap();
+    let problem = function.grid_problem().unwrap();
+    let config = LearnerConfig {
+        search: Some(SearchConfig::CCmaes(CCmaesConfig::default())),
+        ..LearnerConfig::default()
+    };
+    let error = Learner::with_selector(config, problem, &selector(Method::SelfPaced, false, false))
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(error.contains("C-CMA-ES does not have"), "{error}");
 }
 
 #[test]

@@ -18,7 +18,7 @@ use acps_learner::selection::{
     AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, Choice, ContextSelector,
     DUcbConfig, FirstVisit, IntrinsicReward, RetireConfig, RoundRobin, SelfPaced, SelfPacedConfig,
 };
-use acps_learner::{Learner, LearnerConfig, run_in_process};
+use acps_learner::{Learner, LearnerConfig, SearchConfig, run_in_process};
 use acps_models::environment::TrivialEnvironment;
 use acps_shared::ContextSpace;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
@@ -301,7 +301,7 @@ fn trivial_learner(in_flight: usize) -> Learner {
         episodes: 2000,
         in_flight,
         eval_every: u64::MAX,
-        creps: Some(CRepsConfig::batches(1.0, 1000)),
+        search: Some(SearchConfig::CReps(CRepsConfig::batches(1.0, 1000))),
         ..Default::default()
     };
     let selector = Box::new(RoundRobin::all(problem.training_contexts.clone()).unwrap());

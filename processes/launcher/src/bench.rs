@@ -13,7 +13,7 @@ use acps_fleet::{Fleet, FleetError, FleetJob, FleetProgress, Learners};
 use acps_learner::checkpoint::Stamp;
 use acps_learner::creps::CRepsConfig;
 use acps_learner::selection::RoundRobin;
-use acps_learner::{Learner, LearnerConfig, Method, run_in_process};
+use acps_learner::{Learner, LearnerConfig, Method, SearchConfig, run_in_process};
 use acps_models::environment::TrivialEnvironment;
 use acps_shared::Environment;
 use acps_wire::ipc::RunName;
@@ -107,7 +107,7 @@ fn jobs(workload: Workload, scale: f64) -> anyhow::Result<Vec<Job>> {
                     episodes: episodes(60_000.0),
                     in_flight: IN_FLIGHT,
                     eval_every: u64::MAX,
-                    creps: Some(CRepsConfig::batches(1.0, 1000)),
+                    search: Some(SearchConfig::CReps(CRepsConfig::batches(1.0, 1000))),
                 };
                 let selector = Box::new(RoundRobin::all(problem.training_contexts.clone())?);
                 Ok(Job {

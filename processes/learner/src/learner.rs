@@ -19,12 +19,12 @@
 //! A failed outcome (simulation failure or a non-finite return) is retried once: the same task,
 //! same seed, is handed out again, so a transient failure (a crashed simulator) gets a second
 //! chance and a deterministic one fails again. A failed training rollout after its retry is
-//! counted, kept out of the C-REPS memory, and the selector observes the lowest return consumed
+//! counted, kept out of the policy search's memory, and the selector observes the lowest return consumed
 //! so far in the run (0 before any). A failed evaluation rollout is left out of that evaluation's aggregate and
 //! counted in [`Evaluation::failed`].
 //!
 //! # Records
-//! What a run produces (every consumed episode, every C-REPS update, every complete
+//! What a run produces (every consumed episode, every update of the policy search, every complete
 //! evaluation) accumulates in the learner until [`Learner::take_records`] takes it. A short run
 //! can leave it there and read it at the end; a long one takes it as it goes (the run
 //! directory's record files), so that the learner's memory and its snapshots stay the size of
@@ -39,7 +39,8 @@
 //! handed out.
 
 use crate::SelectorConfig;
-use crate::creps::{CReps, CRepsConfig, CRepsCreateError, CRepsRestoreError, CRepsState, Rejection, UpdateReport};
+use crate::creps::Rejection;
+use crate::search::{Search, SearchConfig, SearchCreateError, SearchReport, SearchRestoreError, SearchState};
 use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
 use acps_shared::{
     EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed, nearest,
@@ -51,7 +52,8 @@ use std::collections::VecDeque;
 
 /// How the learner runs, independent of the selection method.
 ///
-/// [`Default`] is a sequential run of 1000 episodes with [`CRepsConfig::default`]; set the
+/// [`Default`] is a sequential run of 1000 episodes with C-REPS at
+/// [`CRepsConfig::default`](crate::creps::CRepsConfig::default); set the
 /// fields that matter for the problem:
 ///
 /// ```
@@ -74,9 +76,9 @@ pub struct LearnerConfig {
     /// training episodes, >= 1 (default 50, as the paper's Sec. 5.1.2; each evaluation costs one
     /// rollout per test context).
     pub eval_every: u64,
-    /// The upper-level policy search (default [`CRepsConfig::default`]); `None` for problems
+    /// The upper-level policy search (default C-REPS at its defaults); `None` for problems
     /// without policy parameters (an empty theta0).
-    pub creps: Option<CRepsConfig>,
+    pub search: Option<SearchConfig>,
 }
 
 impl Default for LearnerConfig {
@@ -86,7 +88,7 @@ impl Default for LearnerConfig {
             episodes: 1000,
             in_flight: 1,
             eval_every: 50,
-            creps: Some(CRepsConfig::default()),
+            search: Some(SearchConfig::default()),
         }
     }
 }
@@ -116,18 +118,18 @@ pub enum LearnerCreateError {
         /// The context space's dimension.
         dim: usize,
     },
-    /// The problem has no policy parameters (`theta0` is empty), but the config has a C-REPS
-    /// configuration: set `creps` to `None`.
+    /// The problem has no policy parameters (`theta0` is empty), but the config has a policy
+    /// search: set `search` to `None`.
     #[error(
-        "problem '{problem}' has no policy parameters (theta0 is empty), so the learner config must have no C-REPS configuration"
+        "problem '{problem}' has no policy parameters (theta0 is empty), so the learner config must have no policy search"
     )]
-    UnusedCReps {
+    UnusedSearch {
         /// The problem's name.
         problem: String,
     },
-    /// The problem has policy parameters, but the config has no C-REPS configuration.
-    #[error("problem '{problem}' has {n_theta} policy parameters but the learner config has no C-REPS configuration")]
-    MissingCReps {
+    /// The problem has policy parameters, but the config has no policy search.
+    #[error("problem '{problem}' has {n_theta} policy parameters but the learner config has no policy search")]
+    MissingSearch {
         /// The problem's name.
         problem: String,
         /// The number of policy parameters.
@@ -142,9 +144,18 @@ pub enum LearnerCreateError {
         /// The problem's name.
         problem: String,
     },
-    /// C-REPS refuses its configuration for this problem.
+    /// The selector's context distribution moves with a C-REPS update (self-paced's joint
+    /// dual), but the learner is C-CMA-ES, which has no dual to share.
+    #[error(
+        "problem '{problem}': the self-paced selector moves its context distribution in C-REPS' joint dual, which C-CMA-ES does not have; use learner c-reps or another method"
+    )]
+    PacedWithoutCReps {
+        /// The problem's name.
+        problem: String,
+    },
+    /// The policy search refuses its configuration for this problem.
     #[error(transparent)]
-    CReps(#[from] CRepsCreateError),
+    Search(#[from] SearchCreateError),
     /// The selector cannot be built for this problem ([`Learner::with_selector`] only).
     #[error(transparent)]
     Selector(#[from] SelectorCreateError),
@@ -226,9 +237,9 @@ pub struct Episode {
 /// Counters of a run.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct LearnerStats {
-    /// C-REPS updates applied.
+    /// Policy updates applied.
     pub updates: u64,
-    /// C-REPS updates rejected (old policy kept).
+    /// Policy updates rejected (old policy kept).
     pub rejected_updates: u64,
     /// Failed training rollouts (after their retry).
     pub failed_episodes: u64,
@@ -244,7 +255,7 @@ pub struct LearnerStats {
 pub struct Records {
     /// Consumed training episodes.
     pub episodes: Vec<Episode>,
-    /// C-REPS updates, applied or rejected.
+    /// Policy updates, applied or rejected.
     pub updates: Vec<UpdateRecord>,
     /// Complete evaluations (an evaluation is taken once its last rollout is consumed).
     pub evaluations: Vec<Evaluation>,
@@ -264,7 +275,7 @@ impl Records {
 pub struct RecordCounts {
     /// Training episodes.
     pub episodes: u64,
-    /// C-REPS updates.
+    /// Policy updates.
     pub updates: u64,
     /// Evaluations.
     pub evaluations: u64,
@@ -287,13 +298,13 @@ impl RecordCounts {
     }
 }
 
-/// One C-REPS update of a run and what it did.
+/// One update of the policy search of a run and what it did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct UpdateRecord {
     /// Training episodes consumed when it ran: it used rollouts up to this one.
     pub episode: u64,
     /// What it did.
-    pub report: UpdateReport,
+    pub report: SearchReport,
 }
 
 /// Why [`Learner::restore`] refuses a snapshot: it does not belong to this learner. The learner
@@ -313,9 +324,9 @@ pub enum LearnerRestoreError {
     /// The selector refused its saved state.
     #[error(transparent)]
     Selector(#[from] SelectorRestoreError),
-    /// C-REPS refused its saved state.
+    /// The policy search refused its saved state.
     #[error(transparent)]
-    Policy(#[from] CRepsRestoreError),
+    Policy(#[from] SearchRestoreError),
     /// The snapshot contradicts itself.
     #[error("the checkpoint's learner state is inconsistent: {0}")]
     Inconsistent(String),
@@ -411,7 +422,7 @@ impl Fit {
 pub struct LearnerSnapshot {
     fit: Fit,
     selector: SelectorState,
-    policy: Option<CRepsState>,
+    policy: Option<SearchState>,
     run: RunState,
 }
 
@@ -538,7 +549,7 @@ impl LearnerSnapshot {
     }
 }
 
-/// The learner: context selection plus C-REPS behind an ask/tell interface.
+/// The learner: context selection plus a policy search (C-REPS or C-CMA-ES) behind an ask/tell interface.
 ///
 /// A problem of your own, the defaults, and a loop that performs each task the learner asks
 /// for (here a closure stands in for the simulator):
@@ -581,7 +592,7 @@ pub struct Learner {
     config: LearnerConfig,
     problem: Problem,
     selector: Box<dyn ContextSelector>,
-    policy: Option<CReps>,
+    policy: Option<Search>,
     run: RunState,
 }
 
@@ -627,24 +638,28 @@ impl Learner {
                 dim: problem.context_dim(),
             });
         }
-        let policy = match (&config.creps, problem.theta0.is_empty()) {
-            (Some(creps), false) => Some(CReps::new(
-                creps.clone(),
+        let policy = match (&config.search, problem.theta0.is_empty()) {
+            (Some(search), false) => Some(Search::new(
+                search,
                 problem.context_dim(),
                 &problem.theta0,
                 problem.training_contexts.len(),
             )?),
             (None, true) => None,
-            (Some(_), true) => return Err(LearnerCreateError::UnusedCReps { problem: name() }),
+            (Some(_), true) => return Err(LearnerCreateError::UnusedSearch { problem: name() }),
             (None, false) => {
-                return Err(LearnerCreateError::MissingCReps {
+                return Err(LearnerCreateError::MissingSearch {
                     problem: name(),
                     n_theta: problem.theta0.len(),
                 });
             }
         };
-        if policy.is_none() && selector.paced().is_some() {
-            return Err(LearnerCreateError::PacedWithoutPolicy { problem: name() });
+        if selector.paced().is_some() {
+            match policy {
+                None => return Err(LearnerCreateError::PacedWithoutPolicy { problem: name() }),
+                Some(Search::CCmaes(_)) => return Err(LearnerCreateError::PacedWithoutCReps { problem: name() }),
+                Some(Search::CReps(_)) => {}
+            }
         }
         let mut learner = Self {
             run: RunState::start(config.seed),
@@ -757,7 +772,7 @@ impl Learner {
         &self.run.episodes
     }
 
-    /// The C-REPS updates not yet taken with [`take_records`](Self::take_records), in order,
+    /// The policy updates not yet taken with [`take_records`](Self::take_records), in order,
     /// with their reports (all of them, if records are never taken).
     pub fn updates(&self) -> &[UpdateRecord] {
         &self.run.updates
@@ -827,7 +842,7 @@ impl Learner {
     }
 
     /// The upper-level policy search, if the problem has parameters.
-    pub fn policy(&self) -> Option<&CReps> {
+    pub fn policy(&self) -> Option<&Search> {
         self.policy.as_ref()
     }
 
@@ -836,7 +851,7 @@ impl Learner {
         self.run.pending.len()
     }
 
-    /// Learning rounds so far, the clock checkpoints are counted in: C-REPS updates run
+    /// Learning rounds so far, the clock checkpoints are counted in: policy updates run
     /// (applied or rejected), or, for a problem without policy parameters, evaluations started
     /// (the first one, before training, included).
     pub fn rounds(&self) -> u64 {
@@ -864,7 +879,7 @@ impl Learner {
         LearnerSnapshot {
             fit: Fit::of(self),
             selector: self.selector.save_state(),
-            policy: self.policy.as_ref().map(CReps::state),
+            policy: self.policy.as_ref().map(Search::state),
             run,
         }
     }
@@ -885,7 +900,7 @@ impl Learner {
             (None, None) => None,
             (_, saved) => {
                 return Err(LearnerRestoreError::Inconsistent(format!(
-                    "it {} a C-REPS state, this learner {} a policy",
+                    "it {} a policy search state, this learner {} a policy",
                     if saved.is_some() { "has" } else { "lacks" },
                     if saved.is_some() { "has no" } else { "has" }
                 )));
@@ -991,7 +1006,7 @@ impl Learner {
                     .map_or(outcome.reward, |low| low.min(outcome.reward)),
             );
             let report = self.policy.as_mut().and_then(|p| {
-                p.record_paced(
+                p.record(
                     bucket,
                     &task.context,
                     &task.theta,
@@ -1000,10 +1015,10 @@ impl Learner {
                 )
             });
             if let Some(report) = report {
-                match report.rejected {
+                match report.rejected() {
                     None => self.run.stats.updates += 1,
                     Some(reason) => {
-                        tracing::debug!(seed = self.config.seed, episode = self.run.train_consumed, %reason, "C-REPS update rejected; the old policy stays");
+                        tracing::debug!(seed = self.config.seed, episode = self.run.train_consumed, %reason, "policy update rejected; the old policy stays");
                         self.run.stats.rejected_updates += 1;
                         self.run.stats.last_rejection = Some(reason);
                     }

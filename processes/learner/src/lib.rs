@@ -14,6 +14,7 @@
 //! - [`creps`]: contextual relative entropy policy search (paper Appendix A): the upper-level
 //!   policy, its sample memory and its update; and SPRL's joint update of the policy with a
 //!   context distribution ([`creps::joint`]).
+//! - [`search`]: which of the two a learner runs ([`SearchConfig`]).
 //! - [`ccmaes`]: contextual CMA-ES (Abdolmaleki et al. 2017), the second upper-level learner,
 //!   with the same policy class.
 //! - [`checkpoint`]: a learner's state in a file, to resume a run bit for bit.
@@ -27,6 +28,7 @@ pub mod checkpoint;
 pub mod creps;
 pub mod learner;
 pub mod method;
+pub mod search;
 pub mod selection;
 
 pub use learner::{
@@ -34,3 +36,4 @@ pub use learner::{
     LearnerStats, LearnerTellError, LearningProgress, RecordCounts, Records, UpdateRecord, run_in_process,
 };
 pub use method::{BanditConfig, Baseline, Method, MethodParseError, SelectorConfig};
+pub use search::{Search, SearchConfig, SearchReport, SearchState};

@@ -212,6 +212,11 @@ pub(crate) fn describe(invalid: Invalid, file: Option<&LoadedFile>, cli: &Experi
             let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
             format!("{subject} applies only when methods lists {}", names.join(" or "))
         }
+        Problem::OtherLearner { only, chosen } => format!(
+            "{subject} is a setting of learner {} only, and the learner is {}",
+            only.name(),
+            chosen.name()
+        ),
     };
     ConfigError::Invalid { key: key.name, message }
 }

@@ -3,6 +3,7 @@
 //! and what can be wrong with its value; [`ConfigError`] is the message a user
 //! reads, naming the option or the file and line.
 
+use crate::settings::LearnerName;
 use acps_learner::Method;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -111,6 +112,8 @@ pub struct Key {
     pub applies: &'static [Kind],
     /// The methods it sets a parameter of (empty: every method).
     pub methods: &'static [Method],
+    /// The one learner it sets a parameter of (`None`: either).
+    pub learner: Option<LearnerName>,
 }
 
 impl Key {
@@ -146,6 +149,13 @@ pub(crate) enum Problem {
     Conflict(&'static str),
     /// The key sets a parameter of these methods, and `methods` lists none of them.
     NoMethod(&'static [Method]),
+    /// The key sets a parameter of learner `only`, and the experiment's learner is `chosen`.
+    OtherLearner {
+        /// The learner the key belongs to.
+        only: LearnerName,
+        /// The experiment's.
+        chosen: LearnerName,
+    },
 }
 
 /// `key`'s value, shown as `got`, is out of range.

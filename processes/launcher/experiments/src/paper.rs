@@ -4,14 +4,15 @@
 //! `settings` and explained in docs/CHOICES.md.
 
 use crate::experiment::{Experiment, Instance, InstanceFactory};
-use crate::settings::{DEFAULT_IN_FLIGHT, DEFAULT_RUNS, ExperimentFile, Memory};
+use crate::settings::{DEFAULT_IN_FLIGHT, DEFAULT_RUNS, ExperimentFile, LearnerName, Memory};
 use crate::summary::{RunResult, mean};
+use acps_learner::ccmaes::CCmaesConfig;
 use acps_learner::creps::{CRepsConfig, MemoryConfig};
 use acps_learner::selection::{
     AbsoluteProgressConfig, AlpGmmConfig, DUcbConfig, EmaRates, FirstVisit, RetireConfig, SaggRiacConfig,
     SelfPacedConfig,
 };
-use acps_learner::{BanditConfig, LearnerConfig, Method, SelectorConfig};
+use acps_learner::{BanditConfig, LearnerConfig, Method, SearchConfig, SelectorConfig};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::environment;
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
@@ -47,15 +48,25 @@ pub(crate) fn ducb(preset: DUcbConfig, s: &ExperimentFile) -> DUcbConfig {
     }
 }
 
-/// The learner of an experiment whose C-REPS is `creps`: the run's seed, episodes (else
-/// `episodes`), window and evaluation interval (else `eval_every`).
+/// The learner of an experiment whose C-REPS would be `creps`: the run's seed, episodes (else
+/// `episodes`), window and evaluation interval (else `eval_every`), and its policy search:
+/// `creps`, or with `learner = "c-cmaes"` C-CMA-ES with C-REPS' features and initial
+/// exploration.
 pub(crate) fn learner(s: &ExperimentFile, episodes: u64, eval_every: u64, creps: Option<CRepsConfig>) -> LearnerConfig {
     LearnerConfig {
         seed: s.seed.unwrap_or(0),
         episodes: s.episodes.unwrap_or(episodes),
         in_flight: s.in_flight.unwrap_or(DEFAULT_IN_FLIGHT),
         eval_every: s.eval_every.unwrap_or(eval_every),
-        creps,
+        search: creps.map(|creps| match s.learner.unwrap_or(LearnerName::CReps) {
+            LearnerName::CReps => SearchConfig::CReps(creps),
+            LearnerName::CCmaes => SearchConfig::CCmaes(CCmaesConfig {
+                population: s.population,
+                initial_sigma: creps.initial_sigma,
+                features: creps.features,
+                ..CCmaesConfig::default()
+            }),
+        }),
     }
 }
 
@@ -289,14 +300,18 @@ fn function_experiment(
         s,
     );
     let learner = learner(s, setting.episodes, setting.eval_every, Some(creps));
-    let settings = json!({
-        "n_s": n_s,
-        "n_theta": n_theta,
-        "creps": creps_settings(learner.creps.as_ref().expect("set above"), "quadratic", "0"),
-        "ducb": ducb,
-        "first_visit": first_visit(s),
-        "eval_every": learner.eval_every,
-    });
+    let settings = with_search(
+        json!({
+            "n_s": n_s,
+            "n_theta": n_theta,
+            "ducb": ducb,
+            "first_visit": first_visit(s),
+            "eval_every": learner.eval_every,
+        }),
+        &learner,
+        "quadratic",
+        "0",
+    );
     let methods = methods(s, defaults, |_| ducb.clone());
     let instance: InstanceFactory = Box::new(move |seed| {
         let function = ContextualFunction::new(n_s, n_theta, seed).expect("the experiment's function is valid");
@@ -353,18 +368,22 @@ fn throwing_creps(tasks: usize, s: &ExperimentFile) -> CRepsConfig {
 }
 
 fn throwing_settings(sim: Sim, learner: &LearnerConfig, ducb: &DUcbConfig, s: &ExperimentFile) -> serde_json::Value {
-    json!({
-        "sim": sim_name(sim),
-        "rapier": (sim == Sim::Rapier).then(RapierConfig::default),
-        "robot": Robot::pa10().name,
-        "theta": "offset on theta_0 = (g1, g1dot, g2dot), 21 values",
-        "theta0_landing": INITIAL_LANDING,
-        "speed_limits": SpeedLimits::Ignore,
-        "creps": creps_settings(learner.creps.as_ref().expect("the throws learn a policy"), "polar-quadratic", "theta_0 (offset 0)"),
-        "ducb": ducb,
-        "first_visit": first_visit(s),
-        "eval_every": learner.eval_every,
-    })
+    with_search(
+        json!({
+            "sim": sim_name(sim),
+            "rapier": (sim == Sim::Rapier).then(RapierConfig::default),
+            "robot": Robot::pa10().name,
+            "theta": "offset on theta_0 = (g1, g1dot, g2dot), 21 values",
+            "theta0_landing": INITIAL_LANDING,
+            "speed_limits": SpeedLimits::Ignore,
+            "ducb": ducb,
+            "first_visit": first_visit(s),
+            "eval_every": learner.eval_every,
+        }),
+        learner,
+        "polar-quadratic",
+        "theta_0 (offset 0)",
+    )
 }
 
 /// Section 5.2.2's D-UCB: gamma 0.99, B 10,000, xi 1e-9.
@@ -497,13 +516,34 @@ fn dartboard_detail(fields: &[Field], runs: &[RunResult]) -> serde_json::Map<Str
     detail
 }
 
-/// C-REPS settings for a summary (the feature map is named, as custom maps are not data).
-pub(crate) fn creps_settings(creps: &CRepsConfig, features: &str, initial_mean: &str) -> serde_json::Value {
-    json!({
-        "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
-        "update_every": creps.update_every, "memory": creps.memory, "features": features,
-        "initial_sigma": creps.initial_sigma, "initial_mean": initial_mean,
-    })
+/// `settings` with the policy search's under the key `creps` or `ccmaes` (the feature map is
+/// named, as custom maps are not data; a C-CMA-ES population of null is the original's).
+pub(crate) fn with_search(
+    mut settings: serde_json::Value,
+    learner: &LearnerConfig,
+    features: &str,
+    initial_mean: &str,
+) -> serde_json::Value {
+    let (key, value) = match learner.search.as_ref().expect("the experiment learns a policy") {
+        SearchConfig::CReps(creps) => (
+            "creps",
+            json!({
+                "epsilon": creps.epsilon, "eta_min": creps.eta_min, "ridge": creps.ridge,
+                "update_every": creps.update_every, "memory": creps.memory, "features": features,
+                "initial_sigma": creps.initial_sigma, "initial_mean": initial_mean,
+            }),
+        ),
+        SearchConfig::CCmaes(ccmaes) => (
+            "ccmaes",
+            json!({
+                "population": ccmaes.population, "ridge": ccmaes.ridge, "features": features,
+                "baseline": "quadratic", "rates": "the original's",
+                "initial_sigma": ccmaes.initial_sigma, "initial_mean": initial_mean,
+            }),
+        ),
+    };
+    settings[key] = value;
+    settings
 }
 
 fn median(sorted: &[f64]) -> f64 {

@@ -178,13 +178,17 @@ fn problem_experiment(checked: &CheckedProblem, s: &ExperimentFile) -> Experimen
     let episodes = s.episodes.unwrap_or(LearnerConfig::default().episodes);
     let learner = paper::learner(s, episodes, EVAL_EVERY.min(episodes), Some(creps));
     let features = serde_json::to_value(checked.features).expect("a unit variant serialises");
-    let settings = json!({
-        "problem": checked.resolved,
-        "creps": paper::creps_settings(learner.creps.as_ref().expect("set above"), features.as_str().unwrap_or_default(), "theta0"),
-        "ducb": ducb,
-        "first_visit": paper::first_visit(s),
-        "eval_every": learner.eval_every,
-    });
+    let settings = paper::with_search(
+        json!({
+            "problem": checked.resolved,
+            "ducb": ducb,
+            "first_visit": paper::first_visit(s),
+            "eval_every": learner.eval_every,
+        }),
+        &learner,
+        features.as_str().unwrap_or_default(),
+        "theta0",
+    );
     let methods = paper::methods(s, &PROBLEM_METHODS, |_| ducb.clone());
     let name = problem.name.clone();
     let instance: InstanceFactory = Box::new(move |_| Instance {

@@ -40,6 +40,7 @@ const fn problem_key(name: &'static str, accepted: &'static str) -> Key {
         why: "",
         applies: FILE,
         methods: &[],
+        learner: None,
     }
 }
 

@@ -18,6 +18,7 @@
 //! Empty CSV fields mean "no value" (an evaluation whose rollouts all failed).
 
 use crate::summary::{RunResult, Summary, UserProblem};
+use acps_learner::SearchReport;
 use acps_learner::creps::{PolicySnapshot, PolicySnapshotRestoreError, Rejection, RestoredPolicy};
 use acps_shared::Problem;
 use serde::{Deserialize, Serialize};
@@ -449,38 +450,61 @@ fn selections_csv(summary: &Summary, csv: &mut dyn Write) -> std::io::Result<()>
     Ok(())
 }
 
-/// The header of `updates.csv`.
+/// The header of `updates.csv` for C-REPS.
 pub const UPDATES_HEADER: &str = "method,run,update,episode,samples,eta,eta_at_bound,kl,epsilon,ess,dual,optimality,iterations,logdet_sigma,trace_sigma,rejected,alpha,context_eta,context_kl,context_ess,nu";
 
+/// The header of `updates.csv` for C-CMA-ES: its step size, the lengths of its evolution paths
+/// (`p_sigma` relative to its length under random selection), the stall test, the mean's shift
+/// in sigma and the condition number of C.
+pub const CCMAES_UPDATES_HEADER: &str = "method,run,update,episode,samples,sigma,p_sigma,p_c,h_sigma,mean_shift,condition,logdet_sigma,trace_sigma,rejected";
+
 fn updates_csv(summary: &Summary, csv: &mut dyn Write) -> std::io::Result<()> {
-    writeln!(csv, "{UPDATES_HEADER}")?;
+    let ccmaes = summary.settings.get("ccmaes").is_some();
+    writeln!(csv, "{}", if ccmaes { CCMAES_UPDATES_HEADER } else { UPDATES_HEADER })?;
     for (method, runs) in &summary.run_results {
         for (index, run) in runs.iter().enumerate() {
             for (update, record) in run.updates.iter().enumerate() {
-                let r = &record.report;
-                let c = r.context.as_ref();
-                writeln!(
-                    csv,
-                    "{method},{index},{update},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-                    record.episode,
-                    r.samples,
-                    r.eta,
-                    r.eta_at_bound,
-                    r.kl,
-                    r.epsilon,
-                    r.ess,
-                    r.dual,
-                    r.optimality,
-                    r.iterations,
-                    r.logdet_sigma,
-                    r.trace_sigma,
-                    r.rejected.map_or("", Rejection::name),
-                    field(c.map(|c| c.alpha)),
-                    field(c.map(|c| c.eta)),
-                    field(c.map(|c| c.kl)),
-                    field(c.map(|c| c.ess)),
-                    field(c.and_then(|c| c.nu)),
-                )?;
+                write!(csv, "{method},{index},{update},{}", record.episode)?;
+                match &record.report {
+                    SearchReport::CReps(r) => {
+                        let c = r.context.as_ref();
+                        writeln!(
+                            csv,
+                            ",{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                            r.samples,
+                            r.eta,
+                            r.eta_at_bound,
+                            r.kl,
+                            r.epsilon,
+                            r.ess,
+                            r.dual,
+                            r.optimality,
+                            r.iterations,
+                            r.logdet_sigma,
+                            r.trace_sigma,
+                            r.rejected.map_or("", Rejection::name),
+                            field(c.map(|c| c.alpha)),
+                            field(c.map(|c| c.eta)),
+                            field(c.map(|c| c.kl)),
+                            field(c.map(|c| c.ess)),
+                            field(c.and_then(|c| c.nu)),
+                        )?;
+                    }
+                    SearchReport::CCmaes(r) => writeln!(
+                        csv,
+                        ",{},{},{},{},{},{},{},{},{},{}",
+                        r.samples,
+                        r.sigma,
+                        r.p_sigma,
+                        r.p_c,
+                        r.h_sigma,
+                        r.mean_shift,
+                        r.condition,
+                        r.logdet_sigma,
+                        r.trace_sigma,
+                        r.rejected.map_or("", Rejection::name),
+                    )?,
+                }
             }
         }
     }

@@ -13,9 +13,10 @@ use crate::experiment::Experiment;
 pub use crate::keys::ExperimentName;
 use crate::keys::{ALL, ANY_METHOD, FILE, Invalid, Key, Kind, PAPER, Problem, WITH_CREPS, out_of_range};
 use crate::problem_file::{PROBLEM_KEYS, ProblemFile};
+use acps_learner::ccmaes::CCmaesConfig;
 use acps_learner::creps::{CRepsConfig, ETA_MIN_RANGE, MemoryConfig};
 use acps_learner::selection::{AlpGmmConfig, EmaRates, FirstVisit};
-use acps_learner::{Method, SelectorConfig};
+use acps_learner::{Method, SearchConfig, SelectorConfig};
 use acps_wire::ipc;
 use acps_wire::wire::MAX_THETA;
 use serde::{Deserialize, Serialize};
@@ -86,6 +87,34 @@ impl From<FirstVisit> for FirstVisitName {
     }
 }
 
+/// The upper-level learner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum LearnerName {
+    /// C-REPS, the paper's.
+    CReps,
+    /// Contextual CMA-ES (Abdolmaleki et al. 2017).
+    CCmaes,
+}
+
+impl LearnerName {
+    /// The learner `search` runs.
+    pub fn of(search: &SearchConfig) -> Self {
+        match search {
+            SearchConfig::CReps(_) => LearnerName::CReps,
+            SearchConfig::CCmaes(_) => LearnerName::CCmaes,
+        }
+    }
+
+    /// Its name in files and options.
+    pub fn name(self) -> &'static str {
+        match self {
+            LearnerName::CReps => "c-reps",
+            LearnerName::CCmaes => "c-cmaes",
+        }
+    }
+}
+
 /// C-REPS sample memory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -113,7 +142,21 @@ pub(crate) struct Resolving<'a> {
 
 impl Resolving<'_> {
     fn creps(&self) -> Option<&CRepsConfig> {
-        self.experiment.learner.creps.as_ref()
+        match self.experiment.learner.search.as_ref()? {
+            SearchConfig::CReps(c) => Some(c),
+            SearchConfig::CCmaes(_) => None,
+        }
+    }
+
+    /// The C-CMA-ES settings with the problem's n_theta and n_s.
+    fn ccmaes(&self) -> Option<(&CCmaesConfig, usize, usize)> {
+        match self.experiment.learner.search.as_ref()? {
+            SearchConfig::CCmaes(c) => {
+                let problem = (self.experiment.instance)(self.experiment.base_seed).problem;
+                Some((c, problem.theta0.len(), problem.context_dim()))
+            }
+            SearchConfig::CReps(_) => None,
+        }
     }
 
     /// The settings the summary records.
@@ -180,7 +223,7 @@ macro_rules! shown_by_serde {
         }
     )*};
 }
-shown_by_serde!(bool, ExperimentName, SimName, FirstVisitName, Memory);
+shown_by_serde!(bool, ExperimentName, SimName, FirstVisitName, Memory, LearnerName);
 
 /// The settings table: see the module's documentation. Every entry:
 ///
@@ -193,6 +236,7 @@ shown_by_serde!(bool, ExperimentName, SimName, FirstVisitName, Memory);
 ///     why: "why that range, for docs/CHOICES.md",
 ///     applies: where it applies (crate::keys),
 ///     methods: the methods that take it (crate::keys::ANY_METHOD: all),
+///     learner: the one learner that takes it (None: either),
 ///     check: |value, settings| whether the value is accepted,
 ///     resolved: |resolving| the value the built experiment runs with,
 /// },
@@ -207,6 +251,7 @@ macro_rules! settings {
             why: $why:literal,
             applies: $applies:expr,
             methods: $methods:expr,
+            learner: $learner:expr,
             check: $check:expr,
             resolved: $resolved:expr $(,)?
         }
@@ -241,6 +286,7 @@ macro_rules! settings {
                 why: $why,
                 applies: $applies,
                 methods: $methods,
+                learner: $learner,
             },
         )*];
 
@@ -290,6 +336,7 @@ settings! {
         why: "",
         applies: PAPER,
         methods: ANY_METHOD,
+        learner: None,
         check: |_, _| true,
         resolved: |r| r.paper,
     },
@@ -302,6 +349,7 @@ settings! {
         why: "the four panels of the paper's Fig. 2",
         applies: &[Kind::Paper(ExperimentName::Toy)],
         methods: ANY_METHOD,
+        learner: None,
         check: |panel, _| ('a'..='d').contains(panel),
         resolved: |r| r.panel,
     },
@@ -314,6 +362,7 @@ settings! {
         why: "the paper's Fig. 6 dimensions",
         applies: &[Kind::Paper(ExperimentName::Dims)],
         methods: ANY_METHOD,
+        learner: None,
         check: |n_s, _| (1..=4).contains(n_s),
         resolved: |r| r.n_s,
     },
@@ -325,6 +374,7 @@ settings! {
         why: "",
         applies: &[Kind::Paper(ExperimentName::Grid), Kind::Paper(ExperimentName::Dartboard)],
         methods: ANY_METHOD,
+        learner: None,
         check: |_, _| true,
         resolved: |r| matches!(r.paper, Some(ExperimentName::Grid | ExperimentName::Dartboard))
             .then(|| r.request.sim.unwrap_or(SimName::Analytic)),
@@ -337,6 +387,7 @@ settings! {
         why: "statistical repetitions (the paper: 20). The SEM falls as 1/sqrt(runs), so 1000 runs put it at 3% of the runs' spread, finer than a figure shows; every run of every method is a learner in memory at once",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |runs, _| (1..=MAX_RUNS).contains(runs),
         resolved: |r| Some(r.experiment.runs),
     },
@@ -348,6 +399,7 @@ settings! {
         why: "the paper's longest run is 50,000 (dartboard). Every episode stays in memory until the run is written (about 300 bytes per episode and run, so 10 million hold about 3 GB per run) and every method's run 0 is written to `selections.csv` (about 60 bytes per episode); an analytic throw run of 10 million episodes takes minutes",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |episodes, _| (1..=MAX_EPISODES).contains(episodes),
         resolved: |r| Some(r.experiment.learner.episodes),
     },
@@ -359,6 +411,7 @@ settings! {
         why: "run r uses seed + r, and the resolved `config.toml` must hold it: TOML's integers are signed 64-bit",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |seed, s| {
             let runs = s.runs.unwrap_or(DEFAULT_RUNS) as u64;
             seed.checked_add(runs.saturating_sub(1)).is_some_and(|last| last <= TOML_MAX)
@@ -374,6 +427,7 @@ settings! {
         why: "what a full fleet holds: 128 workers x 128 tasks",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |in_flight, _| (1..=MAX_IN_FLIGHT).contains(in_flight),
         resolved: |r| Some(r.experiment.learner.in_flight),
     },
@@ -386,6 +440,7 @@ settings! {
         why: "",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |methods, _| {
             !methods.is_empty() && methods.iter().enumerate().all(|(i, m)| !methods[..i].contains(m))
         },
@@ -400,6 +455,7 @@ settings! {
         why: "above the largest n_s (A must have rank n_s), at most the 64 parameters a task carries",
         applies: &[Kind::Paper(ExperimentName::Function), Kind::Paper(ExperimentName::Dims)],
         methods: ANY_METHOD,
+        learner: None,
         check: |n_theta, _| (5..=MAX_THETA).contains(n_theta),
         resolved: |r| r.recorded()["n_theta"].as_u64().map(|n| n as usize),
     },
@@ -411,12 +467,39 @@ settings! {
         why: "",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |_, _| true,
         resolved: |r| {
             let rule: FirstVisit = serde_json::from_value(r.recorded()["first_visit"].clone())
                 .expect("every experiment records its first-visit rule");
             Some(rule.into())
         },
+    },
+    /// Not toy: the upper-level policy search: C-REPS (the paper's) or contextual CMA-ES
+    /// (Abdolmaleki et al. 2017).
+    learner: LearnerName {
+        arg: (long, value_enum),
+        default: "c-reps",
+        accepted: "c-reps or c-cmaes",
+        why: "",
+        applies: WITH_CREPS,
+        methods: ANY_METHOD,
+        learner: None,
+        check: |_, _| true,
+        resolved: |r| r.experiment.learner.search.as_ref().map(LearnerName::of),
+    },
+    /// Not toy, learner c-cmaes: rollouts per generation (lambda); the best half of each
+    /// weighs in its update.
+    population: usize {
+        arg: (long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("population")),
+        default: "the original's 4 + floor(3 ln(n_theta + n_s)) (1 + 2 n_s)",
+        accepted: "an integer in 2..=100000 (rollouts per C-CMA-ES generation, and at least what its regressions need: 2 n_phi, and more than the baseline's features)",
+        why: "the mean's regression weighs the best half of a generation and needs as many rollouts as it has features; the upper bound is C-REPS' memory's, for the same reason (an update that waits longer learns from a policy long gone)",
+        applies: WITH_CREPS,
+        methods: ANY_METHOD,
+        learner: Some(LearnerName::CCmaes),
+        check: |n, _| (2..=MAX_SAMPLES).contains(n),
+        resolved: |r| r.ccmaes().map(|(c, n_theta, n_s)| c.population(n_theta, n_s)),
     },
     /// Not toy: C-REPS sample memory.
     memory: Memory {
@@ -426,6 +509,7 @@ settings! {
         why: "",
         applies: WITH_CREPS,
         methods: ANY_METHOD,
+        learner: Some(LearnerName::CReps),
         check: |_, _| true,
         resolved: |r| r.creps().map(|c| match c.memory {
             MemoryConfig::SlidingWindow { .. } => Memory::Window,
@@ -442,6 +526,7 @@ settings! {
         why: "a weighting of one rollout is no weighting; the dual's cost grows with N (about 0.1 ms per 300 samples at the PA-10's scale) and a memory far larger than the rollouts between updates learns from policies long gone. With best-per-task, N below K keeps the best one per context; the resolved file says N/K x K",
         applies: WITH_CREPS,
         methods: ANY_METHOD,
+        learner: Some(LearnerName::CReps),
         check: |n, _| (2..=MAX_SAMPLES).contains(n),
         resolved: |r| r.memory_size(),
     },
@@ -453,6 +538,7 @@ settings! {
         why: "1 updates after every rollout (the sequential algorithm at its finest); an update that waits beyond 100,000 rollouts learns nothing in any run acps holds in memory",
         applies: WITH_CREPS,
         methods: ANY_METHOD,
+        learner: Some(LearnerName::CReps),
         check: |n, _| (1..=MAX_SAMPLES).contains(n),
         resolved: |r| r.creps().map(|c| c.update_every),
     },
@@ -464,6 +550,7 @@ settings! {
         why: "a variance in the parameters' units: standard deviations 1e-6 ..= 1e6, twelve orders of magnitude around the paper's 0.14 and 1. The C-REPS update is invariant to the returns' units but not to theta's: beyond, rescale the parameters",
         applies: WITH_CREPS,
         methods: ANY_METHOD,
+        learner: None,
         check: |x, _| (1e-12..=1e12).contains(x),
         resolved: |r| r.creps().map(|c| c.initial_sigma),
     },
@@ -475,6 +562,7 @@ settings! {
         why: "the weights' KL from uniform is at most epsilon, and for small epsilon a weighted mean then moves at most about sqrt(2 epsilon) standard deviations of the samples per update: at 1e-4 that is 0.014, so a 10,000-episode run with an update every 25 rollouts moves its policy at most about 6 standard deviations; below, it barely learns. No weighting of N samples is further than ln N from uniform, and acps' memories hold 50 to 400 samples (ln 400 = 6.0): above, the bound does not bind and the update takes the best samples (greedy); 10 keeps every binding value",
         applies: WITH_CREPS,
         methods: ANY_METHOD,
+        learner: Some(LearnerName::CReps),
         check: |x, _| (1e-4..=10.0).contains(x),
         resolved: |r| r.creps().map(|c| c.epsilon),
     },
@@ -486,6 +574,7 @@ settings! {
         why: "0 is plain weighted least squares, singular when fewer samples than features carry weight; the weights sum to 1, so for features of order 1 the Gram matrix is of order 1, and a ridge of 1e6 already holds the policy's mean at zero",
         applies: WITH_CREPS,
         methods: ANY_METHOD,
+        learner: Some(LearnerName::CReps),
         check: |x, _| (0.0..=1e6).contains(x),
         resolved: |r| r.creps().map(|c| c.ridge),
     },
@@ -498,6 +587,7 @@ settings! {
         why: "below 1e-8 the log-weights carry less than 7 significant digits; above 1 the floor overrides the KL bound for any epsilon above about 0.5 (the paper suggests 1e-6..1e-4 in reward units)",
         applies: WITH_CREPS,
         methods: ANY_METHOD,
+        learner: Some(LearnerName::CReps),
         check: |x, _| (ETA_MIN_RANGE.0..=ETA_MIN_RANGE.1).contains(x),
         resolved: |r| r.creps().map(|c| c.eta_min),
     },
@@ -509,6 +599,7 @@ settings! {
         why: "D-UCB's bonus is 2 B sqrt(xi ln n / N_i) ([DUCB-PARAMETERS.md](DUCB-PARAMETERS.md)). 0 is no bonus (greedy on the discounted means), the paper uses 1e-8 and 1e-9, the library 1e-2; at 1e6 the bonus is 2000 B sqrt(ln n / N_i), far beyond the spread of the means (intrinsic rewards lie within B), so D-UCB already chooses by counts alone",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |x, _| (0.0..=1e6).contains(x),
         resolved: |r| r.recorded()["ducb"]["xi"].as_f64(),
     },
@@ -520,6 +611,7 @@ settings! {
         why: "B should bound the intrinsic rewards, which are in the returns' units (DUCB-PARAMETERS.md says how to choose it); the range spans twelve orders of magnitude either side of 1, like initial_sigma's",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |x, _| (1e-12..=1e12).contains(x),
         resolved: |r| {
             let ducb = &r.recorded()["ducb"];
@@ -538,6 +630,7 @@ settings! {
         why: "a discount: 1 is plain UCB, and a reward's weight halves after ln 0.5 / ln gamma choices (69 at 0.99, 14 at 0.95); 0 would forget everything at once",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |x, _| *x > 0.0 && *x <= 1.0,
         resolved: |r| r.recorded()["ducb"]["gamma"].as_f64(),
     },
@@ -550,6 +643,7 @@ settings! {
         why: "every evaluation runs every test context once and is kept in memory: 1 evaluates after every episode, and no run is longer than 10 million episodes",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |n, _| (1..=MAX_EPISODES).contains(n),
         resolved: |r| Some(r.experiment.learner.eval_every),
     },
@@ -563,6 +657,7 @@ settings! {
         why: "",
         applies: ALL,
         methods: ANY_METHOD,
+        learner: None,
         check: |_, _| true,
         resolved: |r| Some(r.recorded()["retire"].is_object()),
     },
@@ -574,6 +669,7 @@ settings! {
         why: "a probability: 0 is progress alone, 1 uniform alone",
         applies: ALL,
         methods: &[Method::AbsoluteProgress, Method::AlpGmm],
+        learner: None,
         check: |x, _| (0.0..=1.0).contains(x),
         resolved: |r| {
             let recorded = r.recorded();
@@ -590,6 +686,7 @@ settings! {
         why: "the rate of a moving average: 1 is the last return itself, 0 never moves; the slow one must be slower, or progress is 0",
         applies: ALL,
         methods: &[Method::AbsoluteProgress],
+        learner: None,
         check: |fast, s| *fast > s.ema_slow.unwrap_or(EmaRates::default().slow) && *fast <= 1.0,
         resolved: |r| r.recorded()["absolute_progress"]["rates"]["fast"].as_f64(),
     },
@@ -601,6 +698,7 @@ settings! {
         why: "as ema_fast's, and below it",
         applies: ALL,
         methods: &[Method::AbsoluteProgress],
+        learner: None,
         check: |slow, s| *slow > 0.0 && *slow < s.ema_fast.unwrap_or(EmaRates::default().fast) && *slow < 1.0,
         resolved: |r| r.recorded()["absolute_progress"]["rates"]["slow"].as_f64(),
     },
@@ -613,6 +711,7 @@ settings! {
         why: "at least 10 points per component of the largest mixture, so each covariance (up to 9 x 9 for 8 context dimensions and the ALP) rests on enough points; a fit's cost grows with its points (3.2 ms for 250), so 100,000 already takes seconds per fit",
         applies: ALL,
         methods: &[Method::AlpGmm],
+        learner: None,
         check: |fit_rate, s| {
             let components = s.max_components.unwrap_or(AlpGmmConfig::default().max_components);
             (AlpGmmConfig::POINTS_PER_COMPONENT * components..=AlpGmmConfig::MAX_FIT_RATE).contains(fit_rate)
@@ -627,6 +726,7 @@ settings! {
         why: "the original fits 2 ..= 10; AIC seldom wants more, and every k is one more EM per fit",
         applies: ALL,
         methods: &[Method::AlpGmm],
+        learner: None,
         check: |n, _| AlpGmmConfig::MAX_COMPONENTS.contains(n),
         resolved: |r| r.recorded()["alp_gmm"]["max_components"].as_u64().map(|n| n as usize),
     },
@@ -639,6 +739,7 @@ settings! {
         why: "",
         applies: ALL,
         methods: &[Method::AlpGmm],
+        learner: None,
         check: |_, _| true,
         resolved: |r| r.recorded()["alp_gmm"]["snap"].as_bool(),
     },
@@ -650,6 +751,7 @@ settings! {
         why: "a share of the returns' spread: 0 never pulls towards the target, and at 100 the pull outweighs any return",
         applies: ALL,
         methods: &[Method::SelfPaced],
+        learner: None,
         check: |x, _| *x > 0.0 && *x <= 100.0,
         resolved: |r| r.recorded()["self_paced"]["zeta"].as_f64(),
     },
@@ -661,6 +763,7 @@ settings! {
         why: "a count of updates; no run holds more than a million",
         applies: ALL,
         methods: &[Method::SelfPaced],
+        learner: None,
         check: |n, _| *n <= 1_000_000,
         resolved: |r| r.recorded()["self_paced"]["offset"].as_u64().map(|n| n as usize),
     },
@@ -673,6 +776,7 @@ settings! {
         why: "",
         applies: &[Kind::Paper(ExperimentName::Toy)],
         methods: ANY_METHOD,
+        learner: None,
         check: |_, _| true,
         resolved: |r| (r.paper == Some(ExperimentName::Toy))
             .then(|| r.request.fig3_learning_factors == Some(true)),
@@ -688,6 +792,7 @@ const PROBLEM: Key = Key {
     why: "",
     applies: FILE,
     methods: ANY_METHOD,
+    learner: None,
 };
 
 /// Every key: the settings, `problem` and the keys of its table.
@@ -765,6 +870,16 @@ impl ExperimentFile {
                 return Err(Invalid {
                     key: key.name,
                     problem: Problem::NoMethod(key.methods),
+                });
+            }
+        }
+        let learner = self.learner.unwrap_or(LearnerName::CReps);
+        for set in self.set_keys() {
+            let key = key(&set);
+            if let Some(only) = key.learner.filter(|&only| only != learner) {
+                return Err(Invalid {
+                    key: key.name,
+                    problem: Problem::OtherLearner { only, chosen: learner },
                 });
             }
         }

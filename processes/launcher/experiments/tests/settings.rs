@@ -6,7 +6,7 @@ use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::Plan;
 use acps_experiments::settings::ExperimentName::{Dartboard, Dims, Function, Grid, Toy};
 use acps_experiments::settings::{ExperimentFile, FirstVisitName};
-use acps_learner::{Method, SelectorConfig};
+use acps_learner::{Method, SearchConfig, SelectorConfig};
 use std::path::Path;
 
 fn error(text: &str) -> String {
@@ -467,7 +467,9 @@ fn d_ucb_c_reps_and_evaluation_settings_reach_the_learner() {
         panic!("{:?}", job.experiment.methods)
     };
     assert_eq!((bandit.ducb.b, bandit.ducb.gamma), (0.5, 0.9));
-    let creps = job.experiment.learner.creps.as_ref().unwrap();
+    let Some(SearchConfig::CReps(creps)) = &job.experiment.learner.search else {
+        panic!("C-REPS is the default learner")
+    };
     // The grid's best-per-task memory: 50 rollouts over 25 targets, 2 each.
     assert_eq!(creps.memory, MemoryConfig::BestPerTask { per_task: 2 });
     assert_eq!((creps.update_every, creps.ridge), (10, 0.01));
@@ -496,7 +498,9 @@ fn d_ucb_c_reps_and_evaluation_settings_reach_the_learner() {
         .unwrap()
         .jobs(Path::new("out"))
         .swap_remove(0);
-    let creps = job.experiment.learner.creps.as_ref().unwrap();
+    let Some(SearchConfig::CReps(creps)) = &job.experiment.learner.search else {
+        panic!("C-REPS is the default learner")
+    };
     assert_eq!(creps.memory, MemoryConfig::SlidingWindow { capacity: 30 });
     let SelectorConfig::Bandit(bandit) = &job.experiment.methods[0] else {
         unreachable!()
@@ -598,4 +602,74 @@ fn training_contexts_are_required_only_by_methods_that_choose_among_them() {
     .unwrap()
     .to_string();
     assert!(message.contains("problem.training_contexts must be set"), "{message}");
+}
+
+/// `learner = "c-cmaes"` runs C-CMA-ES with the experiment's features and initial exploration
+/// and the population asked for; C-REPS' own keys are refused with it, and its population
+/// without it, each naming the key and the learner.
+#[test]
+fn the_learner_setting_chooses_c_cmaes_and_refuses_the_other_learners_keys() {
+    let text = "experiment = \"function\"\nlearner = \"c-cmaes\"\npopulation = 60\ninitial_sigma = 0.5\n";
+    let file = LoadedFile::parse(Path::new("e.toml"), text.into()).unwrap();
+    let plan = Plan::new(Some(&file), &ExperimentFile::default()).unwrap();
+    let job = plan.jobs(Path::new("out")).swap_remove(0);
+    let Some(SearchConfig::CCmaes(ccmaes)) = &job.experiment.learner.search else {
+        panic!("{:?}", job.experiment.learner.search)
+    };
+    assert_eq!((ccmaes.population, ccmaes.initial_sigma), (Some(60), 0.5));
+    assert!(matches!(ccmaes.features, acps_learner::creps::FeatureMap::Quadratic));
+    assert!(job.experiment.settings.get("creps").is_none());
+    assert_eq!(job.experiment.settings["ccmaes"]["population"], 60);
+    let resolved = plan.resolved();
+    assert_eq!(
+        (
+            resolved.learner,
+            resolved.population,
+            resolved.epsilon,
+            resolved.memory_size
+        ),
+        (
+            Some(acps_experiments::settings::LearnerName::CCmaes),
+            Some(60),
+            None,
+            None
+        )
+    );
+    // Unset, the population is the original's for 20 parameters and a 2-D context.
+    let text = "experiment = \"function\"\nlearner = \"c-cmaes\"\n";
+    let file = LoadedFile::parse(Path::new("e.toml"), text.into()).unwrap();
+    let resolved = Plan::new(Some(&file), &ExperimentFile::default()).unwrap().resolved();
+    assert_eq!(resolved.population, Some(49));
+
+    let text = "experiment = \"function\"\nlearner = \"c-cmaes\"\nepsilon = 1.0\n";
+    let file = LoadedFile::parse(Path::new("e.toml"), text.into()).unwrap();
+    let error = Plan::new(Some(&file), &ExperimentFile::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        error.contains("e.toml:3: epsilon is a setting of learner c-reps only, and the learner is c-cmaes"),
+        "{error}"
+    );
+    let cli = ExperimentFile {
+        experiment: Some(Function),
+        population: Some(60),
+        ..Default::default()
+    };
+    let error = Plan::new(None, &cli).err().unwrap().to_string();
+    assert!(
+        error.contains("--population is a setting of learner c-cmaes only, and the learner is c-reps"),
+        "{error}"
+    );
+    let cli = ExperimentFile {
+        experiment: Some(Function),
+        learner: Some(acps_experiments::settings::LearnerName::CCmaes),
+        population: Some(1),
+        ..Default::default()
+    };
+    let error = Plan::new(None, &cli).err().unwrap().to_string();
+    assert!(
+        error.contains("--population must be an integer in 2..=100000"),
+        "{error}"
+    );
 }

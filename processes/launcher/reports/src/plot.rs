@@ -773,7 +773,7 @@ impl Exploration {
                     .map(|run| {
                         run.updates
                             .iter()
-                            .map(|u| (u.episode as f64, u.report.trace_sigma, u.report.ess))
+                            .map(|u| (u.episode as f64, u.report.trace_sigma(), u.report.ess()))
                             .collect()
                     })
                     .collect();
@@ -788,7 +788,7 @@ impl Exploration {
     fn of(summary: &Summary, methods: UpdateTraces) -> Self {
         Self {
             caption: format!(
-                "{}: exploration (trace Sigma) and effective sample size after each C-REPS update, {} runs (thin) and their median (thick)",
+                "{}: exploration (trace Sigma) and effective sample size after each policy update, {} runs (thin) and their median (thick)",
                 summary.experiment, summary.runs
             ),
             methods,

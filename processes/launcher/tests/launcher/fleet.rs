@@ -103,6 +103,35 @@ fn fleet_with_one_or_two_workers_matches_the_in_process_run() {
     }
 }
 
+/// C-CMA-ES through a fleet of two workers is the in-process run, bit for bit, and its
+/// updates.csv has C-CMA-ES' columns.
+#[test]
+fn a_c_cmaes_fleet_matches_the_in_process_run() {
+    let dir = temp_dir("match-c-cmaes");
+    let mut args = GRID.to_vec();
+    args.extend(["--in-flight", "4", "--learner", "c-cmaes"]);
+    let reference = in_process(&args, &dir.join("in-process"));
+    let updates = std::fs::read_to_string(dir.join("in-process").join("updates.csv")).unwrap();
+    assert!(updates.starts_with(acps_experiments::records::CCMAES_UPDATES_HEADER));
+    // 300 episodes in generations of the grid's 4 + floor(3 ln 23) (1 + 2 * 2) = 49.
+    assert_eq!(updates.lines().count(), 1 + 2 * 2 * 6, "{updates}");
+    let run = run_name("match-c-cmaes");
+    let out = dir.join("fleet");
+    succeeded(
+        &watched()
+            .arg("run")
+            .args(&args)
+            .args(["--workers", "2", "--run", run.as_str()])
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_eq!(std::fs::read_to_string(out.join("updates.csv")).unwrap(), updates);
+    assert_clean(&run);
+}
+
 #[test]
 fn learn_is_the_fleet_run_of_monotonic_progress_it_documents() {
     let dir = temp_dir("learn");

@@ -118,8 +118,8 @@ impl Generation {
         Ok((next, policy, report))
     }
 
-    /// The report of an update that leaves this generation with `policy` (mean shift 0 and
-    /// h_sigma false until the caller says otherwise).
+    /// The report of an update that leaves this generation with `policy` (mean shift 0, h_sigma
+    /// false and ess 0 until the caller says otherwise).
     pub(super) fn report(
         &self,
         policy: &LinearGaussianPolicy,
@@ -143,6 +143,7 @@ impl Generation {
             h_sigma: false,
             mean_shift: 0.0,
             condition: largest / smallest,
+            ess: 0.0,
             logdet_sigma: policy.log_det_covariance(),
             trace_sigma: policy.covariance().trace(),
             rejected,

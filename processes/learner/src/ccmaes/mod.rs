@@ -282,6 +282,8 @@ pub struct CCmaesReport {
     pub mean_shift: f64,
     /// The condition number of C (largest over smallest eigenvalue) after the update.
     pub condition: f64,
+    /// The effective sample size of the rank weights, `mu_eff = 1 / sum w_i^2`.
+    pub ess: f64,
     /// `ln det Sigma` of the policy in force after the update.
     pub logdet_sigma: f64,
     /// `trace Sigma` of that policy.
@@ -557,14 +559,16 @@ impl CCmaes {
                 returns: &returns,
             },
         );
-        match outcome {
+        let mut report = match outcome {
             Ok((next, policy, report)) => {
                 self.generation = next;
                 self.policy = policy;
                 report
             }
             Err(rejection) => self.generation.report(&self.policy, rollouts.len(), Some(rejection)),
-        }
+        };
+        report.ess = self.strategy.mu_eff;
+        report
     }
 }
 

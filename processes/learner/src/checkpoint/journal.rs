@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 /// The first eight bytes of every record file.
 pub const JOURNAL_MAGIC: [u8; 8] = *b"ACPSRECS";
 /// The record file format this build writes and reads.
-pub const JOURNAL_VERSION: u32 = 1;
+pub const JOURNAL_VERSION: u32 = 2;
 /// Header length in bytes.
 pub const JOURNAL_HEADER_LEN: usize = 32;
 /// Frame header length in bytes: the kind and the payload length.

@@ -37,7 +37,7 @@ use std::path::{Path, PathBuf};
 /// The first eight bytes of every checkpoint file.
 pub const MAGIC: [u8; 8] = *b"ACPSCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 7;
+pub const FORMAT_VERSION: u32 = 8;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 48;
 

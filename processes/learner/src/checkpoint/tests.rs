@@ -3,7 +3,7 @@
 use super::*;
 use crate::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use crate::selection::RoundRobin;
-use crate::{LearnerConfig, run_in_process};
+use crate::{LearnerConfig, SearchConfig, run_in_process};
 use acps_shared::{ContextSpace, EnvironmentSpec, Outcome, Problem, ScoreAggregate, Task};
 
 /// A stateless environment: reward -(theta - s)^2 summed.
@@ -55,12 +55,12 @@ fn learner_in(seed: u64, episodes: u64, environment: EnvironmentSpec) -> Learner
         episodes,
         in_flight: 2,
         eval_every: 10,
-        creps: Some(CRepsConfig {
+        search: Some(SearchConfig::CReps(CRepsConfig {
             update_every: 10,
             memory: MemoryConfig::SlidingWindow { capacity: 20 },
             features: FeatureMap::Affine,
             ..CRepsConfig::default()
-        }),
+        })),
     };
     Learner::new(config, problem, selector).unwrap()
 }
