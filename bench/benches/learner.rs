@@ -6,6 +6,8 @@
 //! its update (the joint dual and both bounded fits) beside plain C-REPS' at the PA-10 scale. The
 //! learner must stay far below the time of the rollouts it serves.
 //!
+//! One C-CMA-ES generation at the PA-10 scale, beside the C-REPS update.
+//!
 //! The learner's own cost per rollout (ask, tell, the C-REPS updates, no simulation), as in
 //! `acps bench --env trivial`'s in-process rows, guards the transport's figures against
 //! regressions of the core: 2000 trivial rollouts with P = 1 and P = 64.
@@ -13,6 +15,7 @@
 //! Before measuring, the Newton steps per update of 200 seeded data sets of each scale are
 //! printed.
 
+use acps_learner::ccmaes::{CCmaes, CCmaesConfig};
 use acps_learner::creps::{CReps, CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{
     AbsoluteProgress, AbsoluteProgressConfig, AlpGmm, AlpGmmConfig, BanditSelector, Choice, ContextSelector,
@@ -268,6 +271,42 @@ fn alp_gmm(c: &mut Criterion) {
     });
 }
 
+/// One C-CMA-ES generation at the PA-10 scale (21 parameters, polar-quadratic features of 2-D
+/// targets in [-5, -3]^2, the default population 4 + floor(3 ln 23) (1 + 2 * 2) = 49), beside
+/// `creps_update_n300_theta21_phi6`: C-REPS updates every 50 rollouts on 300, C-CMA-ES every 49
+/// on those 49.
+fn ccmaes_update(c: &mut Criterion) {
+    let config = CCmaesConfig {
+        features: FeatureMap::PolarQuadratic,
+        initial_sigma: 0.02,
+        ..CCmaesConfig::default()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let before_update = |rng: &mut ChaCha8Rng| {
+        let mut learner = CCmaes::new(config.clone(), 2, &[0.0; 21]).unwrap();
+        let lambda = learner.population();
+        let mut draw = |learner: &CCmaes| {
+            let s = vec![rng.random_range(-5.0..-3.0), rng.random_range(-5.0..-3.0)];
+            let theta = learner.sample(&s, rng);
+            let r = -theta.iter().zip(&s).map(|(t, s)| (t - s).powi(2)).sum::<f64>();
+            (s, theta, r)
+        };
+        for _ in 0..lambda - 1 {
+            let (s, theta, r) = draw(&learner);
+            assert!(learner.record(&s, &theta, r).is_none());
+        }
+        let last = draw(&learner);
+        (learner, last)
+    };
+    c.bench_function("ccmaes_update_n49_theta21_phi6", |b| {
+        b.iter_batched(
+            || before_update(&mut rng),
+            |(mut learner, (s, theta, r))| black_box(learner.record(&s, &theta, r)),
+            BatchSize::SmallInput,
+        )
+    });
+}
+
 /// Self-paced over the grid's target box, pulled towards its target from the first update: one
 /// PA-10-scale update that moves it with the policy (compare `creps_update_n300_theta21_phi6`),
 /// and one step between updates.
@@ -326,6 +365,7 @@ fn learner_rollouts(c: &mut Criterion) {
 criterion_group!(
     benches,
     creps_update,
+    ccmaes_update,
     selector_steps,
     alp_gmm,
     self_paced,

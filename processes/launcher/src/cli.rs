@@ -82,7 +82,8 @@ pub(crate) struct CompareArgs {
     /// A run directory written by `acps experiment` or `acps run` (summary.json and runs.csv).
     pub(crate) dir: PathBuf,
     /// A further run directory of the same experiment and seeds whose methods join the
-    /// comparison (repeatable); run with retire = true, its methods are named METHOD+retire.
+    /// comparison (repeatable); run with retire = true, its methods are named METHOD+retire, and
+    /// run with the other learner, METHOD+LEARNER (e.g. METHOD+c-cmaes).
     #[arg(long, value_name = "DIR")]
     pub(crate) with: Vec<PathBuf>,
     /// The method every other is paired with [default: the best by final mean score of

@@ -81,7 +81,7 @@ pub enum CompareError {
         theirs: String,
     },
     /// A method appears in two run directories under the same name.
-    #[error("method '{method}' is in both {} and {}: pair only directories with different methods, or with retire = true in the second (its methods are named METHOD+retire)", first.display(), other.display())]
+    #[error("method '{method}' is in both {} and {}: pair only directories with different methods, with retire = true in the second (its methods are named METHOD+retire) or with the other learner (METHOD+c-cmaes)", first.display(), other.display())]
     Duplicate {
         /// The method.
         method: String,
@@ -180,9 +180,20 @@ fn read_runs(dir: &Path) -> Result<Runs, CompareError> {
     Ok(runs)
 }
 
+/// The policy search of a run directory's settings: `c-cmaes` when they have C-CMA-ES', else
+/// `c-reps` (also for a problem without a policy, which has neither).
+fn learner(settings: &serde_json::Value) -> &'static str {
+    if settings.get("ccmaes").is_some() {
+        "c-cmaes"
+    } else {
+        "c-reps"
+    }
+}
+
 impl RunData {
     /// Reads `first` and any further directories that pair with it (same experiment, metric,
-    /// seeds and length). A directory run with `retire = true` names its methods METHOD+retire.
+    /// seeds and length). A directory run with `retire = true` names its methods METHOD+retire,
+    /// and one run with the other learner than the first's METHOD+LEARNER (`+c-cmaes`).
     pub fn load(first: &Path, others: &[PathBuf]) -> Result<Self, CompareError> {
         let head = read_head(first)?;
         let mut runs = read_runs(first)?;
@@ -214,8 +225,13 @@ impl RunData {
                 return Err(mismatch("training_episodes", a.to_string(), b.to_string()));
             }
             let retired = !theirs.settings["retire"].is_null();
+            let learner = learner(&theirs.settings);
+            let other_learner = (learner != self::learner(&head.settings)).then_some(learner);
             for (method, seeds) in read_runs(other)? {
-                let name = if retired { format!("{method}+retire") } else { method };
+                let mut name = if retired { format!("{method}+retire") } else { method };
+                if let Some(learner) = other_learner {
+                    name = format!("{name}+{learner}");
+                }
                 if let Some(first) = origin.get(&name) {
                     return Err(CompareError::Duplicate {
                         method: name,

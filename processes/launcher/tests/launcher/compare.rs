@@ -135,6 +135,35 @@ fn compare_reads_the_direction_and_pairs_a_retiring_run() {
     close(&retired["wilcoxon"]["p"], 2.0 / 8.0);
 }
 
+/// A run of the other learner pairs with the first run's methods under METHOD+c-cmaes.
+#[test]
+fn compare_pairs_a_run_of_the_other_learner() {
+    let (first, second) = (temp_dir("compare-c-reps"), temp_dir("compare-c-cmaes"));
+    let shape = ["--runs", "3", "--episodes", "200", "--method", "random", "-q", "--out"];
+    succeeded(&acps(
+        &[&["experiment", "function"][..], &shape, &[first.to_str().unwrap()]].concat(),
+    ));
+    let learner = ["--learner", "c-cmaes"];
+    succeeded(&acps(
+        &[
+            &["experiment", "function"][..],
+            &learner,
+            &shape,
+            &[second.to_str().unwrap()],
+        ]
+        .concat(),
+    ));
+    let report = report(&[
+        "compare",
+        first.to_str().unwrap(),
+        "--with",
+        second.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(report["baseline"], "random");
+    assert_eq!(row(&report, "random+c-cmaes", "final")["n"], 3);
+}
+
 #[test]
 fn compare_names_bad_input() {
     let dir = temp_dir("compare-bad");
