@@ -3,6 +3,7 @@
 //! theirs with the same constructors. The spec of what was built then says whether it is the
 //! environment asked for: a build with other settings builds another one.
 
+use crate::benchmark::{self, BenchmarkCreateError, ContextualBenchmark, Objective};
 use crate::contextual_function::{self, ContextualFunction, ContextualFunctionCreateError};
 use crate::rapier_sim::{RapierArm, RapierArmCreateError, RapierConfig};
 use crate::robot::Robot;
@@ -35,7 +36,9 @@ pub fn dartboard_fields() -> Vec<targets::Field> {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EnvironmentBuildError {
     /// A name that names none of the project's models.
-    #[error("environment spec: name must be contextual-function, throw-grid, throw-dartboard or trivial, got {0}")]
+    #[error(
+        "environment spec: name must be contextual-function, contextual-sphere, contextual-rosenbrock, throw-grid, throw-dartboard or trivial, got {0}"
+    )]
     UnknownName(String),
     /// A simulator code (a throwing spec's parameter 0) that names no simulator.
     #[error("environment spec: simulator (parameter 0) must be 0 (analytic) or 1 (rapier), got {0}")]
@@ -43,6 +46,9 @@ pub enum EnvironmentBuildError {
     /// The contextual function refuses the spec's dimensions.
     #[error(transparent)]
     ContextualFunction(#[from] ContextualFunctionCreateError),
+    /// A benchmark function's sizes are out of range.
+    #[error(transparent)]
+    Benchmark(#[from] BenchmarkCreateError),
     /// The rapier arm cannot be built.
     #[error(transparent)]
     Rapier(#[from] RapierArmCreateError),
@@ -94,6 +100,21 @@ pub fn build(spec: &EnvironmentSpec) -> Result<Box<dyn Environment>, Environment
             let [n_s, n_theta, problem_seed] = spec.parameters();
             let size = |n: u64| usize::try_from(n).unwrap_or(usize::MAX);
             Box::new(ContextualFunction::new(size(n_s), size(n_theta), problem_seed)?)
+        }
+        name @ (benchmark::SPHERE_ENVIRONMENT | benchmark::ROSENBROCK_ENVIRONMENT) => {
+            let [n_s, n_theta, problem_seed] = spec.parameters();
+            let size = |n: u64| usize::try_from(n).unwrap_or(usize::MAX);
+            let objective = if name == benchmark::SPHERE_ENVIRONMENT {
+                Objective::Sphere
+            } else {
+                Objective::Rosenbrock
+            };
+            Box::new(ContextualBenchmark::new(
+                objective,
+                size(n_s),
+                size(n_theta),
+                problem_seed,
+            )?)
         }
         GRID_ENVIRONMENT => Box::new(grid(sim_of(spec)?)?),
         DARTBOARD_ENVIRONMENT => Box::new(dartboard(sim_of(spec)?)?),
@@ -192,6 +213,13 @@ mod tests {
             function.rollout(&t).reward,
             direct.evaluate(&t.theta, &t.context).unwrap().0
         );
+        for objective in [Objective::Sphere, Objective::Rosenbrock] {
+            let direct = ContextualBenchmark::new(objective, 1, 20, 5).unwrap();
+            let mut built = build(&direct.spec()).unwrap();
+            assert_eq!(built.spec(), direct.spec());
+            let t = task(vec![0.1; 20], vec![1.5]);
+            assert_eq!(built.rollout(&t).score, direct.cost(&t.theta, &t.context).unwrap());
+        }
         let analytic = grid(Sim::Analytic).unwrap();
         let mut built = build(&analytic.spec()).unwrap();
         assert_eq!(built.spec(), analytic.spec());
@@ -226,7 +254,7 @@ mod tests {
         let error = build(&spec("learning-model", [0; 3])).err().unwrap().to_string();
         assert!(
             error.contains(
-                "name must be contextual-function, throw-grid, throw-dartboard or trivial, got learning-model"
+                "name must be contextual-function, contextual-sphere, contextual-rosenbrock, throw-grid, throw-dartboard or trivial, got learning-model"
             ),
             "{error}"
         );
@@ -237,5 +265,7 @@ mod tests {
         );
         let function = spec(contextual_function::ENVIRONMENT, [3, 2, 0]);
         assert!(build(&function).is_err(), "n_theta must exceed n_s");
+        let sphere = spec(benchmark::SPHERE_ENVIRONMENT, [0, 20, 0]);
+        assert!(build(&sphere).is_err(), "n_s must be at least 1");
     }
 }

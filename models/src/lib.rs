@@ -2,6 +2,7 @@
 //!
 //! - [`learning_model`]: the artificial model of a contextual learning process (paper Sec. 4).
 //! - [`contextual_function`]: the contextual function optimisation problem (paper Sec. 5.1).
+//! - [`benchmark`]: BOLeRo's contextual sphere and Rosenbrock (the C-CMA-ES paper's benchmark).
 //! - [`throw`]: the PA-10 throwing task (paper Sec. 5.2): the throw's DMPs and its environment.
 //! - [`robot`]: the arm's description file and kinematics.
 //! - [`rapier_sim`]: the arm simulated as a rapier3d multibody.
@@ -13,6 +14,7 @@
 //! The models' errors share [`InvalidArgument`] as their cause.
 #![warn(missing_docs)]
 
+pub mod benchmark;
 pub mod contextual_function;
 pub mod dmp;
 pub mod environment;

@@ -6,6 +6,7 @@ use acps_experiments::paper::{self, Sim};
 use acps_experiments::records::SavedPolicy;
 use acps_experiments::settings::ExperimentFile;
 use acps_learner::creps::RestoredPolicy;
+use acps_models::benchmark::{self, Objective};
 use acps_models::contextual_function;
 use acps_models::environment;
 use acps_models::rapier_sim::RapierConfig;
@@ -214,14 +215,29 @@ fn experiment_of(saved: &SavedPolicy) -> Result<Experiment, (&'static str, Strin
                 _ => Ok(paper::dims(dim, &options)),
             }
         }
+        name @ ("sphere" | "rosenbrock") => {
+            let objective = if name == "sphere" { Objective::Sphere } else { Objective::Rosenbrock };
+            environment_name(objective.environment())?;
+            let (n_s, dim, n) = (first, problem.context_dim(), problem.theta0.len());
+            if (n_s, n_theta, problem_seed) != (dim as u64, n as u64, saved.seed) {
+                return Err((
+                    "problem.environment.parameters",
+                    format!(
+                        "[n_s, n_theta, problem seed] = [{n_s}, {n_theta}, {problem_seed}] must be the problem's context dimension {dim}, its n_theta {n} and the run's seed {}",
+                        saved.seed
+                    ),
+                ));
+            }
+            Ok(paper::benchmark(objective, &options))
+        }
         "toy" => Err((
             "experiment",
-            "\"toy\" learns no policy (its Section 4 model has no parameters); policy files come from function, dims, grid and dartboard".into(),
+            "\"toy\" learns no policy (its Section 4 model has no parameters); policy files come from function, dims, grid, dartboard, sphere and rosenbrock".into(),
         )),
         other => Err((
             "experiment",
             format!(
-                "must be one of function, dims, grid, dartboard (the experiments acps simulates; a problem of your own has a user_problem field), got {other:?}"
+                "must be one of function, dims, grid, dartboard, sphere, rosenbrock (the experiments acps simulates; a problem of your own has a user_problem field), got {other:?}"
             ),
         )),
     }
@@ -336,6 +352,9 @@ fn simulator(spec: &EnvironmentSpec) -> String {
         }
         (contextual_function::ENVIRONMENT, _) => {
             format!("the contextual function of n_s = {first}, n_theta = {second}, problem seed {third}")
+        }
+        (name @ (benchmark::SPHERE_ENVIRONMENT | benchmark::ROSENBROCK_ENVIRONMENT), _) => {
+            format!("the {name} of n_s = {first}, n_theta = {second}, problem seed {third}")
         }
         (name, _) => name.to_string(),
     }

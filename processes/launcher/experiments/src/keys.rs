@@ -8,7 +8,7 @@ use acps_learner::Method;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-/// The paper's experiments.
+/// The built-in experiments: the paper's, and BOLeRo's benchmark of the C-CMA-ES paper.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum ExperimentName {
@@ -22,6 +22,10 @@ pub enum ExperimentName {
     Grid,
     /// Section 5.2.4: the PA-10 throws at the 81 fields of a dartboard on the ground (Fig. 10).
     Dartboard,
+    /// BOLeRo's contextual sphere: 20 parameters, a 2-D context in [1, 2]^2 (not the paper's).
+    Sphere,
+    /// BOLeRo's contextual Rosenbrock: 20 parameters, a 1-D context in [1, 2] (not the paper's).
+    Rosenbrock,
 }
 
 impl ExperimentName {
@@ -33,6 +37,8 @@ impl ExperimentName {
             Self::Dims => "dims",
             Self::Grid => "grid",
             Self::Dartboard => "dartboard",
+            Self::Sphere => "sphere",
+            Self::Rosenbrock => "rosenbrock",
         }
     }
 }
@@ -64,13 +70,15 @@ impl Kind {
     }
 }
 
-/// Every experiment of the paper.
+/// Every built-in experiment.
 pub const PAPER: &[Kind] = &[
     Kind::Paper(ExperimentName::Toy),
     Kind::Paper(ExperimentName::Function),
     Kind::Paper(ExperimentName::Dims),
     Kind::Paper(ExperimentName::Grid),
     Kind::Paper(ExperimentName::Dartboard),
+    Kind::Paper(ExperimentName::Sphere),
+    Kind::Paper(ExperimentName::Rosenbrock),
 ];
 /// Everything a file can describe.
 pub const ALL: &[Kind] = &[
@@ -79,14 +87,18 @@ pub const ALL: &[Kind] = &[
     Kind::Paper(ExperimentName::Dims),
     Kind::Paper(ExperimentName::Grid),
     Kind::Paper(ExperimentName::Dartboard),
+    Kind::Paper(ExperimentName::Sphere),
+    Kind::Paper(ExperimentName::Rosenbrock),
     Kind::File,
 ];
-/// What learns a policy with C-REPS (all but the Section 4 model).
+/// What learns a policy (all but the Section 4 model).
 pub const WITH_CREPS: &[Kind] = &[
     Kind::Paper(ExperimentName::Function),
     Kind::Paper(ExperimentName::Dims),
     Kind::Paper(ExperimentName::Grid),
     Kind::Paper(ExperimentName::Dartboard),
+    Kind::Paper(ExperimentName::Sphere),
+    Kind::Paper(ExperimentName::Rosenbrock),
     Kind::File,
 ];
 /// Problem files only.

@@ -13,6 +13,7 @@ use acps_learner::selection::{
     SelfPacedConfig,
 };
 use acps_learner::{BanditConfig, LearnerConfig, Method, SearchConfig, SelectorConfig};
+use acps_models::benchmark::{ContextualBenchmark, Objective};
 use acps_models::contextual_function::{ContextualFunction, DEFAULT_N_THETA};
 use acps_models::environment;
 use acps_models::learning_model::{CONTEXTS, LearningModel, LearningModelConfig};
@@ -318,6 +319,55 @@ fn function_experiment(
         stateless(problem(&function), Box::new(function))
     });
     experiment(name, s, settings, methods, learner, instance)
+}
+
+/// BOLeRo's benchmark of C-CMA-ES against C-REPS (`benchmarks/ccmaes/`, the IJCAI 2017 paper's
+/// Sec. 6.1): the contextual sphere (a 2-D context, 10,000 episodes) or Rosenbrock (a 1-D
+/// context, 42,500), 20 parameters (or `n_theta`), contexts from [1, 2]^n_s; C-REPS as the benchmark runs it
+/// (epsilon 1, an update every 50 rollouts on those 50, affine features, Sigma_0 = I, ridge
+/// 1e-10); D-UCB as for the function; evaluation every 250 (sphere) or 500 (Rosenbrock)
+/// episodes on 50 test contexts.
+pub fn benchmark(objective: Objective, s: &ExperimentFile) -> Experiment {
+    let n_theta = s.n_theta.unwrap_or(DEFAULT_N_THETA);
+    let (n_s, episodes, eval_every) = match objective {
+        Objective::Sphere => (2, 10_000, 250),
+        Objective::Rosenbrock => (1, 42_500, 500),
+    };
+    let preset = CRepsConfig {
+        ridge: 1e-10,
+        ..CRepsConfig::batches(1.0, 50)
+    };
+    let creps = creps(preset, s, Memory::Window, 50, 5usize.pow(n_s as u32));
+    let ducb = ducb(
+        DUcbConfig {
+            gamma: 0.99,
+            xi: 1e-8,
+            b: 1.0,
+        },
+        s,
+    );
+    let learner = learner(s, episodes, eval_every, Some(creps));
+    let settings = with_search(
+        json!({
+            "n_s": n_s,
+            "n_theta": n_theta,
+            "ducb": ducb,
+            "first_visit": first_visit(s),
+            "eval_every": learner.eval_every,
+        }),
+        &learner,
+        "affine",
+        "theta0 ~ N(0, I), drawn per run",
+    );
+    let methods = methods(s, &[Method::RandomContinuous, Method::MonotonicProgress], |_| {
+        ducb.clone()
+    });
+    let instance: InstanceFactory = Box::new(move |seed| {
+        let function =
+            ContextualBenchmark::new(objective, n_s, n_theta, seed).expect("the benchmark's sizes are valid");
+        stateless(function.problem(), Box::new(function))
+    });
+    experiment(objective.name(), s, settings, methods, learner, instance)
 }
 
 /// How throws are simulated.

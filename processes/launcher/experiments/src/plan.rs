@@ -11,6 +11,7 @@ use crate::settings::{ExperimentFile, ExperimentName, Memory, Resolving, SimName
 use acps_learner::creps::CRepsConfig;
 use acps_learner::selection::DUcbConfig;
 use acps_learner::{LearnerConfig, Method, SelectorConfig};
+use acps_models::benchmark::Objective;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 
@@ -136,6 +137,18 @@ impl Plan {
             }
             ExperimentName::Grid => vec![job(paper::grid(sim, s), out.to_path_buf(), None, None)],
             ExperimentName::Dartboard => vec![job(paper::dartboard(sim, s), out.to_path_buf(), None, None)],
+            ExperimentName::Sphere => vec![job(
+                paper::benchmark(Objective::Sphere, s),
+                out.to_path_buf(),
+                None,
+                None,
+            )],
+            ExperimentName::Rosenbrock => vec![job(
+                paper::benchmark(Objective::Rosenbrock, s),
+                out.to_path_buf(),
+                None,
+                None,
+            )],
         }
     }
 

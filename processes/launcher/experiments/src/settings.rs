@@ -332,7 +332,7 @@ settings! {
     experiment: ExperimentName {
         arg: (value_name = "NAME", required_unless_present = "config", conflicts_with = "config"),
         default: "none: name one, or give a file with a [problem] table",
-        accepted: "one of toy, function, dims, grid, dartboard (or, in a file, a [problem] table of your own)",
+        accepted: "one of toy, function, dims, grid, dartboard, sphere, rosenbrock (or, in a file, a [problem] table of your own)",
         why: "",
         applies: PAPER,
         methods: ANY_METHOD,
@@ -394,7 +394,7 @@ settings! {
     /// Training episodes per run.
     episodes: u64 {
         arg: (long, allow_hyphen_values = true, value_parser = parse_option::<u64>("episodes")),
-        default: "the paper's: toy 1000, function 2500, dims 5000, grid 10000, dartboard 50000; a problem file's 2500",
+        default: "the paper's: toy 1000, function 2500, dims 5000, grid 10000, dartboard 50000; BOLeRo's: sphere 10000, rosenbrock 42500; a problem file's 2500",
         accepted: "an integer in 1..=10000000 (training episodes per run, each kept in memory: about 300 bytes per episode and run)",
         why: "the paper's longest run is 50,000 (dartboard). Every episode stays in memory until the run is written (about 300 bytes per episode and run, so 10 million hold about 3 GB per run) and every method's run 0 is written to `selections.csv` (about 60 bytes per episode); an analytic throw run of 10 million episodes takes minutes",
         applies: ALL,
@@ -446,14 +446,19 @@ settings! {
         },
         resolved: |r| Some(r.experiment.methods.iter().map(SelectorConfig::method).collect()),
     },
-    /// function and dims only: number of low-level parameters n_theta of the contextual
-    /// function (the paper does not say).
+    /// function, dims, sphere and rosenbrock only: number of low-level parameters n_theta of
+    /// the contextual function (the paper does not say) or of BOLeRo's benchmark function.
     n_theta: usize {
         arg: (long, allow_hyphen_values = true, value_parser = parse_option::<usize>("n_theta")),
         default: "20",
         accepted: "an integer in 5..=64 (more than the largest context dimension, at most what a task carries)",
         why: "above the largest n_s (A must have rank n_s), at most the 64 parameters a task carries",
-        applies: &[Kind::Paper(ExperimentName::Function), Kind::Paper(ExperimentName::Dims)],
+        applies: &[
+            Kind::Paper(ExperimentName::Function),
+            Kind::Paper(ExperimentName::Dims),
+            Kind::Paper(ExperimentName::Sphere),
+            Kind::Paper(ExperimentName::Rosenbrock),
+        ],
         methods: ANY_METHOD,
         learner: None,
         check: |n_theta, _| (5..=MAX_THETA).contains(n_theta),
@@ -504,7 +509,7 @@ settings! {
     /// Not toy: C-REPS sample memory.
     memory: Memory {
         arg: (long, value_enum),
-        default: "window for function, dims and problem files, best-per-task for grid and dartboard, as in the paper",
+        default: "window for function, dims, sphere, rosenbrock and problem files, best-per-task for grid and dartboard, as in the paper",
         accepted: "window or best-per-task",
         why: "",
         applies: WITH_CREPS,
@@ -521,7 +526,7 @@ settings! {
     /// contexts.
     memory_size: usize {
         arg: (long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("memory_size")),
-        default: "function 50, dims 25 n_s^2, grid and dartboard 300, problem files 100",
+        default: "function 50, dims 25 n_s^2, grid and dartboard 300, sphere and rosenbrock 50, problem files 100",
         accepted: "an integer in 2..=100000 (the rollouts each C-REPS update weighs)",
         why: "a weighting of one rollout is no weighting; the dual's cost grows with N (about 0.1 ms per 300 samples at the PA-10's scale) and a memory far larger than the rollouts between updates learns from policies long gone. With best-per-task, N below K keeps the best one per context; the resolved file says N/K x K",
         applies: WITH_CREPS,
@@ -533,7 +538,7 @@ settings! {
     /// Not toy: rollouts between two C-REPS updates (BOLeRo's train_freq).
     update_every: usize {
         arg: (long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("update_every")),
-        default: "function 25, dims 13 n_s^2, grid and dartboard 50, problem files 25",
+        default: "function 25, dims 13 n_s^2, grid and dartboard 50, sphere and rosenbrock 50, problem files 25",
         accepted: "an integer in 1..=100000 (rollouts between two C-REPS updates)",
         why: "1 updates after every rollout (the sequential algorithm at its finest); an update that waits beyond 100,000 rollouts learns nothing in any run acps holds in memory",
         applies: WITH_CREPS,
@@ -545,7 +550,7 @@ settings! {
     /// Not toy: initial exploration covariance Sigma_0 = X I.
     initial_sigma: f64 {
         arg: (long, value_name = "X", allow_hyphen_values = true, value_parser = parse_option::<f64>("initial_sigma")),
-        default: "1 for function, dims and problem files, 0.02 for grid and dartboard",
+        default: "1 for function, dims, sphere, rosenbrock and problem files, 0.02 for grid and dartboard",
         accepted: "a number in 1e-12..=1e12 (a variance in the parameters' units: standard deviations 1e-6 to 1e6)",
         why: "a variance in the parameters' units: standard deviations 1e-6 ..= 1e6, twelve orders of magnitude around the paper's 0.14 and 1. The C-REPS update is invariant to the returns' units but not to theta's: beyond, rescale the parameters",
         applies: WITH_CREPS,
@@ -557,7 +562,7 @@ settings! {
     /// Not toy: C-REPS KL bound epsilon.
     epsilon: f64 {
         arg: (long, allow_hyphen_values = true, value_parser = parse_option::<f64>("epsilon")),
-        default: "function 2, dims 1, grid and dartboard 0.5, problem files 2",
+        default: "function 2, dims 1, grid and dartboard 0.5, sphere and rosenbrock 1, problem files 2",
         accepted: "a number in 1e-4..=10 (C-REPS's KL bound in nats)",
         why: "the weights' KL from uniform is at most epsilon, and for small epsilon a weighted mean then moves at most about sqrt(2 epsilon) standard deviations of the samples per update: at 1e-4 that is 0.014, so a 10,000-episode run with an update every 25 rollouts moves its policy at most about 6 standard deviations; below, it barely learns. No weighting of N samples is further than ln N from uniform, and acps' memories hold 50 to 400 samples (ln 400 = 6.0): above, the bound does not bind and the update takes the best samples (greedy); 10 keeps every binding value",
         applies: WITH_CREPS,
@@ -569,7 +574,7 @@ settings! {
     /// Not toy: ridge lambda of C-REPS's weighted regression of the policy.
     ridge: f64 {
         arg: (long, value_name = "LAMBDA", allow_hyphen_values = true, value_parser = parse_option::<f64>("ridge")),
-        default: "1e-4 (the paper's and BOLeRo's)",
+        default: "1e-4 (the paper's and BOLeRo's), 1e-10 for sphere and rosenbrock (BOLeRo's benchmark)",
         accepted: "a number in 0..=1e6 (added to the diagonal of the weighted features' Gram matrix)",
         why: "0 is plain weighted least squares, singular when fewer samples than features carry weight; the weights sum to 1, so for features of order 1 the Gram matrix is of order 1, and a ridge of 1e6 already holds the policy's mean at zero",
         applies: WITH_CREPS,
@@ -638,7 +643,7 @@ settings! {
     /// one after the last episode).
     eval_every: u64 {
         arg: (long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<u64>("eval_every")),
-        default: "toy 10, function 50, dims 100, grid 100, dartboard 1000, problem files 50 (at most the episodes)",
+        default: "toy 10, function 50, dims 100, grid 100, dartboard 1000, sphere 250, rosenbrock 500, problem files 50 (at most the episodes)",
         accepted: "an integer in 1..=10000000 (training episodes between two evaluations)",
         why: "every evaluation runs every test context once and is kept in memory: 1 evaluates after every episode, and no run is longer than 10 million episodes",
         applies: ALL,

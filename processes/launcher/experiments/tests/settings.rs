@@ -42,7 +42,7 @@ fn file_errors_name_line_key_and_range() {
         ),
         (
             "experiment = \"toy\"\nepsilon = 1.0\n",
-            "e.toml:2: epsilon applies to function, dims, grid, dartboard, [problem] tables only, not to the toy experiment",
+            "e.toml:2: epsilon applies to function, dims, grid, dartboard, sphere, rosenbrock, [problem] tables only, not to the toy experiment",
         ),
         (
             "experiment = \"dims\"\nn_s = 5\n",
@@ -169,7 +169,7 @@ fn options_name_the_flag_and_override_the_file() {
     let message = Plan::new(Some(&file), &cli).err().unwrap().to_string();
     assert_eq!(
         message,
-        "--epsilon applies to function, dims, grid, dartboard, [problem] tables only, not to the toy experiment"
+        "--epsilon applies to function, dims, grid, dartboard, sphere, rosenbrock, [problem] tables only, not to the toy experiment"
     );
     let cli = ExperimentFile {
         experiment: Some(Grid),
@@ -554,7 +554,9 @@ fn d_ucb_and_c_reps_settings_are_refused_outside_their_ranges() {
     }
     let message = error("experiment = \"toy\"\nupdate_every = 5\n");
     assert!(
-        message.contains("update_every applies to function, dims, grid, dartboard, [problem] tables only"),
+        message.contains(
+            "update_every applies to function, dims, grid, dartboard, sphere, rosenbrock, [problem] tables only"
+        ),
         "{message}"
     );
 }

@@ -19,6 +19,7 @@
 //! - `bench`, from `acps bench`: rollouts/s of every mode per environment, ratio above each bar.
 
 use acps_experiments::summary::Summary;
+use acps_learner::SearchReport;
 use acps_models::robot::Robot;
 use acps_models::targets::Field;
 use acps_models::trajectory::JointTrajectory;
@@ -749,14 +750,25 @@ fn short(metric: &str) -> String {
         .collect()
 }
 
-/// Per method, every run's updates: (episode, trace Sigma, ESS).
+/// Per method, every run's updates: (episode, trace Sigma, the right column's value).
 type UpdateTraces = Vec<(String, Vec<Vec<(f64, f64, f64)>>)>;
 
-/// The exploration and the effective sample size of every C-REPS update: a row per method, every
-/// run a thin line and the median over runs (update by update) a thick one.
+/// What the right column of [`Exploration`] shows.
+#[derive(Clone, Copy, PartialEq)]
+enum Right {
+    /// C-REPS' effective sample size, on a linear axis.
+    Ess,
+    /// C-CMA-ES' step size sigma, on a log axis (its ESS, mu_eff, is a constant).
+    Sigma,
+}
+
+/// The exploration of every policy update and, for C-REPS, its effective sample size or, for
+/// C-CMA-ES, its step size: a row per method, every run a thin line and the median over runs
+/// (update by update) a thick one.
 struct Exploration {
     caption: String,
     methods: UpdateTraces,
+    right: Right,
 }
 
 impl Exploration {
@@ -773,7 +785,13 @@ impl Exploration {
                     .map(|run| {
                         run.updates
                             .iter()
-                            .map(|u| (u.episode as f64, u.report.trace_sigma(), u.report.ess()))
+                            .map(|u| {
+                                let right = match &u.report {
+                                    SearchReport::CReps(r) => r.ess,
+                                    SearchReport::CCmaes(r) => r.sigma,
+                                };
+                                (u.episode as f64, u.report.trace_sigma(), right)
+                            })
                             .collect()
                     })
                     .collect();
@@ -786,12 +804,18 @@ impl Exploration {
 
     /// The picture of `methods`' updates.
     fn of(summary: &Summary, methods: UpdateTraces) -> Self {
+        let (right, what) = if summary.settings.get("ccmaes").is_some() {
+            (Right::Sigma, "step size sigma after each C-CMA-ES generation")
+        } else {
+            (Right::Ess, "effective sample size after each C-REPS update")
+        };
         Self {
             caption: format!(
-                "{}: exploration (trace Sigma) and effective sample size after each policy update, {} runs (thin) and their median (thick)",
+                "{}: exploration (trace Sigma) and {what}, {} runs (thin) and their median (thick)",
                 summary.experiment, summary.runs
             ),
             methods,
+            right,
         }
     }
 
@@ -823,12 +847,26 @@ impl Picture for Exploration {
         let all = || self.methods.iter().flat_map(|(_, runs)| runs.iter().flatten());
         let x_max = all().map(|u| u.0).fold(1.0, f64::max);
         let trace_range = log_range(all().map(|u| u.1));
-        let ess_range = from_zero(all().map(|u| u.2), 1.05);
         // A Sigma collapsed to 0, or far below the others, is drawn at the log axis' floor.
         // log10 on a linear axis: plotters' own log axis leaves every tick below 1e-16 unlabelled.
         let trace = |value: f64| Some(clip(value, &trace_range, 0.0)?.log10());
         let decades = trace_range.start.log10()..trace_range.end.log10();
-        let ess = |value: f64| clip(value, &ess_range, 0.0);
+        let (right_range, right_axis) = match self.right {
+            Right::Ess => (from_zero(all().map(|u| u.2), 1.05), None),
+            Right::Sigma => {
+                let range = log_range(all().map(|u| u.2));
+                let axis = range.start.log10()..range.end.log10();
+                (range, Some(axis))
+            }
+        };
+        let right = |value: f64| {
+            let clipped = clip(value, &right_range, 0.0)?;
+            Some(if right_axis.is_some() { clipped.log10() } else { clipped })
+        };
+        let (right_name, right_label): (&str, &dyn Fn(&f64) -> String) = match self.right {
+            Right::Ess => ("effective sample size", &|y| format!("{y:.0}")),
+            Right::Sigma => ("step size sigma", &|y| format!("{:.0e}", 10f64.powf(*y))),
+        };
         let panels = root.split_evenly((self.methods.len(), 2));
         for (row, (name, runs)) in self.methods.iter().enumerate() {
             let color = COLORS[row % COLORS.len()];
@@ -857,20 +895,32 @@ impl Picture for Exploration {
                     left_out(floored, "value", "drawn at the floor"),
                 ],
             )?;
-            let mut chart = panel(&panels[2 * row + 1], last).build_cartesian_2d(0.0..x_max, ess_range.clone())?;
+            let y_range = right_axis.clone().unwrap_or(right_range.clone());
+            let mut chart = panel(&panels[2 * row + 1], last).build_cartesian_2d(0.0..x_max, y_range)?;
             run_lines(
                 &mut chart,
                 runs,
                 |u| u.2,
-                &ess,
-                ("effective sample size", &|y| format!("{y:.0}")),
+                &right,
+                (right_name, right_label),
                 last,
                 color,
             )?;
-            let count = runs.iter().flatten().filter(|u| !u.2.is_finite()).count();
+            let values = || runs.iter().flatten().map(|u| u.2);
+            let floored = match right_axis {
+                Some(_) => values().filter(|&v| v.is_finite() && v < right_range.start).count(),
+                None => 0,
+            };
             note(
                 &panels[2 * row + 1],
-                &[left_out(count, "non-finite value", "not drawn")],
+                &[
+                    left_out(
+                        values().filter(|v| !v.is_finite()).count(),
+                        "non-finite value",
+                        "not drawn",
+                    ),
+                    left_out(floored, "value", "drawn at the floor"),
+                ],
             )?;
         }
         Ok(())
@@ -1985,21 +2035,28 @@ mod tests {
                     .map(|(i, &v)| (100.0 * i as f64, v * scale, v))
                     .collect()
             };
-            let picture = Exploration {
-                caption: case.to_string(),
-                methods: vec![
-                    ("a".to_string(), vec![run(1.0), run(2.0), Vec::new()]),
-                    ("b".to_string(), vec![run(-1.0)]),
-                ],
-            };
-            let dir = dir.clone();
-            within_a_minute(case, move || save(&picture, &dir, case));
+            // C-REPS' effective sample sizes, and C-CMA-ES' step sizes on a log axis.
+            for (right, name) in [(Right::Ess, case.to_string()), (Right::Sigma, format!("{case}-sigma"))] {
+                let picture = Exploration {
+                    caption: name.clone(),
+                    methods: vec![
+                        ("a".to_string(), vec![run(1.0), run(2.0), Vec::new()]),
+                        ("b".to_string(), vec![run(-1.0)]),
+                    ],
+                    right,
+                };
+                let dir = dir.clone();
+                within_a_minute(&name.clone(), move || save(&picture, &dir, &name));
+            }
         }
         let svg = drawn(&dir, "collapse");
         // Zeros, 5e-324 and 1e-200 are more than 40 decades below 100.
         assert!(svg.contains("6 values drawn at the floor"), "{svg}");
         let svg = drawn(&dir, "plus-inf");
         assert!(svg.contains("2 non-finite values not drawn"), "{svg}");
+        // On the step size's log axis too.
+        let svg = drawn(&dir, "collapse-sigma");
+        assert_eq!(svg.matches("values drawn at the floor").count(), 4, "{svg}");
     }
 
     #[test]

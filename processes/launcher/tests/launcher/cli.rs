@@ -161,7 +161,7 @@ fn bad_options_are_refused_naming_the_option() {
         ),
         (
             &["experiment", "toy", "--epsilon", "1"],
-            "--epsilon applies to function, dims, grid, dartboard, [problem] tables only, not to the toy experiment",
+            "--epsilon applies to function, dims, grid, dartboard, sphere, rosenbrock, [problem] tables only, not to the toy experiment",
         ),
         (
             &["experiment", "grid", "--method", "random", "--method", "random"],

@@ -48,6 +48,8 @@ fn every_shipped_file_validates_sets_every_key_and_matches_the_defaults() {
         "grid-fig8",
         "grid-fig8-rapier",
         "dartboard-fig10",
+        "bolero-sphere",
+        "bolero-rosenbrock",
     ] {
         assert!(
             stems.iter().any(|s| s == expected),
@@ -105,6 +107,8 @@ fn every_shipped_file_validates_sets_every_key_and_matches_the_defaults() {
             ExperimentName::Grid if v.sim == Some(SimName::Rapier) => "grid-fig8-rapier".into(),
             ExperimentName::Grid => "grid-fig8".into(),
             ExperimentName::Dartboard => "dartboard-fig10".into(),
+            ExperimentName::Sphere => "bolero-sphere".into(),
+            ExperimentName::Rosenbrock => "bolero-rosenbrock".into(),
         };
         assert_eq!(path.file_stem().unwrap().to_str().unwrap(), expected_stem);
     }
@@ -145,7 +149,7 @@ fn bad_files_are_refused_with_file_line_and_range() {
         ),
         (
             "experiment = \"grid\"\nn_theta = 10\n",
-            ":2: n_theta applies to function, dims only, not to the grid experiment",
+            ":2: n_theta applies to function, dims, sphere, rosenbrock only, not to the grid experiment",
         ),
         // Values that crashed (capacity overflow) or were accepted though nothing can learn with
         // them: refused with the key's range.

@@ -595,7 +595,7 @@ fn evaluate_refuses_edited_policy_files_naming_the_file_and_field() {
         (
             &grid,
             |p| p["experiment"] = "bowl".into(),
-            "experiment must be one of function, dims, grid, dartboard (the experiments acps simulates; a problem of your own has a user_problem field), got \"bowl\"",
+            "experiment must be one of function, dims, grid, dartboard, sphere, rosenbrock (the experiments acps simulates; a problem of your own has a user_problem field), got \"bowl\"",
         ),
         (
             &grid,
