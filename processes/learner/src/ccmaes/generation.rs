@@ -60,12 +60,18 @@ impl Generation {
         let n = data.returns.len();
         let weights = rank_weights(&advantages(data.psi, data.returns, ridge), &strategy.weights);
         let old_w = policy.weights();
-        let new_w = ridge_solve(data.phi, &weights, data.thetas, ridge).ok_or(Rejection::SingularRegression)?;
+        // The residuals of the old mean, which the rank-mu update uses too, regressed on the
+        // features: the ridge pulls the change of W towards 0, so that directions of W the
+        // generation's contexts do not determine (a selector that practised a few contexts
+        // only) keep their old values instead of being set by rounding.
+        let residuals = data.thetas - data.phi * old_w;
+        let step = ridge_solve(data.phi, &weights, &residuals, ridge).ok_or(Rejection::SingularRegression)?;
+        let new_w = old_w + &step;
         if !new_w.iter().all(|w| w.is_finite()) {
             return Err(Rejection::MeanNotFinite);
         }
         let mean_phi = data.phi.row_mean().transpose();
-        let shift = (&new_w - old_w).tr_mul(&mean_phi) / self.sigma;
+        let shift = step.tr_mul(&mean_phi) / self.sigma;
 
         let eigen = SymmetricEigen::new(self.shape.clone());
         if eigen.eigenvalues.min() <= 0.0 {
@@ -87,7 +93,7 @@ impl Generation {
             p_c += &shift * (c_c * (2.0 - c_c) * strategy.mu_eff).sqrt();
         }
 
-        let residuals = (data.thetas - data.phi * old_w) / self.sigma;
+        let residuals = residuals / self.sigma;
         let mut weighted = residuals.clone();
         for (i, w) in weights.iter().enumerate() {
             weighted.row_mut(i).scale_mut(*w);

@@ -272,3 +272,32 @@ fn the_policy_snapshot_describes_the_learned_policy() {
         "quadratic"
     );
 }
+
+#[test]
+fn a_generation_in_one_context_keeps_what_it_cannot_see_of_the_others() {
+    // theta = 2 s is learned over s in [0, 1]; then a whole generation practises s = 0.2 only.
+    // Its rollouts determine the mean at 0.2 alone: the policy elsewhere must stay what it was,
+    // not be pulled towards 0 where the generation says nothing.
+    let mut learner = CCmaes::new(CCmaesConfig::default(), 1, &[0.0, 0.0]).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let reward = |theta: &[f64], s: f64| -(theta[0] - 2.0 * s).powi(2) - (theta[1] + s).powi(2);
+    for _ in 0..200 * learner.population() {
+        let s = rng.random_range(0.0..1.0);
+        let theta = learner.sample(&[s], &mut rng);
+        learner.record(&[s], &theta, reward(&theta, s));
+    }
+    let before = learner.greedy(&[0.9]);
+    assert!(
+        (before[0] - 1.8).abs() < 1e-3 && (before[1] + 0.9).abs() < 1e-3,
+        "{before:?}"
+    );
+    for _ in 0..learner.population() {
+        let theta = learner.sample(&[0.2], &mut rng);
+        learner.record(&[0.2], &theta, reward(&theta, 0.2));
+    }
+    let after = learner.greedy(&[0.9]);
+    assert!(
+        (after[0] - 1.8).abs() < 1e-2 && (after[1] + 0.9).abs() < 1e-2,
+        "{before:?} -> {after:?}"
+    );
+}
