@@ -193,17 +193,19 @@ fn rank_weights(advantages: &[f64], ranked: &[f64]) -> Vec<f64> {
     weights
 }
 
-/// `(X^T D X + r I)^-1 X^T D Y` with `D = diag(weights)` and `r = ridge` times the mean diagonal
-/// of `X^T D X`; `None` when that matrix is not positive definite.
+/// `(X^T D X + R)^-1 X^T D Y` with `D = diag(weights)` and `R` the diagonal of `X^T D X` times
+/// `ridge` (Marquardt's scaling); `None` when that matrix is not positive definite.
 fn ridge_solve(x: &DMatrix<f64>, weights: &[f64], y: &DMatrix<f64>, ridge: f64) -> Option<DMatrix<f64>> {
     let mut weighted = x.clone();
     for (i, w) in weights.iter().enumerate() {
         weighted.row_mut(i).scale_mut(*w);
     }
     let mut normal = weighted.tr_mul(x);
-    let r = ridge * normal.trace() / normal.nrows() as f64;
+    let mean_diagonal = normal.trace() / normal.nrows() as f64;
     for i in 0..normal.nrows() {
-        normal[(i, i)] += r;
+        // Each feature's own scale, floored so that a feature that is 0 in every rollout
+        // still gets a ridge.
+        normal[(i, i)] += ridge * normal[(i, i)].max(1e-12 * mean_diagonal);
     }
     Some(Cholesky::new(normal)?.solve(&weighted.tr_mul(y)))
 }

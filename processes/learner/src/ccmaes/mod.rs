@@ -81,9 +81,12 @@ pub struct CCmaesConfig {
     /// The context features of the baseline the advantages are taken from (default
     /// [`FeatureMap::Quadratic`], as BOLeRo's `baseline_degree = 2`).
     pub baseline: FeatureMap,
-    /// Ridge of both regressions relative to the mean diagonal of their normal matrix, within
-    /// [0, 1] (default 1e-8: numerical safety only, so it does not depend on the features'
-    /// units).
+    /// Ridge of both regressions, relative to each feature's own entry on the diagonal of the
+    /// normal matrix (so it does not depend on the features' units), within [0, 1]. The mean's
+    /// regression fits the change of W, so the ridge holds back directions of W that a
+    /// generation's contexts barely determine: a selector that practises two nearby contexts
+    /// would otherwise extrapolate their noise to every other. Default 1e-5, chosen on tuning
+    /// seeds 1000-1004 of the grid (docs/CHOICES.md).
     pub ridge: f64,
     /// The learning rates; `None` fields take the original's defaults.
     pub rates: Rates,
@@ -96,7 +99,7 @@ impl Default for CCmaesConfig {
             initial_sigma: 1.0,
             features: FeatureMap::Affine,
             baseline: FeatureMap::Quadratic,
-            ridge: 1e-8,
+            ridge: 1e-5,
             rates: Rates::default(),
         }
     }
