@@ -292,16 +292,39 @@ fn function_experiment(
         MemoryConfig::BestPerTask { .. } => unreachable!("Section 5.1's memories are windows"),
     };
     let creps = creps(setting.creps, s, Memory::Window, capacity, 25);
-    let ducb = ducb(
+    let ducb = function_ducb(s);
+    let learner = learner(s, setting.episodes, setting.eval_every, Some(creps));
+    let settings = sized_settings((n_s, n_theta), &ducb, s, &learner, ("quadratic", "0"));
+    let methods = methods(s, defaults, |_| ducb.clone());
+    let instance: InstanceFactory = Box::new(move |seed| {
+        let function = ContextualFunction::new(n_s, n_theta, seed).expect("the experiment's function is valid");
+        stateless(problem(&function), Box::new(function))
+    });
+    experiment(name, s, settings, methods, learner, instance)
+}
+
+/// D-UCB of the functions (Section 5.1.2 and the benchmarks): gamma 0.99, xi 1e-8, B 1.
+fn function_ducb(s: &ExperimentFile) -> DUcbConfig {
+    ducb(
         DUcbConfig {
             gamma: 0.99,
             xi: 1e-8,
             b: 1.0,
         },
         s,
-    );
-    let learner = learner(s, setting.episodes, setting.eval_every, Some(creps));
-    let settings = with_search(
+    )
+}
+
+/// The settings of a function experiment of `(n_s, n_theta)`: D-UCB's, the first visit, the
+/// evaluation interval and the policy search's with its `(features, initial mean)`.
+fn sized_settings(
+    (n_s, n_theta): (usize, usize),
+    ducb: &DUcbConfig,
+    s: &ExperimentFile,
+    learner: &LearnerConfig,
+    (features, initial_mean): (&str, &str),
+) -> serde_json::Value {
+    with_search(
         json!({
             "n_s": n_s,
             "n_theta": n_theta,
@@ -309,16 +332,10 @@ fn function_experiment(
             "first_visit": first_visit(s),
             "eval_every": learner.eval_every,
         }),
-        &learner,
-        "quadratic",
-        "0",
-    );
-    let methods = methods(s, defaults, |_| ducb.clone());
-    let instance: InstanceFactory = Box::new(move |seed| {
-        let function = ContextualFunction::new(n_s, n_theta, seed).expect("the experiment's function is valid");
-        stateless(problem(&function), Box::new(function))
-    });
-    experiment(name, s, settings, methods, learner, instance)
+        learner,
+        features,
+        initial_mean,
+    )
 }
 
 /// BOLeRo's benchmark of C-CMA-ES against C-REPS (`benchmarks/ccmaes/`, the IJCAI 2017 paper's
@@ -338,26 +355,14 @@ pub fn benchmark(objective: Objective, s: &ExperimentFile) -> Experiment {
         ..CRepsConfig::batches(1.0, 50)
     };
     let creps = creps(preset, s, Memory::Window, 50, 5usize.pow(n_s as u32));
-    let ducb = ducb(
-        DUcbConfig {
-            gamma: 0.99,
-            xi: 1e-8,
-            b: 1.0,
-        },
-        s,
-    );
+    let ducb = function_ducb(s);
     let learner = learner(s, episodes, eval_every, Some(creps));
-    let settings = with_search(
-        json!({
-            "n_s": n_s,
-            "n_theta": n_theta,
-            "ducb": ducb,
-            "first_visit": first_visit(s),
-            "eval_every": learner.eval_every,
-        }),
+    let settings = sized_settings(
+        (n_s, n_theta),
+        &ducb,
+        s,
         &learner,
-        "affine",
-        "theta0 ~ N(0, I), drawn per run",
+        ("affine", "theta0 ~ N(0, I), drawn per run"),
     );
     let methods = methods(s, &[Method::RandomContinuous, Method::MonotonicProgress], |_| {
         ducb.clone()

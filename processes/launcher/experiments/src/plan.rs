@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 const PROBLEM_METHODS: [Method; 2] = [Method::MonotonicProgress, Method::Random];
 
 /// A problem file's C-REPS memory unless set: BOLeRo's window of the last 100 rollouts.
-const WINDOW: usize = 100;
+const MEMORY: usize = 100;
 
 /// A problem file's evaluations of the greedy policy on the test contexts happen every this
 /// many training episodes (or once at the end of shorter runs), as in the paper's Section 5.1.2.
@@ -175,8 +175,9 @@ impl Plan {
     }
 }
 
-/// The experiment of a checked problem file: C-REPS with BOLeRo's defaults (an update every 25
-/// rollouts on the last 100, or the best 100/K per training context) and the file's features,
+/// The experiment of a checked problem file: C-REPS with BOLeRo's defaults but for its memory
+/// (an update every 25 rollouts on the best 100/K per training context, or with `memory =
+/// "window"` the last 100) and the file's features,
 /// D-UCB with [`DUcbConfig::default`] (docs/DUCB-PARAMETERS.md), monotonic progress against
 /// random selection by default. No environment: the user's workers perform every rollout.
 fn problem_experiment(checked: &CheckedProblem, s: &ExperimentFile) -> Experiment {
@@ -186,7 +187,9 @@ fn problem_experiment(checked: &CheckedProblem, s: &ExperimentFile) -> Experimen
         ..CRepsConfig::default()
     };
     let tasks = problem.training_contexts.len();
-    let creps = paper::creps(preset, s, Memory::Window, WINDOW, tasks);
+    // The best N/K per training context, not the last N: with a window, C-REPS lost its best
+    // policy on users' problems (docs/RESULTS.md, "Learning that does not undo itself").
+    let creps = paper::creps(preset, s, Memory::BestPerTask, MEMORY, tasks);
     let ducb = paper::ducb(DUcbConfig::default(), s);
     let episodes = s.episodes.unwrap_or(LearnerConfig::default().episodes);
     let learner = paper::learner(s, episodes, EVAL_EVERY.min(episodes), Some(creps));

@@ -509,7 +509,7 @@ settings! {
     /// Not toy: C-REPS sample memory.
     memory: Memory {
         arg: (long, value_enum),
-        default: "window for function, dims, sphere, rosenbrock and problem files, best-per-task for grid and dartboard, as in the paper",
+        default: "window for function, dims, sphere and rosenbrock, best-per-task for grid and dartboard (as in the paper) and for problem files",
         accepted: "window or best-per-task",
         why: "",
         applies: WITH_CREPS,

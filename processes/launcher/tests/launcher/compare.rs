@@ -43,6 +43,17 @@ fn report(args: &[&str]) -> serde_json::Value {
     serde_json::from_str(&succeeded(&acps(args))).unwrap()
 }
 
+/// `acps compare FIRST --with SECOND --json`.
+fn paired(first: &Path, second: &Path) -> serde_json::Value {
+    report(&[
+        "compare",
+        first.to_str().unwrap(),
+        "--with",
+        second.to_str().unwrap(),
+        "--json",
+    ])
+}
+
 fn row<'a>(report: &'a serde_json::Value, method: &str, metric: &str) -> &'a serde_json::Value {
     report["rows"]
         .as_array()
@@ -117,13 +128,7 @@ fn compare_reads_the_direction_and_pairs_a_retiring_run() {
         &[("random", RANDOM), ("round-robin", ROUND_ROBIN)],
     );
     run_dir(&second, "toy", true, &[("monotonic-progress", TEACHER)]);
-    let report = report(&[
-        "compare",
-        first.to_str().unwrap(),
-        "--with",
-        second.to_str().unwrap(),
-        "--json",
-    ]);
+    let report = paired(&first, &second);
     assert_eq!(report["baseline"], "round-robin");
     assert_eq!(report["lower_is_better"], false);
     let d: Vec<f64> = (0..3).map(|r| TEACHER[r][2] - ROUND_ROBIN[r][2]).collect();
@@ -153,13 +158,7 @@ fn compare_pairs_a_run_of_the_other_learner() {
         ]
         .concat(),
     ));
-    let report = report(&[
-        "compare",
-        first.to_str().unwrap(),
-        "--with",
-        second.to_str().unwrap(),
-        "--json",
-    ]);
+    let report = paired(&first, &second);
     assert_eq!(report["baseline"], "random");
     assert_eq!(row(&report, "random+c-cmaes", "final")["n"], 3);
 }

@@ -527,14 +527,7 @@ impl CCmaes {
     }
 
     fn features(&self, context: &[f64]) -> DVector<f64> {
-        assert_eq!(
-            context.len(),
-            self.context_dim,
-            "context has {} entries, context_dim is {}",
-            context.len(),
-            self.context_dim
-        );
-        self.config.features.apply(context)
+        self.config.features.apply_sized(context, self.context_dim)
     }
 
     /// One generation's update on `rollouts`; a rejected one keeps the policy, paths and step

@@ -104,6 +104,22 @@ impl FeatureMap {
         DVector::from_vec(features)
     }
 
+    /// The features of `context`, which a learner for `context_dim`-dimensional contexts was
+    /// handed.
+    ///
+    /// # Panics
+    /// If `context.len() != context_dim`.
+    pub(crate) fn apply_sized(&self, context: &[f64], context_dim: usize) -> DVector<f64> {
+        assert_eq!(
+            context.len(),
+            context_dim,
+            "context has {} entries, context_dim is {}",
+            context.len(),
+            context_dim
+        );
+        self.apply(context)
+    }
+
     /// Checks that this map works for `context_dim`-dimensional contexts and for the initial
     /// mean `theta0`.
     pub(crate) fn validate(&self, context_dim: usize, theta0: &[f64]) -> Result<(), FeatureMapValidateError> {

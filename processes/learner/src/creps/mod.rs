@@ -450,14 +450,7 @@ impl CReps {
     }
 
     fn features(&self, context: &[f64]) -> DVector<f64> {
-        assert_eq!(
-            context.len(),
-            self.context_dim,
-            "context has {} entries, context_dim is {}",
-            context.len(),
-            self.context_dim
-        );
-        self.config.features.apply(context)
+        self.config.features.apply_sized(context, self.context_dim)
     }
 
     /// The settings of its updates.
