@@ -497,7 +497,7 @@ settings! {
     /// weighs in its update.
     population: usize {
         arg: (long, value_name = "N", allow_hyphen_values = true, value_parser = parse_option::<usize>("population")),
-        default: "the original's 4 + floor(3 ln(n_theta + n_s)) (1 + 2 n_s)",
+        default: "4 + floor(3 ln(n_theta + n_s)) (2 n_phi - 1): the original's (1 + 2 n_s) for affine features, 103 for the grid's and the function's 6",
         accepted: "an integer in 2..=100000 (rollouts per C-CMA-ES generation, and at least what its regressions need: 2 n_phi, and more than the baseline's features)",
         why: "the mean's regression weighs the best half of a generation and needs as many rollouts as it has features; the upper bound is C-REPS' memory's, for the same reason (an update that waits longer learns from a policy long gone)",
         applies: WITH_CREPS,

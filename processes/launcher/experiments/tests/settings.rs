@@ -637,11 +637,12 @@ fn the_learner_setting_chooses_c_cmaes_and_refuses_the_other_learners_keys() {
             None
         )
     );
-    // Unset, the population is the original's for 20 parameters and a 2-D context.
+    // Unset: 4 + floor(3 ln 22) (2 * 6 - 1) for 20 parameters and the 6 quadratic features of a
+    // 2-D context.
     let text = "experiment = \"function\"\nlearner = \"c-cmaes\"\n";
     let file = LoadedFile::parse(Path::new("e.toml"), text.into()).unwrap();
     let resolved = Plan::new(Some(&file), &ExperimentFile::default()).unwrap().resolved();
-    assert_eq!(resolved.population, Some(49));
+    assert_eq!(resolved.population, Some(103));
 
     let text = "experiment = \"function\"\nlearner = \"c-cmaes\"\nepsilon = 1.0\n";
     let file = LoadedFile::parse(Path::new("e.toml"), text.into()).unwrap();

@@ -15,6 +15,9 @@ pub(super) struct Generation {
     pub(super) p_sigma: DVector<f64>,
     pub(super) p_c: DVector<f64>,
     pub(super) count: u64,
+    /// Per policy feature, the largest weighted mean of its square over the generations so
+    /// far: the scale its ridge is relative to.
+    pub(super) feature_scale: DVector<f64>,
 }
 
 /// A generation's rollouts, one row each: policy features, baseline features, parameters and
@@ -32,14 +35,15 @@ pub(super) struct Data<'a> {
 const MAX_LOG_STEP: f64 = 1.0;
 
 impl Generation {
-    /// Generation 0: `sigma_0`, `C = I`, both paths 0.
-    pub(super) fn start(sigma: f64, n_theta: usize) -> Self {
+    /// Generation 0: `sigma_0`, `C = I`, both paths 0, no feature scales yet.
+    pub(super) fn start(sigma: f64, n_theta: usize, n_phi: usize) -> Self {
         Self {
             sigma,
             shape: DMatrix::identity(n_theta, n_theta),
             p_sigma: DVector::zeros(n_theta),
             p_c: DVector::zeros(n_theta),
             count: 0,
+            feature_scale: DVector::zeros(n_phi),
         }
     }
 
@@ -65,7 +69,20 @@ impl Generation {
         // generation's contexts do not determine (a selector that practised a few contexts
         // only) keep their old values instead of being set by rounding.
         let residuals = data.thetas - data.phi * old_w;
-        let step = ridge_solve(data.phi, &weights, &residuals, ridge).ok_or(Rejection::SingularRegression)?;
+        // A feature that is about 0 in this generation's contexts but not in others' keeps the
+        // ridge of its scale elsewhere: relative to its own square here, its coefficient's change
+        // would be nearly free and set by rounding (the dartboard's targets on the angle's zero).
+        let squares = DVector::from_fn(data.phi.ncols(), |j, _| {
+            data.phi
+                .column(j)
+                .iter()
+                .zip(&weights)
+                .map(|(x, w)| w * x * x)
+                .sum::<f64>()
+        });
+        let feature_scale = self.feature_scale.zip_map(&squares, f64::max);
+        let step = ridge_solve(data.phi, &weights, &residuals, ridge, feature_scale.as_slice())
+            .ok_or(Rejection::SingularRegression)?;
         let new_w = old_w + &step;
         if !new_w.iter().all(|w| w.is_finite()) {
             return Err(Rejection::MeanNotFinite);
@@ -114,6 +131,7 @@ impl Generation {
             p_sigma,
             p_c,
             count,
+            feature_scale,
         };
         let policy = next
             .policy(new_w)
@@ -174,7 +192,7 @@ fn advantages(psi: &DMatrix<f64>, returns: &[f64], ridge: f64) -> Vec<f64> {
     }
     let standardised = DMatrix::from_iterator(returns.len(), 1, returns.iter().map(|r| (r - mean) / spread));
     let ones = vec![1.0; returns.len()];
-    match ridge_solve(psi, &ones, &standardised, ridge) {
+    match ridge_solve(psi, &ones, &standardised, ridge, &[]) {
         Some(beta) => (&standardised - psi * beta).iter().copied().collect(),
         // Features that are all 0: no baseline to take.
         None => standardised.iter().copied().collect(),
@@ -193,9 +211,10 @@ fn rank_weights(advantages: &[f64], ranked: &[f64]) -> Vec<f64> {
     weights
 }
 
-/// `(X^T D X + R)^-1 X^T D Y` with `D = diag(weights)` and `R` the diagonal of `X^T D X` times
-/// `ridge` (Marquardt's scaling); `None` when that matrix is not positive definite.
-fn ridge_solve(x: &DMatrix<f64>, weights: &[f64], y: &DMatrix<f64>, ridge: f64) -> Option<DMatrix<f64>> {
+/// `(X^T D X + R)^-1 X^T D Y` with `D = diag(weights)` and `R` the diagonal of `X^T D X`, or
+/// the larger `scale` where given, times `ridge` (Marquardt's scaling); `None` when that matrix
+/// is not positive definite.
+fn ridge_solve(x: &DMatrix<f64>, weights: &[f64], y: &DMatrix<f64>, ridge: f64, scale: &[f64]) -> Option<DMatrix<f64>> {
     let mut weighted = x.clone();
     for (i, w) in weights.iter().enumerate() {
         weighted.row_mut(i).scale_mut(*w);
@@ -205,7 +224,8 @@ fn ridge_solve(x: &DMatrix<f64>, weights: &[f64], y: &DMatrix<f64>, ridge: f64) 
     for i in 0..normal.nrows() {
         // Each feature's own scale, floored so that a feature that is 0 in every rollout
         // still gets a ridge.
-        normal[(i, i)] += ridge * normal[(i, i)].max(1e-12 * mean_diagonal);
+        let own = scale.get(i).copied().unwrap_or(0.0).max(normal[(i, i)]);
+        normal[(i, i)] += ridge * own.max(1e-12 * mean_diagonal);
     }
     Some(Cholesky::new(normal)?.solve(&weighted.tr_mul(y)))
 }

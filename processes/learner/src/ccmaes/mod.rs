@@ -54,24 +54,32 @@ use crate::creps::{
 };
 use generation::Generation;
 
-/// C-CMA-ES settings. [`Default`] is the original's: the population and every rate from the
-/// problem's dimensions, affine policy features, a quadratic baseline.
+/// C-CMA-ES settings. [`Default`] is the original's: the population (generalised to any
+/// features) and every rate from the problem's dimensions, affine policy features, a quadratic
+/// baseline.
 ///
 /// Like C-REPS', only `initial_sigma` has units (those of theta, squared).
 ///
 /// ```
 /// use acps_learner::ccmaes::{CCmaesConfig, Rates};
+/// use acps_learner::creps::FeatureMap;
 ///
 /// let config = CCmaesConfig { initial_sigma: 0.1, ..CCmaesConfig::default() };
-/// // 20 parameters and a 2-D context: lambda = 4 + floor(3 ln 22) (1 + 2 * 2) = 49.
+/// // 20 parameters, a 2-D context and its 3 affine features: 4 + floor(3 ln 22) (2 * 3 - 1) = 49,
+/// // the original's 4 + floor(3 ln 22) (1 + 2 * 2).
 /// assert_eq!(config.population(20, 2), 49);
+/// // Its 6 quadratic features need more rollouts: 4 + 9 (2 * 6 - 1) = 103.
+/// let quadratic = CCmaesConfig { features: FeatureMap::Quadratic, ..CCmaesConfig::default() };
+/// assert_eq!(quadratic.population(20, 2), 103);
 /// assert_eq!(config.rates, Rates::default());
 /// ```
 #[derive(Clone, Debug)]
 pub struct CCmaesConfig {
-    /// Rollouts per generation, lambda; `None` for the original's
-    /// `4 + floor(3 ln(n_theta + n_s)) (1 + 2 n_s)`. At least enough for both regressions:
-    /// `lambda / 2 >= n_phi` (the mean's fit weights the best half) and `lambda > n_psi`.
+    /// Rollouts per generation, lambda; `None` for `4 + floor(3 ln(n_theta + n_s)) (2 n_phi - 1)`,
+    /// the original's `(1 + 2 n_s)` for its affine features (n_phi = n_s + 1) extended to any
+    /// features: the mean's regression weighs the best half of a generation, and with the
+    /// original's count for quadratic features it fitted noise (docs/CHOICES.md). At least
+    /// enough for both regressions: `lambda / 2 >= n_phi` and `lambda > n_psi`.
     pub population: Option<usize>,
     /// `sigma_0^2 C_0 = initial_sigma I` (C_0 = I), finite and > 0: the exploration variance
     /// around theta0, as C-REPS' setting of the same name.
@@ -107,11 +115,12 @@ impl Default for CCmaesConfig {
 
 impl CCmaesConfig {
     /// lambda for `n_theta` parameters and `n_s`-dimensional contexts: the setting, or the
-    /// original's default.
+    /// default for these features.
     pub fn population(&self, n_theta: usize, n_s: usize) -> usize {
         self.population.unwrap_or_else(|| {
             let n = (n_theta + n_s) as f64;
-            4 + (3.0 * n.ln()).floor() as usize * (1 + 2 * n_s)
+            let n_phi = self.features.dim(n_s);
+            4 + (3.0 * n.ln()).floor() as usize * (2 * n_phi).saturating_sub(1)
         })
     }
 }
@@ -313,6 +322,7 @@ pub struct CCmaesState {
     p_sigma: DVector<f64>,
     p_c: DVector<f64>,
     generations: u64,
+    feature_scale: DVector<f64>,
     rollouts: Vec<Rollout>,
     dropped: usize,
 }
@@ -348,7 +358,7 @@ impl CCmaes {
         if let Some(constant) = config.features.constant_index(context_dim) {
             weights.row_mut(constant).copy_from_slice(theta0);
         }
-        let generation = Generation::start(config.initial_sigma.sqrt(), theta0.len());
+        let generation = Generation::start(config.initial_sigma.sqrt(), theta0.len(), n_phi);
         let policy = generation
             .policy(weights)
             .expect("W is finite (theta0 was checked) and sigma_0^2 I with a checked initial_sigma");
@@ -467,6 +477,7 @@ impl CCmaes {
             p_sigma: g.p_sigma.clone(),
             p_c: g.p_c.clone(),
             generations: g.count,
+            feature_scale: g.feature_scale.clone(),
             rollouts: self.rollouts.clone(),
             dropped: self.dropped,
         }
@@ -489,9 +500,13 @@ impl CCmaes {
                 return refuse(what, size(matrix), expected);
             }
         }
-        for (what, path) in [("p_sigma", &state.p_sigma), ("p_c", &state.p_c)] {
-            if path.len() != n_theta {
-                return refuse(what, path.len().to_string(), n_theta.to_string());
+        for (what, vector, expected) in [
+            ("p_sigma", &state.p_sigma, n_theta),
+            ("p_c", &state.p_c, n_theta),
+            ("the feature scales", &state.feature_scale, n_phi),
+        ] {
+            if vector.len() != expected {
+                return refuse(what, vector.len().to_string(), expected.to_string());
             }
         }
         if state.rollouts.len() >= self.strategy.population {
@@ -520,6 +535,7 @@ impl CCmaes {
             p_sigma: state.p_sigma,
             p_c: state.p_c,
             count: state.generations,
+            feature_scale: state.feature_scale,
         };
         self.rollouts = state.rollouts;
         self.dropped = state.dropped;
