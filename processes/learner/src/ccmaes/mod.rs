@@ -89,8 +89,9 @@ pub struct CCmaesConfig {
     /// The context features of the baseline the advantages are taken from (default
     /// [`FeatureMap::Quadratic`], as BOLeRo's `baseline_degree = 2`).
     pub baseline: FeatureMap,
-    /// Ridge of both regressions, relative to each feature's own entry on the diagonal of the
-    /// normal matrix (so it does not depend on the features' units), within [0, 1]. The mean's
+    /// Ridge of both regressions, relative to each feature's scale (its entry on the diagonal of
+    /// the normal matrix; for the mean's regression the largest over the generations so far),
+    /// so it does not depend on the features' units; within [0, 1]. The mean's
     /// regression fits the change of W, so the ridge holds back directions of W that a
     /// generation's contexts barely determine: a selector that practises two nearby contexts
     /// would otherwise extrapolate their noise to every other. Default 1e-5, chosen on tuning
