@@ -272,9 +272,9 @@ fn alp_gmm(c: &mut Criterion) {
 }
 
 /// One C-CMA-ES generation at the PA-10 scale (21 parameters, polar-quadratic features of 2-D
-/// targets in [-5, -3]^2, the default population 4 + floor(3 ln 23) (1 + 2 * 2) = 49), beside
-/// `creps_update_n300_theta21_phi6`: C-REPS updates every 50 rollouts on 300, C-CMA-ES every 49
-/// on those 49.
+/// targets in [-5, -3]^2, the default population 4 + floor(3 ln 23) (2 * 6 - 1) = 103), beside
+/// `creps_update_n300_theta21_phi6`: C-REPS updates every 50 rollouts on 300, C-CMA-ES every 103
+/// on those 103.
 fn ccmaes_update(c: &mut Criterion) {
     let config = CCmaesConfig {
         features: FeatureMap::PolarQuadratic,
@@ -298,7 +298,7 @@ fn ccmaes_update(c: &mut Criterion) {
         let last = draw(&learner);
         (learner, last)
     };
-    c.bench_function("ccmaes_update_n49_theta21_phi6", |b| {
+    c.bench_function("ccmaes_update_n103_theta21_phi6", |b| {
         b.iter_batched(
             || before_update(&mut rng),
             |(mut learner, (s, theta, r))| black_box(learner.record(&s, &theta, r)),
