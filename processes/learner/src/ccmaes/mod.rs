@@ -399,13 +399,7 @@ impl CCmaes {
     /// # Panics
     /// If `context.len() != context_dim` or `theta.len() != n_theta`.
     pub fn record(&mut self, context: &[f64], theta: &[f64], reward: f64) -> Option<CCmaesReport> {
-        assert_eq!(
-            theta.len(),
-            self.policy.n_params(),
-            "theta has {} entries, n_theta is {}",
-            theta.len(),
-            self.policy.n_params()
-        );
+        self.policy.assert_params(theta);
         let finite = reward.is_finite()
             && theta.iter().all(|t| t.is_finite())
             && self.features(context).iter().all(|f| f.is_finite())

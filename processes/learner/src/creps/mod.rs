@@ -345,13 +345,7 @@ impl CReps {
             "task {task} out of range, n_tasks is {}",
             self.n_tasks
         );
-        assert_eq!(
-            theta.len(),
-            self.policy.n_params(),
-            "theta has {} entries, n_theta is {}",
-            theta.len(),
-            self.policy.n_params()
-        );
+        self.policy.assert_params(theta);
         let features = self.features(context);
         let finite = reward.is_finite()
             && theta.iter().all(|t| t.is_finite())

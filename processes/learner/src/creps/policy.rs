@@ -102,6 +102,20 @@ impl LinearGaussianPolicy {
         self.weights.ncols()
     }
 
+    /// Checks that `theta` has n_theta entries, as a learner's record does.
+    ///
+    /// # Panics
+    /// If it does not.
+    pub(crate) fn assert_params(&self, theta: &[f64]) {
+        assert_eq!(
+            theta.len(),
+            self.n_params(),
+            "theta has {} entries, n_theta is {}",
+            theta.len(),
+            self.n_params()
+        );
+    }
+
     /// The mean `W^T phi`.
     pub fn mean(&self, features: &DVector<f64>) -> DVector<f64> {
         self.weights.tr_mul(features)
