@@ -107,3 +107,29 @@ fn function_corners_fast_and_reward_heuristics_worse_than_random() {
     let diversity = ratio(Method::Diversity);
     assert!(diversity[index([-1.0, -1.0])] > diversity[index([1.0, 1.0])]);
 }
+
+#[test]
+fn c_cmaes_keeps_improving_on_bolero_s_sphere_where_c_reps_stalls() {
+    // BOLeRo's benchmark (issue 36): after 2,500 episodes of uniform contexts C-REPS stays at a
+    // cost of tens, contextual CMA-ES is below 2 in every run (run r of both has seed r: the same
+    // instance, paired).
+    let run = |learner| {
+        let request = ExperimentFile {
+            episodes: Some(2500),
+            learner: Some(learner),
+            ..options(3, &[Method::RandomContinuous])
+        };
+        paper::benchmark(acps_models::benchmark::Objective::Sphere, &request)
+            .run(&Progress::new("test", 0, true))
+            .unwrap()
+    };
+    let creps = run(acps_experiments::settings::LearnerName::CReps);
+    let ccmaes = run(acps_experiments::settings::LearnerName::CCmaes);
+    let finals = |s: &Summary| s.methods[Method::RandomContinuous.name()].final_scores.clone();
+    assert_eq!((finals(&creps).len(), finals(&ccmaes).len()), (3, 3));
+    for (r, (a, b)) in finals(&creps).iter().zip(finals(&ccmaes)).enumerate() {
+        let (a, b) = (a.unwrap(), b.unwrap());
+        // Scores are ln(mean cost).
+        assert!(a > 10f64.ln() && b < 2f64.ln(), "run {r}: C-REPS {a}, C-CMA-ES {b}");
+    }
+}
