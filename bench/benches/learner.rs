@@ -10,7 +10,7 @@
 //!
 //! The learner's own cost per rollout (ask, tell, the C-REPS updates, no simulation), as in
 //! `acps bench --env trivial`'s in-process rows, guards the transport's figures against
-//! regressions of the core: 2000 trivial rollouts with P = 1 and P = 64.
+//! regressions of the core: 2000 trivial rollouts with P = 1 and P = 64, and with C-CMA-ES at P = 64.
 //!
 //! Before measuring, the Newton steps per update of 200 seeded data sets of each scale are
 //! printed.
@@ -332,26 +332,36 @@ fn self_paced(c: &mut Criterion) {
     });
 }
 
-/// A learner of `acps bench`'s trivial problem (one context, one parameter, no evaluation, an
-/// update every 1000 rollouts on a window of 1000) for 2000 episodes with P = `in_flight`.
-fn trivial_learner(in_flight: usize) -> Learner {
+/// A learner of `acps bench`'s trivial problem (one context, one parameter, no evaluation) for
+/// 2000 episodes with P = `in_flight` and `search`.
+fn trivial_learner(in_flight: usize, search: SearchConfig) -> Learner {
     let problem = TrivialEnvironment::new().problem(Vec::new());
     let config = LearnerConfig {
         episodes: 2000,
         in_flight,
         eval_every: u64::MAX,
-        search: Some(SearchConfig::CReps(CRepsConfig::batches(1.0, 1000))),
+        search: Some(search),
         ..Default::default()
     };
     let selector = Box::new(RoundRobin::all(problem.training_contexts.clone()).unwrap());
     Learner::new(config, problem, selector).unwrap()
 }
 
+/// The learner's cost per rollout: C-REPS as `acps bench` runs it (an update every 1000
+/// rollouts on a window of 1000) at P = 1 and 64, and C-CMA-ES at its defaults (a generation
+/// of 10 here) at P = 64.
 fn learner_rollouts(c: &mut Criterion) {
-    for in_flight in [1, 64] {
-        c.bench_function(&format!("learner_2000_trivial_rollouts_p{in_flight}"), |b| {
+    let creps = || SearchConfig::CReps(CRepsConfig::batches(1.0, 1000));
+    let ccmaes = || SearchConfig::CCmaes(CCmaesConfig::default());
+    let cases: [(&str, usize, &dyn Fn() -> SearchConfig); 3] = [
+        ("learner_2000_trivial_rollouts_p1", 1, &creps),
+        ("learner_2000_trivial_rollouts_p64", 64, &creps),
+        ("learner_2000_trivial_rollouts_p64_ccmaes", 64, &ccmaes),
+    ];
+    for (name, in_flight, search) in cases {
+        c.bench_function(name, |b| {
             b.iter_batched(
-                || (trivial_learner(in_flight), TrivialEnvironment::new()),
+                || (trivial_learner(in_flight, search()), TrivialEnvironment::new()),
                 |(mut learner, mut environment)| {
                     run_in_process(&mut learner, &mut environment).unwrap();
                     black_box(learner.stats().updates)
