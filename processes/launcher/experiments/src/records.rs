@@ -17,6 +17,7 @@
 //!
 //! Empty CSV fields mean "no value" (an evaluation whose rollouts all failed).
 
+use crate::settings::LearnerName;
 use crate::summary::{RunResult, Summary, UserProblem};
 use acps_learner::SearchReport;
 use acps_learner::creps::{PolicySnapshot, PolicySnapshotRestoreError, Rejection, RestoredPolicy};
@@ -459,8 +460,11 @@ pub const UPDATES_HEADER: &str = "method,run,update,episode,samples,eta,eta_at_b
 pub const CCMAES_UPDATES_HEADER: &str = "method,run,update,episode,samples,sigma,p_sigma,p_c,h_sigma,mean_shift,condition,logdet_sigma,trace_sigma,rejected";
 
 fn updates_csv(summary: &Summary, csv: &mut dyn Write) -> std::io::Result<()> {
-    let ccmaes = summary.settings.get("ccmaes").is_some();
-    writeln!(csv, "{}", if ccmaes { CCMAES_UPDATES_HEADER } else { UPDATES_HEADER })?;
+    let header = match LearnerName::recorded(&summary.settings) {
+        LearnerName::CReps => UPDATES_HEADER,
+        LearnerName::CCmaes => CCMAES_UPDATES_HEADER,
+    };
+    writeln!(csv, "{header}")?;
     for (method, runs) in &summary.run_results {
         for (index, run) in runs.iter().enumerate() {
             for (update, record) in run.updates.iter().enumerate() {

@@ -113,6 +113,17 @@ impl LearnerName {
             LearnerName::CCmaes => "c-cmaes",
         }
     }
+
+    /// The learner of an experiment whose summary recorded `settings`: C-CMA-ES when they have
+    /// its settings (`ccmaes`, [`crate::paper::with_search`]), else C-REPS (also for a problem
+    /// without a policy, which has neither).
+    pub fn recorded(settings: &serde_json::Value) -> Self {
+        if settings.get("ccmaes").is_some() {
+            LearnerName::CCmaes
+        } else {
+            LearnerName::CReps
+        }
+    }
 }
 
 /// C-REPS sample memory.
@@ -863,6 +874,7 @@ impl ExperimentFile {
     pub(crate) fn check(&self) -> Result<Kind, Invalid> {
         let kind = self.kind()?;
         let listed = self.methods.as_deref().unwrap_or_default();
+        let learner = self.learner.unwrap_or(LearnerName::CReps);
         for set in self.set_keys() {
             let key = key(&set);
             if !key.applies.contains(&kind) {
@@ -877,10 +889,6 @@ impl ExperimentFile {
                     problem: Problem::NoMethod(key.methods),
                 });
             }
-        }
-        let learner = self.learner.unwrap_or(LearnerName::CReps);
-        for set in self.set_keys() {
-            let key = key(&set);
             if let Some(only) = key.learner.filter(|&only| only != learner) {
                 return Err(Invalid {
                     key: key.name,

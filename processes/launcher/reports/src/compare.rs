@@ -7,6 +7,7 @@
 //! here ([`signed_rank_counts`]).
 
 use acps_experiments::records::RUNS_CSV_HEADER;
+use acps_experiments::settings::LearnerName;
 use acps_experiments::summary::{UserProblem, lower_is_better, scores_are_distances};
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, StudentsT};
@@ -180,16 +181,6 @@ fn read_runs(dir: &Path) -> Result<Runs, CompareError> {
     Ok(runs)
 }
 
-/// The policy search of a run directory's settings: `c-cmaes` when they have C-CMA-ES', else
-/// `c-reps` (also for a problem without a policy, which has neither).
-fn learner(settings: &serde_json::Value) -> &'static str {
-    if settings.get("ccmaes").is_some() {
-        "c-cmaes"
-    } else {
-        "c-reps"
-    }
-}
-
 impl RunData {
     /// Reads `first` and any further directories that pair with it (same experiment, metric,
     /// seeds and length). A directory run with `retire = true` names its methods METHOD+retire,
@@ -225,8 +216,8 @@ impl RunData {
                 return Err(mismatch("training_episodes", a.to_string(), b.to_string()));
             }
             let retired = !theirs.settings["retire"].is_null();
-            let learner = learner(&theirs.settings);
-            let other_learner = (learner != self::learner(&head.settings)).then_some(learner);
+            let learner = LearnerName::recorded(&theirs.settings);
+            let other_learner = (learner != LearnerName::recorded(&head.settings)).then_some(learner.name());
             for (method, seeds) in read_runs(other)? {
                 let mut name = if retired { format!("{method}+retire") } else { method };
                 if let Some(learner) = other_learner {

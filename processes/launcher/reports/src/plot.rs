@@ -18,6 +18,7 @@
 //!   the initial throw.
 //! - `bench`, from `acps bench`: rollouts/s of every mode per environment, ratio above each bar.
 
+use acps_experiments::settings::LearnerName;
 use acps_experiments::summary::Summary;
 use acps_learner::SearchReport;
 use acps_models::robot::Robot;
@@ -804,10 +805,9 @@ impl Exploration {
 
     /// The picture of `methods`' updates.
     fn of(summary: &Summary, methods: UpdateTraces) -> Self {
-        let (right, what) = if summary.settings.get("ccmaes").is_some() {
-            (Right::Sigma, "step size sigma after each C-CMA-ES generation")
-        } else {
-            (Right::Ess, "effective sample size after each C-REPS update")
+        let (right, what) = match LearnerName::recorded(&summary.settings) {
+            LearnerName::CCmaes => (Right::Sigma, "step size sigma after each C-CMA-ES generation"),
+            LearnerName::CReps => (Right::Ess, "effective sample size after each C-REPS update"),
         };
         Self {
             caption: format!(

@@ -4,7 +4,7 @@
 use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
 
 use super::{CCmaesReport, Strategy};
-use crate::creps::{LinearGaussianPolicy, PolicyCreateError, Rejection};
+use crate::creps::{LinearGaussianPolicy, PolicyCreateError, Rejection, scale_rows};
 
 /// The step size, the covariance's shape and the two evolution paths, after `count`
 /// generations.
@@ -111,11 +111,8 @@ impl Generation {
         }
 
         let residuals = residuals / self.sigma;
-        let mut weighted = residuals.clone();
-        for (i, w) in weights.iter().enumerate() {
-            weighted.row_mut(i).scale_mut(*w);
-        }
-        let rank_mu = residuals.tr_mul(&weighted);
+        let weight_vector = DVector::from_column_slice(&weights);
+        let rank_mu = residuals.tr_mul(&scale_rows(&residuals, &weight_vector));
         let lost = if h_sigma { 0.0 } else { c_c * (2.0 - c_c) };
         let (c_1, c_mu) = (strategy.c_1, strategy.c_mu);
         let shape = &self.shape * (1.0 - c_1 - c_mu + c_1 * lost) + &p_c * p_c.transpose() * c_1 + rank_mu * c_mu;
@@ -215,10 +212,7 @@ fn rank_weights(advantages: &[f64], ranked: &[f64]) -> Vec<f64> {
 /// the larger `scale` where given, times `ridge` (Marquardt's scaling); `None` when that matrix
 /// is not positive definite.
 fn ridge_solve(x: &DMatrix<f64>, weights: &[f64], y: &DMatrix<f64>, ridge: f64, scale: &[f64]) -> Option<DMatrix<f64>> {
-    let mut weighted = x.clone();
-    for (i, w) in weights.iter().enumerate() {
-        weighted.row_mut(i).scale_mut(*w);
-    }
+    let weighted = scale_rows(x, &DVector::from_column_slice(weights));
     let mut normal = weighted.tr_mul(x);
     let mean_diagonal = normal.trace() / normal.nrows() as f64;
     for i in 0..normal.nrows() {

@@ -305,10 +305,12 @@ pub struct CCmaesReport {
     pub rejected: Option<Rejection>,
 }
 
-/// One rollout of the current generation.
+/// One rollout of the current generation, its context as the policy's and the baseline's
+/// features (computed once, when it is recorded).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct Rollout {
-    context: Vec<f64>,
+    features: Vec<f64>,
+    baseline: Vec<f64>,
     theta: Vec<f64>,
     reward: f64,
 }
@@ -400,16 +402,18 @@ impl CCmaes {
     /// If `context.len() != context_dim` or `theta.len() != n_theta`.
     pub fn record(&mut self, context: &[f64], theta: &[f64], reward: f64) -> Option<CCmaesReport> {
         self.policy.assert_params(theta);
+        let features = self.features(context);
+        let baseline = self.config.baseline.apply(context);
         let finite = reward.is_finite()
             && theta.iter().all(|t| t.is_finite())
-            && self.features(context).iter().all(|f| f.is_finite())
-            && self.config.baseline.apply(context).iter().all(|f| f.is_finite());
+            && features.iter().chain(&baseline).all(|f| f.is_finite());
         if !finite {
             self.dropped += 1;
             return None;
         }
         self.rollouts.push(Rollout {
-            context: context.to_vec(),
+            features: features.data.into(),
+            baseline: baseline.data.into(),
             theta: theta.to_vec(),
             reward,
         });
@@ -511,15 +515,14 @@ impl CCmaes {
                 format!("below the population {}", self.strategy.population),
             );
         }
-        if let Some(bad) = state
-            .rollouts
-            .iter()
-            .find(|r| r.context.len() != self.context_dim || r.theta.len() != n_theta)
-        {
+        let n_psi = self.config.baseline.dim(self.context_dim);
+        let lengths = |r: &Rollout| format!("{}, {} and {}", r.features.len(), r.baseline.len(), r.theta.len());
+        let expected = format!("{n_phi}, {n_psi} and {n_theta}");
+        if let Some(bad) = state.rollouts.iter().find(|r| lengths(r) != expected) {
             return refuse(
-                "a rollout's context and theta lengths",
-                format!("{} and {}", bad.context.len(), bad.theta.len()),
-                format!("{} and {n_theta}", self.context_dim),
+                "a rollout's feature, baseline feature and theta lengths",
+                lengths(bad),
+                expected,
             );
         }
         let covariance = &state.shape * (state.sigma * state.sigma);
@@ -544,16 +547,13 @@ impl CCmaes {
     /// One generation's update on `rollouts`; a rejected one keeps the policy, paths and step
     /// size.
     fn update(&mut self, rollouts: &[Rollout]) -> CCmaesReport {
-        let rows = |map: &FeatureMap| {
-            let mut matrix = DMatrix::zeros(rollouts.len(), map.dim(self.context_dim));
-            for (i, r) in rollouts.iter().enumerate() {
-                matrix.row_mut(i).tr_copy_from(&map.apply(&r.context));
-            }
-            matrix
+        let rows = |row: fn(&Rollout) -> &[f64]| {
+            let width = rollouts.first().map_or(0, |r| row(r).len());
+            DMatrix::from_fn(rollouts.len(), width, |i, j| row(&rollouts[i])[j])
         };
-        let phi = rows(&self.config.features);
-        let psi = rows(&self.config.baseline);
-        let thetas = DMatrix::from_fn(rollouts.len(), self.policy.n_params(), |i, j| rollouts[i].theta[j]);
+        let phi = rows(|r| &r.features);
+        let psi = rows(|r| &r.baseline);
+        let thetas = rows(|r| &r.theta);
         let returns: Vec<f64> = rollouts.iter().map(|r| r.reward).collect();
         let outcome = self.generation.next(
             &self.strategy,

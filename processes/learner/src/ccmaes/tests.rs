@@ -169,6 +169,22 @@ fn a_state_of_other_dimensions_is_refused_by_name() {
     let error = other.restore(state).unwrap_err().to_string();
     assert!(error.contains("W is 2 x 4, this learner's is 2 x 5"), "{error}");
     assert_eq!(other.state(), before);
+    // The rollouts of a generation under way were recorded with a quadratic baseline (3
+    // features of a 1-D context), this learner's is affine (2).
+    let mut quadratic = CCmaes::new(CCmaesConfig::default(), 1, &[0.0; 4]).unwrap();
+    quadratic.record(&[0.5], &[0.0; 4], 1.0);
+    let affine = CCmaesConfig {
+        baseline: FeatureMap::Affine,
+        ..CCmaesConfig::default()
+    };
+    let mut other = CCmaes::new(affine, 1, &[0.0; 4]).unwrap();
+    let error = other.restore(quadratic.state()).unwrap_err().to_string();
+    assert!(
+        error.contains(
+            "a rollout's feature, baseline feature and theta lengths is 2, 3 and 4, this learner's is 2, 2 and 4"
+        ),
+        "{error}"
+    );
 }
 
 #[test]

@@ -400,7 +400,7 @@ impl LinearGaussianPolicy {
 }
 
 /// `diag(d) m`.
-fn scale_rows(m: &DMatrix<f64>, d: &DVector<f64>) -> DMatrix<f64> {
+pub(crate) fn scale_rows(m: &DMatrix<f64>, d: &DVector<f64>) -> DMatrix<f64> {
     let mut scaled = m.clone();
     for (mut row, &di) in scaled.row_iter_mut().zip(d.iter()) {
         row *= di;
