@@ -675,4 +675,14 @@ fn the_learner_setting_chooses_c_cmaes_and_refuses_the_other_learners_keys() {
         error.contains("--population must be an integer in 2..=100000"),
         "{error}"
     );
+    // A learner that does not exist is refused with the file's line and the two there are.
+    let text = "experiment = \"grid\"\nlearner = \"cmaes\"\n";
+    let error = LoadedFile::parse(Path::new("e.toml"), text.into())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        error.contains("e.toml:2: learner must be c-reps or c-cmaes, got \"cmaes\""),
+        "{error}"
+    );
 }
