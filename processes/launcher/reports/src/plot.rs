@@ -217,8 +217,17 @@ fn throws_at_targets(summary: &Summary) -> bool {
 
 /// What the recorded settings say about how the scores came about, for a title: the throws'
 /// simulator, the context dimensions of Section 5.1.3 or the noise of Section 4's model (what
-/// tells Fig. 6's and Fig. 2's panels apart).
+/// tells Fig. 6's and Fig. 2's panels apart), and C-CMA-ES when it learned instead of C-REPS.
 fn setting_note(summary: &Summary) -> Option<String> {
+    let note = experiment_note(summary);
+    match LearnerName::recorded(&summary.settings) {
+        LearnerName::CReps => note,
+        LearnerName::CCmaes => Some(note.map_or("C-CMA-ES".into(), |note| format!("{note}, C-CMA-ES"))),
+    }
+}
+
+/// What distinguishes the run among its experiment's: the simulator, n_s or the model's noise.
+fn experiment_note(summary: &Summary) -> Option<String> {
     let settings = &summary.settings;
     if let Some(sim) = settings["sim"].as_str() {
         return Some(format!("{sim} simulator"));
@@ -2498,6 +2507,13 @@ mod tests {
         });
         save(&LearningCurves(&user), &dir, "unitless").unwrap_or_else(|e| panic!("{e}"));
         assert!(drawn(&dir, "unitless").contains("best policy (2.62)"));
+        // A run of the other learner says so.
+        let mut ccmaes = grid_like();
+        ccmaes.settings["ccmaes"] = serde_json::json!({ "population": null });
+        save(&LearningCurves(&ccmaes), &dir, "ccmaes").unwrap_or_else(|e| panic!("{e}"));
+        let (_, texts) = svg_texts(&drawn(&dir, "ccmaes"));
+        let title = "grid, analytic simulator, C-CMA-ES: mean ± SEM of 20 runs per method";
+        assert!(texts.iter().any(|t| t.content == title), "{title:?} not drawn");
     }
 
     #[test]
