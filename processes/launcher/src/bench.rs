@@ -680,8 +680,7 @@ fn relay_command(
         config_file: None,
     };
     let listener = acps_relay::Listener::open(name, &net).with_context(|| format!("listening at {endpoint}"))?;
-    let exe = std::env::current_exe().context("finding this executable")?;
-    let mut command = std::process::Command::new(exe);
+    let mut command = acps_experiments::workers::this_program();
     command.args([
         "relay",
         "--connect",

@@ -63,7 +63,7 @@ fn continue_hint(resume: Option<&str>) -> String {
 /// The command line this process was started with, with `--resume DIR` in place of any
 /// `--resume` it had: the exact command that continues the run writing into `dir`.
 fn continue_command(dir: &Path) -> String {
-    resumed(std::env::args_os().map(|a| a.to_string_lossy().into_owned()), dir)
+    resumed(crate::command_line().iter().cloned(), dir)
 }
 
 /// The command `args` (the program first) with `--resume dir` in place of any `--resume`, as a

@@ -458,6 +458,11 @@ struct RunState {
 
 impl RunState {
     /// Task `id`, if it is pending.
+    fn pending(&self, id: u64) -> Option<&Pending> {
+        let index = usize::try_from(id.checked_sub(self.next_to_consume)?).ok()?;
+        self.pending.get(index)
+    }
+
     fn pending_mut(&mut self, id: u64) -> Option<&mut Pending> {
         let index = usize::try_from(id.checked_sub(self.next_to_consume)?).ok()?;
         self.pending.get_mut(index)
@@ -738,6 +743,12 @@ impl Learner {
             self.consume(pending, outcome);
         }
         Ok(())
+    }
+
+    /// Whether [`tell`](Self::tell) takes an outcome of `task_id` now: the task exists and no
+    /// outcome of it has arrived. Lets a caller check a batch of outcomes before telling any.
+    pub fn awaits(&self, task_id: u64) -> bool {
+        self.run.pending(task_id).is_some_and(|p| p.arrived.is_none())
     }
 
     /// True when every training episode and every evaluation has been consumed.

@@ -233,7 +233,10 @@ impl Experiment {
             .collect()
     }
 
-    fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, RunError> {
+    /// The learner of `selector` with `seed` (run `seed - base_seed` of the experiment) and its
+    /// environment: what [`run`](Self::run) runs as that job, for a caller that drives the
+    /// learner itself.
+    pub fn job(&self, selector: &SelectorConfig, seed: u64) -> Result<Job, RunError> {
         let Instance {
             problem,
             environment,

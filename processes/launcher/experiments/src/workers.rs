@@ -5,8 +5,10 @@ use acps_shared::{Environment, EnvironmentSpec, Serves};
 use acps_worker::{EnvironmentFactory, EnvironmentProvideError};
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
-use std::path::Path;
+use std::ffi::OsString;
+use std::path::PathBuf;
 use std::process::Command;
+use std::sync::OnceLock;
 
 /// Builds environments with `acps_models::environment::build` and keeps them for later tasks:
 /// it serves any spec of the project's models, and the worker checks that what it built is
@@ -32,15 +34,37 @@ impl EnvironmentFactory for ModelFactory {
     }
 }
 
-/// The command of started worker `index`: `acps worker` of this executable, with a queue of
+/// How this program starts itself again, when it is not its own executable: the Python
+/// package's `acps` runs inside the interpreter, so its workers are `python -m acps worker`.
+static THIS_PROGRAM: OnceLock<Vec<OsString>> = OnceLock::new();
+
+/// Start this program's own workers and relays as `program` (its first element the
+/// executable, the rest arguments before the subcommand) instead of this executable. Takes
+/// effect once per process; returns false when a program was set already.
+pub fn set_this_program(program: Vec<OsString>) -> bool {
+    THIS_PROGRAM.set(program).is_ok()
+}
+
+/// A command that runs this program (`acps`), ready for a subcommand's arguments.
+pub fn this_program() -> Command {
+    match THIS_PROGRAM.get().and_then(|p| p.split_first()) {
+        Some((executable, arguments)) => {
+            let mut command = Command::new(executable);
+            command.args(arguments);
+            command
+        }
+        // A missing executable fails the spawn, which names it.
+        None => Command::new(std::env::current_exe().unwrap_or_else(|_| PathBuf::from("acps"))),
+    }
+}
+
+/// The command of started worker `index`: `acps worker` of this program, with a queue of
 /// `queue_depth` tasks, which joins the run the fleet names in its environment. `workers` is the
 /// size of the fleet, which decides whether workers poll before they block.
 pub fn command(queue_depth: usize, workers: usize) -> impl Fn(usize) -> Command {
-    let exe = std::env::current_exe();
     let spin = acps_fleet::processes::spin(workers).as_micros().to_string();
     move |index| {
-        // A missing executable fails the spawn, which names it.
-        let mut command = Command::new(exe.as_deref().unwrap_or(Path::new("acps")));
+        let mut command = this_program();
         command.args([
             "worker",
             "--queue-depth",

@@ -1,7 +1,8 @@
-//! The Python worker package (`processes/worker/python`) from `cargo test`: a virtual environment
-//! in the build directory with the package installed from its sources (pip fetches iceoryx2 from
-//! PyPI once), its unittest suite run against this build's `acps`, and its policy reader checked
-//! against the learner's own numbers.
+//! The Python packages from `cargo test`: a virtual environment in the build directory with the
+//! worker package (`processes/worker/python`) installed from its sources (pip fetches iceoryx2
+//! from PyPI once), its unittest suite run against this build's `acps`, and its policy reader
+//! checked against the learner's own numbers; and the `acps` package (`python/`) built from this
+//! checkout by maturin, with its own suite.
 
 use crate::problems::{self, LONG_BOWL, bowl_toml, bowl_worker};
 use crate::{run_name, succeeded, temp_dir};
@@ -25,8 +26,12 @@ fn target_dir() -> PathBuf {
         .to_path_buf()
 }
 
-/// A hash of the package's sources (names and contents): the environment is reinstalled when
-/// it changes.
+/// What the venv needs beside the worker package to build the acps package without build
+/// isolation (so that rebuilds reuse one interpreter path and the workspace's artifacts).
+const BUILD_REQUIREMENTS: [&str; 2] = ["maturin>=1.16,<2", "numpy"];
+
+/// A hash of the worker package's sources (names and contents) and the build requirements:
+/// the environment is reinstalled when it changes.
 fn sources_hash() -> u64 {
     let package = package();
     let mut files = vec![package.join("pyproject.toml")];
@@ -37,7 +42,8 @@ fn sources_hash() -> u64 {
         .collect();
     modules.sort();
     files.extend(modules);
-    files.iter().fold(acps_shared::FNV_OFFSET, |hash, file| {
+    let requirements = acps_shared::fnv1a(acps_shared::FNV_OFFSET, BUILD_REQUIREMENTS.concat().as_bytes());
+    files.iter().fold(requirements, |hash, file| {
         let name = file.file_name().expect("a file name").to_string_lossy();
         let hash = acps_shared::fnv1a(hash, name.as_bytes());
         acps_shared::fnv1a(hash, &std::fs::read(file).expect("a readable source"))
@@ -83,14 +89,16 @@ fn python() -> &'static Path {
             );
             let output = Command::new(&python)
                 .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check"])
-                // With the examples' MuJoCo, which the test of the MuJoCo example needs.
+                // With the examples' MuJoCo, which the test of the MuJoCo example needs, and
+                // what builds the acps package (`acps_python`).
                 .arg(format!("{}[examples]", package().display()))
+                .args(BUILD_REQUIREMENTS)
                 .output()
                 .expect("pip runs");
             assert!(
                 output.status.success(),
                 "pip could not install the Python worker package with its examples' dependencies \
-                 (iceoryx2, mujoco; is PyPI reachable from this machine?): {}",
+                 and maturin (iceoryx2, mujoco, maturin; is PyPI reachable from this machine?): {}",
                 show(&output)
             );
             std::fs::write(&stamp, &wanted).expect("writing the venv's stamp");
@@ -98,6 +106,55 @@ fn python() -> &'static Path {
         lock.unlock().expect("unlocking the venv");
         python
     })
+}
+
+/// The venv's Python with the `acps` package of this checkout installed: built by maturin
+/// into this build directory (the workspace's own artifacts, so only the extension module
+/// compiles), once per test process, since its Rust sources are the whole workspace.
+fn acps_python() -> &'static Path {
+    static INSTALLED: OnceLock<&'static Path> = OnceLock::new();
+    INSTALLED.get_or_init(|| {
+        let python = python();
+        let lock = std::fs::File::create(target_dir().join("python-venv.lock")).expect("the venv's lock file");
+        lock.lock().expect("locking the venv");
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        run(
+            "building and installing the acps package (pip install ./python)",
+            Command::new(python)
+                .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check"])
+                .args(["--no-build-isolation", "--no-deps", "--force-reinstall"])
+                .arg(root.join("python"))
+                .env("CARGO_TARGET_DIR", target_dir())
+                // pip runs the venv's `maturin` by name.
+                .env("PATH", on_path(python.parent().expect("the venv's bin/"))),
+        );
+        lock.unlock().expect("unlocking the venv");
+        python
+    })
+}
+
+/// `PATH` with `dir` first.
+fn on_path(dir: &Path) -> std::ffi::OsString {
+    let rest = std::env::var_os("PATH").unwrap_or_default();
+    std::env::join_paths(std::iter::once(dir.to_path_buf()).chain(std::env::split_paths(&rest)))
+        .expect("a PATH without separators in its parts")
+}
+
+#[test]
+fn python_package_unittests_pass() {
+    // From the tests' own directory, so that `import acps` is the installed package and not
+    // the sources beside it (which lack the built extension).
+    let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../python/tests");
+    let output = Command::new(acps_python())
+        .args(["-m", "unittest", "discover", "-v", "-s", ".", "-t", "."])
+        .current_dir(tests)
+        .output()
+        .expect("the venv's python runs");
+    assert!(
+        output.status.success(),
+        "the acps package's tests failed: {}",
+        show(&output)
+    );
 }
 
 #[test]

@@ -1,0 +1,90 @@
+//! `acps`: the command line of Active Contextual Policy Search as a function, [`main`], for
+//! the `acps` executable and the Python package's `acps` command. Parse (`cli`), then carry
+//! the command out (`commands`) with the libraries: acps-experiments runs experiments and
+//! writes run directories, acps-reports draws and compares them. Programs that want acps as a
+//! library use those crates, not this one.
+#![warn(missing_docs)]
+
+mod bench;
+mod cli;
+mod commands;
+mod evaluate;
+
+use acps_wire::ipc;
+use clap::Parser;
+use cli::Cli;
+use std::ffi::OsString;
+use std::sync::OnceLock;
+
+/// Log to stderr at the level -v asks for, or as ACPS_LOG says; warnings by default.
+fn init_logging(verbose: u8) {
+    let level = match verbose {
+        0 => "warn",
+        1 => "info",
+        2 => "debug",
+        _ => "trace",
+    };
+    // Zenoh's own notes (its settings, reconnections) say nothing an acps user acts on: acps
+    // reports what matters in its words.
+    let zenoh = [
+        "zenoh",
+        "zenoh_transport",
+        "zenoh_link_commons",
+        "zenoh_link_tcp",
+        "zenoh_config",
+    ]
+    .map(|target| format!(",{target}=error"))
+    .concat();
+    let filter = tracing_subscriber::EnvFilter::try_from_env("ACPS_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{level}{zenoh}")));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init()
+        // A second command in one process (the Python package's) keeps the first one's logger.
+        .ok();
+    ipc::quiet_iceoryx2_log();
+}
+
+/// The command line [`main`] runs.
+static COMMAND_LINE: OnceLock<Vec<String>> = OnceLock::new();
+
+/// The command line [`main`] runs, the program first.
+fn command_line() -> &'static [String] {
+    COMMAND_LINE.get().map_or(&[], Vec::as_slice)
+}
+
+/// Run the command line `args` (the program's name first, as `std::env::args_os` gives it) and
+/// say how it ended, as the process's exit status: 0 done, 2 an error (printed to stderr), 130
+/// stopped by Ctrl-C. Help and usage errors print and exit the process as clap does.
+///
+/// ```no_run
+/// let status = acps::main(["acps", "experiment", "function", "--runs", "1"]);
+/// assert_eq!(status, 0);
+/// ```
+pub fn main<I, T>(args: I) -> u8
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let args: Vec<OsString> = args.into_iter().map(Into::into).collect();
+    // Kept for the command that continues an interrupted run: it is what the user typed (the
+    // Python package's `acps` runs inside an interpreter, whose own arguments differ).
+    let _ = COMMAND_LINE.set(args.iter().map(|a| a.to_string_lossy().into_owned()).collect());
+    let cli = Cli::parse_from(args);
+    init_logging(cli.verbosity());
+    match commands::run(cli.command) {
+        Ok(()) => 0,
+        Err(error) => match error.downcast_ref::<commands::Stopped>() {
+            Some(stopped @ (commands::Stopped::Interrupted { .. } | commands::Stopped::RelayInterrupted)) => {
+                eprintln!("{stopped}");
+                130
+            }
+            _ => {
+                eprintln!("error: {error:#}");
+                2
+            }
+        },
+    }
+}

@@ -1,0 +1,5 @@
+"""``python -m acps``: the acps command line."""
+
+from acps._cli import main
+
+main()

@@ -1,0 +1,62 @@
+"""Type stubs of the extension module ``acps._native`` (python/src)."""
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+class AcpsError(Exception):
+    """Every error acps raises."""
+
+class SettingsError(AcpsError):
+    """Settings acps refuses: the message names the key, where it stands and its range."""
+
+class TellError(AcpsError):
+    """Outcomes the learner cannot take; nothing of the batch was taken."""
+
+class CheckpointError(AcpsError):
+    """A checkpoint that cannot be written, read or applied."""
+
+def cli(argv: list[str], program: list[str]) -> int:
+    """Run the acps command line ``argv``; ``program`` is how it starts itself again."""
+
+class NativeLearner:
+    """A learner of one (method, run) of an experiment."""
+
+    @staticmethod
+    def from_path(path: str, method: str | None, run: int) -> NativeLearner: ...
+    @staticmethod
+    def from_json(json: str, origin: str, method: str | None, run: int) -> NativeLearner: ...
+    def ask(
+        self, n: int
+    ) -> tuple[
+        npt.NDArray[np.uint64],
+        npt.NDArray[np.uint8],
+        npt.NDArray[np.uint64],
+        npt.NDArray[np.float64],
+        npt.NDArray[np.float64],
+    ]: ...
+    def tell(
+        self,
+        ids: npt.NDArray[np.uint64],
+        rewards: npt.NDArray[np.float64],
+        scores: npt.NDArray[np.float64],
+        ok: npt.NDArray[np.bool_] | None = None,
+    ) -> None: ...
+    @property
+    def done(self) -> bool: ...
+    @property
+    def episodes(self) -> tuple[int, int]: ...
+    @property
+    def tasks_in_flight(self) -> int: ...
+    @property
+    def evaluations(self) -> list[tuple[int, float | None, int]]: ...
+    @property
+    def identity(self) -> tuple[str, str, int, int]: ...
+    @property
+    def sizes(self) -> tuple[int, int, int]: ...
+    def contexts(self, test: bool) -> npt.NDArray[np.float64]: ...
+    def mean(self, contexts: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    def covariance(self) -> npt.NDArray[np.float64]: ...
+    def save(self, path: str) -> None: ...
+    def restore(self, path: str) -> None: ...
