@@ -8,6 +8,7 @@ run's end; the rate is their total rollouts over the longest of those times.
 
     python bench.py                                  # trivial rollouts, W = 1
     python bench.py --workers 1 2 --rollout-us 1000  # ~1 ms rollouts at W = 1 and W = 2
+    python bench.py --batch                          # batch workers (numpy), trivial rollouts
 
 ``--acps`` (default ``$ACPS_BIN``, else the worktree's ``target/release/acps``) is the binary.
 """
@@ -23,13 +24,17 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import acps_worker
+
+if TYPE_CHECKING:
+    from acps_worker.batch import TaskBatch
 
 ROOT = Path(__file__).resolve().parents[3]
 
 
-def worker(run: str, identity: str, rollout_us: int, queue_depth: int) -> None:
+def worker(run: str, identity: str, rollout_us: int, queue_depth: int, batch: bool) -> None:
     """One worker process: serve ``run`` and print its report as JSON."""
     name, settings, parameters = json.loads(identity)
     environment = acps_worker.Environment(name, int(settings), tuple(parameters))
@@ -43,7 +48,22 @@ def worker(run: str, identity: str, rollout_us: int, queue_depth: int) -> None:
                 pass
         return -abs(task.theta[0]), 1.0 + abs(task.theta[0])
 
-    report = acps_worker.serve(rollout, run, environment=environment, queue_depth=queue_depth)
+    def batch_rollout(tasks: TaskBatch) -> tuple[Any, Any]:
+        import numpy as np
+
+        if spin:
+            end = clock() + spin * len(tasks)
+            while clock() < end:
+                pass
+        first = np.abs(tasks.thetas[:, 0])
+        return -first, 1.0 + first
+
+    if batch:
+        report = acps_worker.serve(
+            run=run, batch_rollout=batch_rollout, environment=environment, queue_depth=queue_depth
+        )
+    else:
+        report = acps_worker.serve(rollout, run, environment=environment, queue_depth=queue_depth)
     print(
         json.dumps(
             {"exit": report.exit.value, "rollouts": report.rollouts, "seconds": report.seconds}
@@ -51,7 +71,9 @@ def worker(run: str, identity: str, rollout_us: int, queue_depth: int) -> None:
     )
 
 
-def measure(acps: str, workers: int, episodes: int, rollout_us: int, queue_depth: int) -> float:
+def measure(
+    acps: str, workers: int, episodes: int, rollout_us: int, queue_depth: int, batch: bool
+) -> float:
     """Rollouts per second of ``workers`` Python workers; also prints the row."""
     run = f"bench-{os.getpid()}-{workers}"
     with tempfile.TemporaryDirectory() as out:
@@ -114,6 +136,7 @@ def measure(acps: str, workers: int, episodes: int, rollout_us: int, queue_depth
                     identity,
                     str(rollout_us),
                     str(queue_depth),
+                    "batch" if batch else "one",
                 ],
                 stdout=subprocess.PIPE,
                 text=True,
@@ -127,7 +150,8 @@ def measure(acps: str, workers: int, episodes: int, rollout_us: int, queue_depth
         seconds = float(max(r["seconds"] for r in reports))
         rate = rollouts / seconds
         print(
-            f"W={workers} rollout={rollout_us} us queue_depth={queue_depth}: {rollouts} rollouts in "
+            f"W={workers} {'batch ' if batch else ''}rollout={rollout_us} us "
+            f"queue_depth={queue_depth}: {rollouts} rollouts in "
             f"{seconds:.3f} s = {rate:,.0f} rollouts/s",
             flush=True,
         )
@@ -147,7 +171,8 @@ def measure(acps: str, workers: int, episodes: int, rollout_us: int, queue_depth
 def main() -> None:
     """Parse the options and run the rows."""
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
-        worker(sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5]))
+        batch = sys.argv[6] == "batch"
+        worker(sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), batch)
         return
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
@@ -161,10 +186,14 @@ def main() -> None:
     parser.add_argument(
         "--queue-depth", type=int, default=64, help="tasks each worker keeps asked for or queued"
     )
+    parser.add_argument(
+        "--batch", action="store_true", help="batch workers: one numpy call per batch of tasks"
+    )
     args = parser.parse_args()
     episodes = args.episodes or (2000 if args.rollout_us >= 100 else 100_000)
     rates = [
-        measure(args.acps, w, episodes, args.rollout_us, args.queue_depth) for w in args.workers
+        measure(args.acps, w, episodes, args.rollout_us, args.queue_depth, args.batch)
+        for w in args.workers
     ]
     if len(rates) > 1:
         print(f"ratio W={args.workers[-1]} / W={args.workers[0]}: {rates[-1] / rates[0]:.2f}")

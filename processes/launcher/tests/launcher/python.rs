@@ -267,6 +267,16 @@ fn python_bowl_workers_give_rust_bowl_workers_bits() {
         String::from_utf8_lossy(&python),
         String::from_utf8_lossy(&rust)
     );
+    // Batch workers (numpy, one call per batch), with a window wide enough for batches.
+    let wide = ["--in-flight", "32"];
+    let rust = bowl_summary(&format!("'{}'", bowl_worker().display()), "bowl-rust-wide", &dir, &wide);
+    let batch = bowl_summary(&format!("{} --batch", python_bowl()), "bowl-batch", &dir, &wide);
+    assert!(
+        batch == rust,
+        "summary.json of 2 Python batch workers differs from 2 Rust workers':\n{}\n{}",
+        String::from_utf8_lossy(&batch),
+        String::from_utf8_lossy(&rust)
+    );
 }
 
 #[test]

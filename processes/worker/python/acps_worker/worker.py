@@ -21,13 +21,16 @@ from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import iceoryx2 as iox2
 
 from . import _ipc, _wire
 from .environment import Environment
 from .errors import NoLearnerError, ProtocolError, RefusedError
+
+if TYPE_CHECKING:
+    from .batch import BatchRollout
 
 log = logging.getLogger("acps_worker")
 
@@ -263,9 +266,10 @@ Rollout = Callable[[Task], RolloutResult]
 
 
 def serve(
-    rollout: Rollout,
+    rollout: Rollout | None = None,
     run: str | None = None,
     *,
+    batch_rollout: BatchRollout | None = None,
     environment: Environment | None = None,
     queue_depth: int = _wire.DEFAULT_QUEUE_DEPTH,
     in_flight: int | None = None,
@@ -281,7 +285,16 @@ def serve(
 
     ``rollout(task)`` returns ``(reward, score)``, optionally with a third value, a sequence
     of up to 16 diagnostics; ``None``, an exception or non-finite numbers make a failed
-    outcome (the first exception is logged with its traceback). ``environment`` is the
+    outcome (the first exception is logged with its traceback).
+
+    ``batch_rollout(batch)`` instead (vectorised simulators; needs numpy) receives every task
+    the worker holds that shares the first one's shapes, as a :class:`TaskBatch` of numpy
+    arrays, and returns arrays ``(rewards, scores)`` or ``(rewards, scores, ok)``; an exception
+    or a result of the wrong shape fails the whole batch, a false ``ok`` or a non-finite number
+    its task. A batch holds at most 32 tasks (the outcomes of one request) and at most what the
+    worker keeps queued (``queue_depth``), and the learner's window (its ``in_flight``) bounds
+    how many tasks exist at once: a batch worker wants a ``queue_depth`` of at least the
+    window's share of each worker. ``environment`` is the
     identity this worker serves (default :meth:`Environment.unnamed`, which matches only
     problems that name none). ``queue_depth`` (1..=128) tasks are kept asked for or queued: the
     worker's queue, not the learner's window (``in_flight``, its old name, still works with a
@@ -293,6 +306,8 @@ def serve(
     :class:`AcpsWorkerError` when iceoryx2 fails. Every iceoryx2 resource is released before
     it returns or raises.
     """
+    if (rollout is None) == (batch_rollout is None):
+        raise TypeError("serve needs exactly one of rollout and batch_rollout")
     run = run if run is not None else os.environ.get(_wire.RUN_ENV)
     if not run:
         raise ValueError(f"no run to join: pass run=NAME or set {_wire.RUN_ENV}")
@@ -319,6 +334,7 @@ def serve(
     session = _Session(
         run=run,
         rollout=rollout,
+        batch_rollout=batch_rollout,
         environment=environment if environment is not None else Environment.unnamed(),
         in_flight=queue_depth,
         name=name,
@@ -340,7 +356,8 @@ class _Session:
         self,
         *,
         run: str,
-        rollout: Rollout,
+        rollout: Rollout | None,
+        batch_rollout: BatchRollout | None,
         environment: Environment,
         in_flight: int,
         name: str,
@@ -351,6 +368,7 @@ class _Session:
         """A worker of ``run`` that is yet to open anything (see :func:`serve`)."""
         self.run = run
         self.rollout = rollout
+        self.batch_rollout = batch_rollout
         self.environment = environment
         self.in_flight = in_flight
         self.name = name
@@ -368,6 +386,7 @@ class _Session:
         self.rollout_seconds = 0.0
         self.joined: float | None = None
         self.logged_failure = False
+        self.batch_slowest_us = 0
 
     def report(self, exit: Exit) -> Report:
         """What the worker did, ending for ``exit``."""
@@ -460,7 +479,7 @@ class _Session:
         self.learner_pid = _ipc.alive_learner_pid(self.config)
         return self.learner_pid is not None
 
-    def failure(self, task: Task, why: str, exc: bool = False) -> None:
+    def failure(self, task_id: int, job: int, why: str, exc: bool = False) -> None:
         """Count a failed rollout; log the first with its reason (and the traceback of the
         exception being handled when ``exc``, as text: a record holding the traceback itself
         would keep this worker's frames, and with them its shared memory, alive)."""
@@ -470,8 +489,8 @@ class _Session:
             trace = "\n" + traceback.format_exc().rstrip() if exc else ""
             log.error(
                 "rollout of task %d (job %d) failed: %s; later failures are counted, not logged%s",
-                task.id,
-                task.job,
+                task_id,
+                job,
                 why,
                 trace,
             )
@@ -494,17 +513,23 @@ class _Session:
         in_flight = self.in_flight
         stop = self.stop
         rollout = self.rollout
+        batches: Any = None
+        queue: Any = deque()
+        if self.batch_rollout is not None:
+            from . import batch as batches
+
+            queue = batches.TaskQueue()
         served = self.environment.to_wire()
         served_bytes = bytes(served)
         identity = 0
         asking = min(in_flight, _wire.MAX_ASKING_REQUESTS)
         slots = self.slots = [None] * (asking + 1)
-        queue: deque[Any] = deque()
         outbox = _wire.WorkerMessage()
         outbox.protocol = self.protocol
         outbox.serves_one = 1
         outbox.environment = served
         outcomes = outbox.outcomes
+        outcome_rows = None if batches is None else batches.outcome_view(outcomes)
         count = 0
         batching = _Batching(in_flight)
         slowest_us = 0
@@ -608,7 +633,13 @@ class _Session:
                     _delete(response)
                     _delete(pending)
                     slots[i] = None
+            if queue and not outbox_full and batches is not None:
+                count = self.perform_batch(batches, queue, outcome_rows, count, batching)
+                slowest_us = max(slowest_us, self.batch_slowest_us)
+                silence.heard()
+                continue
             if queue and not outbox_full:
+                assert rollout is not None
                 wire = queue.popleft()
                 n_context = min(wire.context_len, _wire.MAX_CONTEXT)
                 n_theta = min(wire.theta_len, _wire.MAX_THETA)
@@ -626,7 +657,7 @@ class _Session:
                 try:
                     result = rollout(task)
                 except Exception:  # noqa: BLE001 - any failure of a rollout is a failed outcome
-                    self.failure(task, "the rollout raised", exc=True)
+                    self.failure(task.id, task.job, "the rollout raised", exc=True)
                     result = _RAISED
                 took = perf() - started
                 batching.observe(took)
@@ -641,7 +672,7 @@ class _Session:
                 outcome.diagnostics_len = 0
                 ok = 0
                 if result is None:
-                    self.failure(task, "it returned None")
+                    self.failure(task.id, task.job, "it returned None")
                 elif result is not _RAISED:
                     ok = self.fill(task, outcome, result, isfinite)
                 outcome.ok = ok
@@ -667,6 +698,50 @@ class _Session:
                     return self.report(Exit.LEARNER_GONE)
                 silence.looked()
 
+    def perform_batch(
+        self, batches: Any, queue: Any, outcome_rows: Any, count: int, batching: _Batching
+    ) -> int:
+        """Perform the front of ``queue`` with one call of the batch rollout, writing the
+        outcomes after the ``count`` already in the outbox; returns the new count."""
+        np = batches.np
+        rows = queue.take(_wire.MAX_BATCH - count)
+        n = len(rows)
+        tasks = batches.batch_of(rows)
+        logged = False
+        started = time.perf_counter()
+        try:
+            result = self.batch_rollout(tasks)  # type: ignore[misc]
+        except Exception:  # noqa: BLE001 - any failure of a rollout is a failed outcome
+            why = f"the batch rollout of {n} tasks raised"
+            # Here, where the traceback is the one being handled.
+            self.failure(int(tasks.ids[0]), int(tasks.jobs[0]), why, exc=True)
+            logged = True
+        else:
+            rewards, scores, ok, why = batches.checked(result, n)
+        took = time.perf_counter() - started
+        if why is not None:
+            rewards = scores = None
+            ok = np.zeros(n, dtype=bool)
+        batching.observe(took / n)
+        self.rollout_seconds += took
+        # Every task of the batch waited for all of it.
+        self.batch_slowest_us = min(int(took * 1e6), _U32_MAX)
+        self.rollouts += n
+        failed = n - int(ok.sum())
+        if failed:
+            if not logged:
+                first = int(np.argmin(ok))
+                self.failure(
+                    int(tasks.ids[first]),
+                    int(tasks.jobs[first]),
+                    why
+                    or f"{failed} of a batch of {n} tasks failed (ok false, or non-finite numbers)",
+                )
+            # failure() counted one.
+            self.failed += failed - 1
+        batches.write(outcome_rows[count : count + n], rows, rewards, scores, ok)
+        return count + n
+
     def fill(
         self,
         task: Task,
@@ -689,7 +764,8 @@ class _Session:
             n = len(diagnostics)
         except (TypeError, ValueError) as error:
             self.failure(
-                task,
+                task.id,
+                task.job,
                 f"it returned {result!r} ({error}); a rollout returns (reward, score), "
                 "(reward, score, diagnostics) or None",
             )
@@ -701,16 +777,18 @@ class _Session:
                 "(MAX_DIAGNOSTICS)"
             )
         if not (isfinite(reward) and isfinite(score)):
-            self.failure(task, f"non-finite reward {reward} or score {score}")
+            self.failure(task.id, task.job, f"non-finite reward {reward} or score {score}")
             return 0
         if n:
             try:
                 values = [float(d) for d in diagnostics]
             except (TypeError, ValueError) as error:
-                self.failure(task, f"diagnostics {diagnostics!r} are not numbers ({error})")
+                self.failure(
+                    task.id, task.job, f"diagnostics {diagnostics!r} are not numbers ({error})"
+                )
                 return 0
             if not all(isfinite(v) for v in values):
-                self.failure(task, f"non-finite diagnostics {values}")
+                self.failure(task.id, task.job, f"non-finite diagnostics {values}")
                 return 0
             outcome.diagnostics[:n] = values
             outcome.diagnostics_len = n

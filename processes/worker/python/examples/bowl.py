@@ -2,11 +2,23 @@
 the same arithmetic in the same order, so that its outcomes are the Rust worker's bit for bit.
 
     acps run --config experiments/bowl.toml --worker-command "python examples/bowl.py"
+
+With ``--batch`` it serves whole batches with numpy (``batch_rollout``), the same bits again.
 """
 
+from __future__ import annotations
+
 import math
+import sys
+from typing import TYPE_CHECKING
 
 import acps_worker
+
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    from acps_worker.batch import TaskBatch
 
 BOWL = acps_worker.Environment("bowl", settings="bowl v1", parameters=(0, 0, 0))
 
@@ -23,5 +35,24 @@ def rollout(task: acps_worker.Task) -> tuple[float, float] | None:
     return -total, math.sqrt(total)
 
 
+def batch_rollout(
+    batch: TaskBatch,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """:func:`rollout` of a whole batch, column by column in the same order of operations."""
+    import numpy as np
+
+    contexts, thetas = batch.contexts, batch.thetas
+    n, d = thetas.shape[1], contexts.shape[1]
+    total = np.zeros(len(batch))
+    for i in range(n):
+        e = thetas[:, i] - contexts[:, i % d] * (i + 1) / n
+        total = total + e * e
+    return -total, np.sqrt(total)
+
+
 if __name__ == "__main__":
-    acps_worker.serve(rollout, environment=BOWL)  # joins the run named by $ACPS_RUN
+    # Joins the run named by $ACPS_RUN.
+    if "--batch" in sys.argv[1:]:
+        acps_worker.serve(batch_rollout=batch_rollout, environment=BOWL, queue_depth=16)
+    else:
+        acps_worker.serve(rollout, environment=BOWL)
