@@ -13,11 +13,11 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomllib
 
 import acps
 
@@ -61,7 +61,9 @@ def main() -> None:
         for batch in batches:
             learner_time, _, tasks = one_round(batch, args.episodes)
             per_task[batch].append(learner_time / tasks * 1e6)
-            print(f"round {r + 1}: batch {batch:5}: {per_task[batch][-1]:.2f} us per task", flush=True)
+            print(
+                f"round {r + 1}: batch {batch:5}: {per_task[batch][-1]:.2f} us per task", flush=True
+            )
     for batch in batches:
         median = statistics.median(per_task[batch])
         print(f"batch {batch:5}: {median:.2f} us per task in ask/tell (median of {args.rounds})")
