@@ -348,7 +348,8 @@ impl Fleet {
         let mut remote = remote;
         if let Some(remote) = remote.as_deref_mut() {
             let environments: Vec<_> = (0..source.jobs()).map(|job| source.environment(job)).collect();
-            if let Err(error) = remote.start(&self.run.0, identity, &environments) {
+            let sizes: Vec<_> = (0..source.jobs()).map(|job| source.sizes(job)).collect();
+            if let Err(error) = remote.start(&self.run.0, identity, &environments, &sizes) {
                 processes::reap(&mut children);
                 return Err(FleetError::Remote(error));
             }

@@ -32,7 +32,7 @@ use acps_learner::{Learner, LearningProgress};
 use acps_shared::{EnvironmentSpec, Outcome, Serves, SpecBuildError, Task};
 use acps_wire::ipc::{self, IpcError, RunName, ServerError, TICK, TaskRequest, TaskServer, TaskService};
 use acps_wire::wire::{
-    Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, WireTask, WorkerMessage, check_task_sizes,
+    Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, Sizes, WireTask, WorkerMessage, check_task_sizes,
 };
 use iceoryx2::identifiers::UniqueClientId;
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
@@ -164,6 +164,9 @@ pub trait TaskSource {
     /// The environment job `job`'s tasks need.
     fn environment(&self, job: usize) -> EnvironmentSpec;
 
+    /// The lengths of job `job`'s contexts and parameters.
+    fn sizes(&self, job: usize) -> Sizes;
+
     /// The identity workers must name (or 0) in their requests.
     fn identity(&self) -> u64;
 
@@ -274,6 +277,13 @@ impl TaskSource for Source<'_> {
         }
     }
 
+    fn sizes(&self, job: usize) -> Sizes {
+        match self {
+            Self::Own(source) => source.sizes(job),
+            Self::Forwarding(source) => source.sizes(job),
+        }
+    }
+
     fn identity(&self) -> u64 {
         match self {
             Self::Own(source) => source.identity(),
@@ -334,6 +344,14 @@ impl TaskSource for Learners<'_> {
 
     fn environment(&self, job: usize) -> EnvironmentSpec {
         *self.0[job].environment()
+    }
+
+    fn sizes(&self, job: usize) -> Sizes {
+        let problem = self.0[job].learner().problem();
+        Sizes {
+            context: problem.context_dim(),
+            theta: problem.theta0.len(),
+        }
     }
 
     /// A hash of the jobs' problems (their environments included) and seeds, stable across builds.
@@ -408,9 +426,14 @@ pub enum RemoteEvent {
 /// server waits, see [`Remote::may_wait`]).
 pub trait Remote {
     /// Serving of `run` starts: admit peers for a source of this `identity` whose jobs need
-    /// these `environments` (by job).
-    fn start(&mut self, run: &RunName, identity: u64, environments: &[EnvironmentSpec])
-    -> Result<(), RemoteServeError>;
+    /// these `environments` and carry contexts and parameters of these `sizes` (by job).
+    fn start(
+        &mut self,
+        run: &RunName,
+        identity: u64,
+        environments: &[EnvironmentSpec],
+        sizes: &[Sizes],
+    ) -> Result<(), RemoteServeError>;
 
     /// Append what happened since the last call to `events`, without blocking.
     fn poll(&mut self, events: &mut Vec<RemoteEvent>) -> Result<(), RemoteServeError>;
@@ -1110,6 +1133,13 @@ enum Mismatch {
     Environment(EnvironmentSpec),
     /// An environment description that is none.
     Unreadable(SpecBuildError),
+    /// Declared lengths of contexts and parameters other than those of a job it would serve.
+    Sizes {
+        /// What the worker declared.
+        worker: Sizes,
+        /// What that job's tasks carry.
+        job: Sizes,
+    },
 }
 
 /// What a request's worker serves, if the learner accepts it: this build's protocol, this run
@@ -1122,12 +1152,22 @@ fn admit(message: &WorkerMessage, identity: u64, source: &dyn TaskSource) -> Res
         return Err(Mismatch::Run(message.run));
     }
     let serves = message.serves().map_err(Mismatch::Unreadable)?;
-    match serves {
-        Serves::One(spec) if !(0..source.jobs()).any(|job| source.environment(job) == spec) => {
-            Err(Mismatch::Environment(spec))
-        }
-        serves => Ok(serves),
+    if let Serves::One(spec) = serves
+        && !(0..source.jobs()).any(|job| source.environment(job) == spec)
+    {
+        return Err(Mismatch::Environment(spec));
     }
+    // A declared size must be every served job's: a worker of other sizes would fail each of
+    // its rollouts, and the run would find out only at its end.
+    if let Some(worker) = message.sizes()
+        && let Some(job) = (0..source.jobs())
+            .filter(|&job| serves.includes(&source.environment(job)))
+            .map(|job| source.sizes(job))
+            .find(|&job| job != worker)
+    {
+        return Err(Mismatch::Sizes { worker, job });
+    }
+    Ok(serves)
 }
 
 /// The answer refusing a worker for `mismatch`, and the reason in words, naming the worker's
@@ -1147,12 +1187,14 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
     }
     .or(needed.first())
     .copied();
-    let code = match mismatch {
-        Mismatch::Protocol(_) => Refusal::Protocol,
-        Mismatch::Run(_) => Refusal::Run,
-        Mismatch::Environment(_) | Mismatch::Unreadable(_) => Refusal::Environment,
+    let answer = match mismatch {
+        Mismatch::Protocol(_) => Answer::refused(Refusal::Protocol, identity, closest, needed.len()),
+        Mismatch::Run(_) => Answer::refused(Refusal::Run, identity, closest, needed.len()),
+        Mismatch::Environment(_) | Mismatch::Unreadable(_) => {
+            Answer::refused(Refusal::Environment, identity, closest, needed.len())
+        }
+        Mismatch::Sizes { job, .. } => Answer::refused_sizes(identity, *job),
     };
-    let answer = Answer::refused(code, identity, closest, needed.len());
     let reason = match mismatch {
         Mismatch::Protocol(protocol) => format!("protocol {protocol} (ours {PROTOCOL_VERSION})"),
         Mismatch::Run(run) => format!("run identity {run:016x} (ours {identity:016x})"),
@@ -1161,6 +1203,7 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
             "its environment cannot be read ({error}); the jobs need {}",
             answer.needs()
         ),
+        Mismatch::Sizes { worker, job } => format!("it serves {worker}; the jobs need {job}"),
     };
     (answer, reason)
 }

@@ -400,6 +400,8 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         name,
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
         spin: Duration::from_micros(args.spin_us),
+        // It builds whichever model a task names, of whatever sizes.
+        sizes: None,
     };
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop)
         .with_context(|| format!("joining run '{run}' (its learner: `acps run ... --run {run}`)"))?;

@@ -5,7 +5,7 @@ use crate::pump::{Bell, Pump};
 use acps_fleet::{PeerId, Remote, RemoteEvent, RemoteServeError};
 use acps_shared::{EnvironmentSpec, Serves, Task};
 use acps_wire::ipc::RunName;
-use acps_wire::wire::PROTOCOL_VERSION;
+use acps_wire::wire::{PROTOCOL_VERSION, Sizes};
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -91,6 +91,7 @@ struct Shared {
 struct Serving {
     identity: u64,
     environments: Vec<EnvironmentSpec>,
+    sizes: Vec<Sizes>,
 }
 
 /// The learner's network side: listens on its endpoints, holds the run's learner token, answers
@@ -375,6 +376,7 @@ fn welcome(
         instance,
         identity: serving.identity,
         environments: serving.environments,
+        sizes: serving.sizes,
         host: host.to_string(),
     })
 }
@@ -385,6 +387,7 @@ impl Remote for Listener {
         run: &RunName,
         identity: u64,
         environments: &[EnvironmentSpec],
+        sizes: &[Sizes],
     ) -> Result<(), RemoteServeError> {
         let (pump, poke) = Pump::start(run, "learner-net").map_err(RemoteServeError::new)?;
         let mut shared = lock(&self.shared);
@@ -394,6 +397,7 @@ impl Remote for Listener {
         shared.serving = Some(Serving {
             identity,
             environments: environments.to_vec(),
+            sizes: sizes.to_vec(),
         });
         shared.bell = Bell::new(poke);
         drop(shared);

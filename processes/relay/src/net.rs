@@ -11,6 +11,7 @@
 
 use acps_shared::{EnvironmentSpec, Outcome, Task};
 use acps_wire::ipc::RunName;
+use acps_wire::wire::Sizes;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -72,6 +73,8 @@ pub struct Admission {
     pub identity: u64,
     /// The environment of each job.
     pub environments: Vec<EnvironmentSpec>,
+    /// The lengths of each job's contexts and parameters.
+    pub sizes: Vec<Sizes>,
     /// The learner's host, for messages.
     pub host: String,
 }

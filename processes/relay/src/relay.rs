@@ -10,7 +10,7 @@ use acps_fleet::{
 };
 use acps_shared::{EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::RunName;
-use acps_wire::wire::{PROTOCOL_VERSION, check_task_sizes};
+use acps_wire::wire::{PROTOCOL_VERSION, Sizes, check_task_sizes};
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
@@ -347,6 +347,7 @@ struct RelaySource {
     instance: u64,
     identity: u64,
     environments: Vec<EnvironmentSpec>,
+    sizes: Vec<Sizes>,
     queues: Vec<VecDeque<Task>>,
     queued: usize,
     /// Tasks the host's workers hold, to re-issue locally when one of them dies.
@@ -466,6 +467,7 @@ impl RelaySource {
             instance: welcome.instance,
             identity: welcome.identity,
             environments: welcome.environments,
+            sizes: welcome.sizes,
             queues: vec![VecDeque::new(); jobs],
             queued: 0,
             held: HashMap::new(),
@@ -589,6 +591,10 @@ impl TaskSource for RelaySource {
 
     fn environment(&self, job: usize) -> EnvironmentSpec {
         self.environments[job]
+    }
+
+    fn sizes(&self, job: usize) -> Sizes {
+        self.sizes[job]
     }
 
     fn identity(&self) -> u64 {

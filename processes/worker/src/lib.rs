@@ -21,6 +21,7 @@ use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORK
 /// A run's name, which a worker joins by; [`RunName::from_env`] reads the one a fleet gives the
 /// worker processes it starts.
 pub use acps_wire::ipc::{RunName, RunNameParseError};
+pub use acps_wire::wire::Sizes;
 use acps_wire::wire::{
     Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireEnvironment, WireOutcome, WireTask,
     WorkerMessage,
@@ -87,6 +88,10 @@ pub struct WorkerOptions {
     /// How long to poll (yielding the CPU) for an answer before blocking: saves the wake-up
     /// latency when every process has a core of its own; use zero when processes outnumber cores.
     pub spin: Duration,
+    /// The lengths of contexts and parameters this worker's simulator takes, if it says: the
+    /// learner then refuses it at once, naming both sides, when its jobs carry others (without,
+    /// a worker of other sizes fails every rollout).
+    pub sizes: Option<Sizes>,
 }
 
 pub use acps_wire::ipc::DEFAULT_QUEUE_DEPTH;
@@ -98,6 +103,7 @@ impl Default for WorkerOptions {
             name: format!("worker-{}", std::process::id()),
             startup_timeout: Duration::from_secs(10),
             spin: Duration::ZERO,
+            sizes: None,
         }
     }
 }
@@ -308,7 +314,14 @@ pub fn serve(
     // Tasks answered by the learner and not yet simulated.
     let mut queue: VecDeque<WireTask> = VecDeque::new();
     // Outcomes not yet sent.
-    let mut outbox = WorkerMessage::request(identity, 1, serves);
+    let fresh_outbox = |identity| {
+        let message = WorkerMessage::request(identity, 1, serves);
+        match options.sizes {
+            Some(sizes) => message.declaring(sizes),
+            None => message,
+        }
+    };
+    let mut outbox = fresh_outbox(identity);
     let mut batching = Batching::new(options.queue_depth);
     // Told to the learner, which then waits for this worker at least a few times as long.
     let mut slowest = Duration::ZERO;
@@ -358,7 +371,7 @@ pub fn serve(
             outbox.observe_rollout(slowest);
             let request = client.send_copy(outbox).map_err(IpcError::RequestSend)?;
             *slot = Some((request, want));
-            outbox = WorkerMessage::request(identity, 1, serves);
+            outbox = fresh_outbox(identity);
             sent = true;
         }
         unannounced |= sent;
@@ -396,7 +409,7 @@ pub fn serve(
                     Some(Response::Refused) | None => {
                         return Err(WorkerError::Refused {
                             run: run.clone(),
-                            reason: refusal_reason(&answer, identity, &serves),
+                            reason: refusal_reason(&answer, identity, &serves, options.sizes),
                         });
                     }
                 }
@@ -490,8 +503,8 @@ pub fn serve(
 }
 
 /// Why the learner's `answer` refused this worker (of run `identity`, 0 before it learnt one,
-/// serving `serves`), naming both sides.
-fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves) -> String {
+/// serving `serves` of `sizes`), naming both sides.
+fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves, sizes: Option<Sizes>) -> String {
     if answer.protocol != PROTOCOL_VERSION {
         return format!(
             "protocol version {} here, {} at the learner (another build)",
@@ -502,6 +515,13 @@ fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves) -> String {
         Some(Refusal::Environment) => {
             format!("this worker serves {serves}; the run's jobs need {}", answer.needs())
         }
+        Some(Refusal::Sizes) => match sizes {
+            Some(sizes) => format!(
+                "this worker serves {sizes}; the run's jobs need {}",
+                answer.needed_sizes()
+            ),
+            None => format!("the run's jobs need {}", answer.needed_sizes()),
+        },
         _ => format!(
             "this worker belongs to run identity {identity:016x}, the learner runs {:016x}",
             answer.run

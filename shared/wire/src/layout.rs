@@ -106,6 +106,8 @@ pub fn describe() -> Value {
             field!(Answer, refusal, "u32"),
             field!(Answer, environments, "u32"),
             field!(Answer, environment, "WireEnvironment"),
+            field!(Answer, context_len, "u32"),
+            field!(Answer, theta_len, "u32"),
         ],
     );
     let outcome = payload::<WireOutcome>(
@@ -130,6 +132,8 @@ pub fn describe() -> Value {
             field!(WorkerMessage, count, "u32"),
             field!(WorkerMessage, slowest_rollout_us, "u32"),
             field!(WorkerMessage, serves_one, "u32"),
+            field!(WorkerMessage, context_len, "u32"),
+            field!(WorkerMessage, theta_len, "u32"),
             field!(WorkerMessage, reserved, "u32"),
             field!(WorkerMessage, environment, "WireEnvironment"),
             field!(WorkerMessage, outcomes, "WireOutcome", Some(MAX_BATCH)),

@@ -15,7 +15,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use std::time::Duration;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 7;
+pub const PROTOCOL_VERSION: u32 = 8;
 /// Largest context a task can carry (docs/CHOICES.md: why 8).
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -80,6 +80,28 @@ pub enum Refusal {
     Run = 2,
     /// The worker serves none of the environments the run's jobs need.
     Environment = 3,
+    /// The worker declared context or parameter lengths other than its jobs'.
+    Sizes = 4,
+}
+
+/// The lengths of a problem's contexts and parameters: what a worker may declare it serves,
+/// and what a job's tasks carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub struct Sizes {
+    /// Values of a context (n_s).
+    pub context: usize,
+    /// Values of the parameters (n_theta).
+    pub theta: usize,
+}
+
+impl std::fmt::Display for Sizes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "contexts of {} and parameters of {} values",
+            self.context, self.theta
+        )
+    }
 }
 
 /// One task of an answer.
@@ -126,6 +148,10 @@ pub struct Answer {
     pub environments: u32,
     /// For `Refused`, one of them: the first with the worker's environment's name, if any.
     pub environment: WireEnvironment,
+    /// For a [`Refusal::Sizes`], the context length the worker's jobs need; else 0.
+    pub context_len: u32,
+    /// For a [`Refusal::Sizes`], the parameter length the worker's jobs need; else 0.
+    pub theta_len: u32,
 }
 
 /// One outcome of a [`WorkerMessage`].
@@ -171,6 +197,11 @@ pub struct WorkerMessage {
     pub slowest_rollout_us: u32,
     /// 1: the worker serves `environment` only; 0: any environment its factory builds.
     pub serves_one: u32,
+    /// The context length the worker serves, 0 when it does not say (then `theta_len` is 0
+    /// too): the learner refuses a worker whose declared lengths are not its jobs'.
+    pub context_len: u32,
+    /// The parameter length the worker serves (with a non-zero `context_len`).
+    pub theta_len: u32,
     /// Padding, always 0.
     pub reserved: u32,
     /// The environment a worker that serves one serves (zeros otherwise).
@@ -316,7 +347,26 @@ impl Answer {
             1 => Some(Refusal::Protocol),
             2 => Some(Refusal::Run),
             3 => Some(Refusal::Environment),
+            4 => Some(Refusal::Sizes),
             _ => None,
+        }
+    }
+
+    /// A sizes refusal for a worker whose jobs need `needed`, by the learner of run identity
+    /// `run`.
+    pub fn refused_sizes(run: u64, needed: Sizes) -> Self {
+        Self {
+            context_len: u32::try_from(needed.context).unwrap_or(u32::MAX),
+            theta_len: u32::try_from(needed.theta).unwrap_or(u32::MAX),
+            ..Self::refused(Refusal::Sizes, run, None, 0)
+        }
+    }
+
+    /// The lengths a sizes refusal says the worker's jobs need.
+    pub fn needed_sizes(&self) -> Sizes {
+        Sizes {
+            context: self.context_len as usize,
+            theta: self.theta_len as usize,
         }
     }
 
@@ -400,6 +450,8 @@ impl WorkerMessage {
             count: 0,
             slowest_rollout_us: 0,
             serves_one: u32::from(matches!(serves, Serves::One(_))),
+            context_len: 0,
+            theta_len: 0,
             reserved: 0,
             environment: match serves {
                 Serves::One(spec) => spec.into(),
@@ -407,6 +459,22 @@ impl WorkerMessage {
             },
             outcomes: [EMPTY; MAX_BATCH],
         }
+    }
+
+    /// The same request declaring that the worker serves `sizes` (contexts and parameters of
+    /// these lengths).
+    pub fn declaring(mut self, sizes: Sizes) -> Self {
+        self.context_len = u32::try_from(sizes.context).unwrap_or(u32::MAX);
+        self.theta_len = u32::try_from(sizes.theta).unwrap_or(u32::MAX);
+        self
+    }
+
+    /// The lengths the worker declared it serves, `None` when it did not say.
+    pub fn sizes(&self) -> Option<Sizes> {
+        (self.context_len != 0).then_some(Sizes {
+            context: self.context_len as usize,
+            theta: self.theta_len as usize,
+        })
     }
 
     /// The environments the worker serves, or why its message does not say.
@@ -576,12 +644,28 @@ mod tests {
     }
 
     #[test]
+    fn declared_sizes_cross_in_requests_and_refusals() {
+        let sizes = Sizes { context: 2, theta: 21 };
+        assert_eq!(WorkerMessage::request(0, 1, Serves::Any).sizes(), None);
+        assert_eq!(
+            WorkerMessage::request(0, 1, Serves::Any).declaring(sizes).sizes(),
+            Some(sizes)
+        );
+        let refusal = Answer::refused_sizes(7, sizes);
+        assert_eq!(
+            (refusal.response(), refusal.refusal(), refusal.needed_sizes()),
+            (Some(Response::Refused), Some(Refusal::Sizes), sizes)
+        );
+        assert_eq!(sizes.to_string(), "contexts of 2 and parameters of 21 values");
+    }
+
+    #[test]
     fn the_payloads_have_the_sizes_docs_choices_gives() {
         use std::mem::size_of;
         assert_eq!(size_of::<WireEnvironment>(), 64);
         assert_eq!(size_of::<WireTask>(), 672);
         assert_eq!(size_of::<WireOutcome>(), 168);
-        assert_eq!(size_of::<WorkerMessage>(), 5472);
-        assert_eq!(size_of::<Answer>(), 88);
+        assert_eq!(size_of::<WorkerMessage>(), 5480);
+        assert_eq!(size_of::<Answer>(), 96);
     }
 }

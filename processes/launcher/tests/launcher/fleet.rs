@@ -12,7 +12,7 @@ use acps_models::robot::Robot;
 use acps_models::throw::{Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, RunName};
-use acps_wire::wire::{Answer, Response, WorkerMessage};
+use acps_wire::wire::{Answer, Response, Sizes, WorkerMessage};
 use acps_worker::{EnvironmentFactory, EnvironmentProvideError, Single, WorkerError, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
@@ -660,7 +660,40 @@ fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worke
             "the learner of run '{run}' refused this worker: this worker serves {theirs}; the run's jobs need {ours}"
         )
     );
-    let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &AtomicBool::new(false)).unwrap();
+    // One that declares parameters of another length than the problem's: refused at once,
+    // with both sides' sizes.
+    let grid = environment::grid(Sim::Analytic).unwrap();
+    let needed = Sizes {
+        context: grid.context_dim(),
+        theta: grid.param_dim(),
+    };
+    let declared = Sizes {
+        theta: needed.theta + 1,
+        ..needed
+    };
+    let sized = WorkerOptions {
+        sizes: Some(declared),
+        ..options.clone()
+    };
+    let error = acps_worker::serve(&run, &sized, &mut ModelFactory::default(), &AtomicBool::new(false)).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        format!(
+            "the learner of run '{run}' refused this worker: this worker serves contexts of {} and parameters of {} values; the run's jobs need contexts of {} and parameters of {} values",
+            declared.context, declared.theta, needed.context, needed.theta
+        )
+    );
+    // Declaring the problem's own sizes joins like declaring none.
+    let report = acps_worker::serve(
+        &run,
+        &WorkerOptions {
+            sizes: Some(needed),
+            ..options
+        },
+        &mut ModelFactory::default(),
+        &AtomicBool::new(false),
+    )
+    .unwrap();
     assert_eq!(report.exit, WorkerExit::Finished);
     assert!(report.rollouts >= 2 * 2 * 300);
     let output = learner.wait_with_output().unwrap();
@@ -670,9 +703,13 @@ fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worke
         stderr.contains("refused a worker") && stderr.contains("protocol 99"),
         "{stderr}"
     );
-    // The learner names both environments too.
+    // The learner names both environments too, and both sizes.
     assert!(
         stderr.contains(&format!("it serves environment {theirs}; the jobs need {ours}")),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains(&format!("it serves {declared}; the jobs need {needed}")),
         "{stderr}"
     );
     assert_eq!(

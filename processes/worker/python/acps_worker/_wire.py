@@ -12,7 +12,7 @@ from __future__ import annotations
 import ctypes
 
 #: Version of the wire format (Rust: ``PROTOCOL_VERSION``).
-PROTOCOL_VERSION = 7
+PROTOCOL_VERSION = 8
 #: Most bytes of an environment's name.
 MAX_NAME = 32
 #: Largest context a task carries.
@@ -42,6 +42,7 @@ RESPONSE_REFUSED = 3
 REFUSAL_PROTOCOL = 1
 REFUSAL_RUN = 2
 REFUSAL_ENVIRONMENT = 3
+REFUSAL_SIZES = 4
 
 #: The environment variable naming the run a started worker joins.
 RUN_ENV = "ACPS_RUN"
@@ -116,6 +117,8 @@ class Answer(ctypes.Structure):
         ("refusal", ctypes.c_uint32),
         ("environments", ctypes.c_uint32),
         ("environment", WireEnvironment),
+        ("context_len", ctypes.c_uint32),
+        ("theta_len", ctypes.c_uint32),
     ]
 
     @staticmethod
@@ -154,6 +157,8 @@ class WorkerMessage(ctypes.Structure):
         ("count", ctypes.c_uint32),
         ("slowest_rollout_us", ctypes.c_uint32),
         ("serves_one", ctypes.c_uint32),
+        ("context_len", ctypes.c_uint32),
+        ("theta_len", ctypes.c_uint32),
         ("reserved", ctypes.c_uint32),
         ("environment", WireEnvironment),
         ("outcomes", WireOutcome * MAX_BATCH),

@@ -187,14 +187,30 @@ def _needs(answer: _wire.Answer) -> str:
     return f"{spec} and {n - 1} others"
 
 
-def refusal_reason(answer: _wire.Answer, identity: int, serves: Environment, protocol: int) -> str:
+def _sizes(context: int, theta: int) -> str:
+    """Sizes in words, as Rust's ``Sizes`` displays them."""
+    return f"contexts of {context} and parameters of {theta} values"
+
+
+def refusal_reason(
+    answer: _wire.Answer,
+    identity: int,
+    serves: Environment,
+    protocol: int,
+    sizes: tuple[int, int] | None = None,
+) -> str:
     """Why the learner's ``answer`` refused this worker (of run ``identity``, 0 before it learnt
-    one, serving ``serves``, speaking ``protocol``), naming both sides exactly as the Rust
-    worker's ``refusal_reason`` does."""
+    one, serving ``serves`` of ``sizes``, speaking ``protocol``), naming both sides exactly as
+    the Rust worker's ``refusal_reason`` does."""
     if answer.protocol != protocol:
         return f"protocol version {protocol} here, {answer.protocol} at the learner (another build)"
     if answer.refusal == _wire.REFUSAL_ENVIRONMENT:
         return f"this worker serves {serves}; the run's jobs need {_needs(answer)}"
+    if answer.refusal == _wire.REFUSAL_SIZES:
+        needed = _sizes(int(answer.context_len), int(answer.theta_len))
+        if sizes is None:
+            return f"the run's jobs need {needed}"
+        return f"this worker serves {_sizes(*sizes)}; the run's jobs need {needed}"
     return (
         f"this worker belongs to run identity {identity:016x}, the learner runs {answer.run:016x}"
     )
@@ -271,6 +287,7 @@ def serve(
     *,
     batch_rollout: BatchRollout | None = None,
     environment: Environment | None = None,
+    sizes: tuple[int, int] | None = None,
     queue_depth: int = _wire.DEFAULT_QUEUE_DEPTH,
     in_flight: int | None = None,
     name: str | None = None,
@@ -294,7 +311,10 @@ def serve(
     its task. A batch holds at most 32 tasks (the outcomes of one request) and at most what the
     worker keeps queued (``queue_depth``), and the learner's window (its ``in_flight``) bounds
     how many tasks exist at once: a batch worker wants a ``queue_depth`` of at least the
-    window's share of each worker. ``environment`` is the
+    window's share of each worker. ``sizes=(n_context, n_theta)`` declares the lengths of
+    contexts and parameters the simulator takes: the learner refuses the worker at once
+    (:class:`RefusedError` naming both sides' sizes) when its problem has others, where a
+    worker that declares none would fail every rollout. ``environment`` is the
     identity this worker serves (default :meth:`Environment.unnamed`, which matches only
     problems that name none). ``queue_depth`` (1..=128) tasks are kept asked for or queued: the
     worker's queue, not the learner's window (``in_flight``, its old name, still works with a
@@ -329,6 +349,13 @@ def serve(
             f"got {queue_depth}"
         )
     name = _ipc.check_worker_name(name if name is not None else f"worker-{os.getpid()}")
+    if sizes is not None and not (
+        len(sizes) == 2 and 1 <= sizes[0] <= _wire.MAX_CONTEXT and 0 <= sizes[1] <= _wire.MAX_THETA
+    ):
+        raise ValueError(
+            f"worker option sizes must be (n_context in 1..={_wire.MAX_CONTEXT}, "
+            f"n_theta in 0..={_wire.MAX_THETA}), got {sizes!r}"
+        )
     if not startup_timeout >= 0:
         raise ValueError(f"startup_timeout must be >= 0 seconds, got {startup_timeout}")
     session = _Session(
@@ -336,6 +363,7 @@ def serve(
         rollout=rollout,
         batch_rollout=batch_rollout,
         environment=environment if environment is not None else Environment.unnamed(),
+        sizes=sizes,
         in_flight=queue_depth,
         name=name,
         startup_timeout=startup_timeout,
@@ -359,6 +387,7 @@ class _Session:
         rollout: Rollout | None,
         batch_rollout: BatchRollout | None,
         environment: Environment,
+        sizes: tuple[int, int] | None,
         in_flight: int,
         name: str,
         startup_timeout: float,
@@ -370,6 +399,7 @@ class _Session:
         self.rollout = rollout
         self.batch_rollout = batch_rollout
         self.environment = environment
+        self.sizes = sizes
         self.in_flight = in_flight
         self.name = name
         self.startup_timeout = startup_timeout
@@ -528,6 +558,8 @@ class _Session:
         outbox.protocol = self.protocol
         outbox.serves_one = 1
         outbox.environment = served
+        if self.sizes is not None:
+            outbox.context_len, outbox.theta_len = self.sizes
         outcomes = outbox.outcomes
         outcome_rows = None if batches is None else batches.outcome_view(outcomes)
         count = 0
@@ -626,7 +658,9 @@ class _Session:
                         _delete(response)
                         raise RefusedError(
                             self.run,
-                            refusal_reason(answer, identity, self.environment, self.protocol),
+                            refusal_reason(
+                                answer, identity, self.environment, self.protocol, self.sizes
+                            ),
                         )
                     # The answered request must be gone before the next is sent: the service
                     # allows only so many active requests per client.

@@ -29,8 +29,8 @@ class BowlTest(unittest.TestCase):
     """A learner of a problem file and Python workers."""
 
     def test_refusals_are_named_on_both_sides_and_the_example_finishes_the_run(self) -> None:
-        """Another protocol version, other settings and no identity are refused; the
-        example's identity is admitted and serves the run to its end."""
+        """Another protocol version, other settings, no identity and other declared sizes are
+        refused; the example's identity and sizes are admitted and serve the run to its end."""
         bowl = bowl_example()
         wanted = Environment("bowl", "bowl v1", (0, 0, 0))
         self.assertEqual(bowl.BOWL, wanted)
@@ -41,7 +41,7 @@ class BowlTest(unittest.TestCase):
                 acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL, _protocol=6)
             self.assertEqual(
                 refused.exception.reason,
-                "protocol version 6 here, 7 at the learner (another build)",
+                "protocol version 6 here, 8 at the learner (another build)",
             )
             other = Environment("bowl", "bowl v2")
             with self.assertRaises(RefusedError) as refused:
@@ -59,15 +59,29 @@ class BowlTest(unittest.TestCase):
                 refused.exception.reason,
                 f"this worker serves no named environment; the run's jobs need {wanted}",
             )
-            report = acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL)
+            with self.assertRaises(RefusedError) as refused:
+                acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL, sizes=(2, 5))
+            self.assertEqual(
+                refused.exception.reason,
+                "this worker serves contexts of 2 and parameters of 5 values; "
+                "the run's jobs need contexts of 2 and parameters of 4 values",
+            )
+            with self.assertRaises(ValueError):
+                acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL, sizes=(0, 4))
+            report = acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL, sizes=(2, 4))
             self.assertEqual((report.exit, report.failed), (Exit.FINISHED, 0))
         finally:
             summary = learner.finished()
         self.assertEqual(summary["experiment"], "bowl")
         log = learner.output()
-        self.assertIn("protocol 6 (ours 7)", log)
+        self.assertIn("protocol 6 (ours 8)", log)
         self.assertIn(f"it serves environment {other}; the jobs need {wanted}", log)
         self.assertIn(f"it serves environment no named environment; the jobs need {wanted}", log)
+        self.assertIn(
+            "it serves contexts of 2 and parameters of 5 values; "
+            "the jobs need contexts of 2 and parameters of 4 values",
+            log,
+        )
         self.assertEqual(leftovers(run), [])
 
 

@@ -126,7 +126,7 @@ class ServeTest(unittest.TestCase):
                 acps_worker.serve(bowl, run, environment=self.environment, _protocol=6)
             self.assertEqual(
                 refused.exception.reason,
-                "protocol version 6 here, 7 at the learner (another build)",
+                "protocol version 6 here, 8 at the learner (another build)",
             )
             with self.assertRaises(RefusedError) as refused:
                 acps_worker.serve(bowl, run)
@@ -135,7 +135,7 @@ class ServeTest(unittest.TestCase):
         finally:
             learner.finished()
         log = learner.output()
-        self.assertIn("protocol 6 (ours 7)", log)
+        self.assertIn("protocol 6 (ours 8)", log)
         self.assertIn(f"it serves environment {other}", log)
         self.assert_clean(run)
 
