@@ -111,6 +111,13 @@ pub trait Environment: Send {
     /// Perform one rollout. Never panics on bad numbers: a failed simulation is a failed outcome.
     fn rollout(&mut self, task: &Task) -> Outcome;
 
+    /// Perform `tasks`, returning one outcome per task in their order: a vectorised simulator
+    /// overrides it to step them together. A worker with `WorkerOptions::batches` hands it every
+    /// queued task of this environment at once (up to 32); the default performs them one by one.
+    fn rollout_batch(&mut self, tasks: &[Task]) -> Vec<Outcome> {
+        tasks.iter().map(|task| self.rollout(task)).collect()
+    }
+
     /// What the environment carries from one rollout to the next, encoded exactly (every bit of
     /// a float), for a checkpoint. Empty, the default, for environments whose rollouts depend
     /// on the task only.
@@ -148,6 +155,10 @@ impl<E: Environment + ?Sized> Environment for Box<E> {
 
     fn rollout(&mut self, task: &Task) -> Outcome {
         (**self).rollout(task)
+    }
+
+    fn rollout_batch(&mut self, tasks: &[Task]) -> Vec<Outcome> {
+        (**self).rollout_batch(tasks)
     }
 
     fn save_state(&self) -> Vec<u8> {

@@ -400,8 +400,10 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         name,
         startup_timeout: Duration::from_secs_f64(args.startup_timeout),
         spin: Duration::from_micros(args.spin_us),
-        // It builds whichever model a task names, of whatever sizes.
+        // It builds whichever model a task names, of whatever sizes, and simulates one task at
+        // a time.
         sizes: None,
+        batches: false,
     };
     let report = acps_worker::serve(&run, &options, &mut ModelFactory::default(), &stop)
         .with_context(|| format!("joining run '{run}' (its learner: `acps run ... --run {run}`)"))?;

@@ -10,7 +10,8 @@
 //!
 //! `BOWL_SETTINGS=TEXT` declares other settings than the problem file's ("bowl v1"), and
 //! `BOWL_UNNAMED=1` no environment at all: the learner then refuses the worker, naming both
-//! sides' environments.
+//! sides' environments. `--batch` serves batches: every queued task in one `rollout_batch`
+//! call (here the trait's default, one after another: the same bits).
 
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
 use acps_worker::{RunName, Single, WorkerOptions};
@@ -67,9 +68,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         EnvironmentSpec::from_text("bowl", [0, 0, 0], &settings)?
     };
     let index = std::env::var("ACPS_WORKER_INDEX").unwrap_or_default();
+    let batches = std::env::args().any(|arg| arg == "--batch");
+    let defaults = WorkerOptions::default();
     let options = WorkerOptions {
         name: format!("bowl-{index}-{}", std::process::id()),
-        ..WorkerOptions::default()
+        // A deeper queue lets batches form.
+        queue_depth: if batches { 16 } else { defaults.queue_depth },
+        batches,
+        ..defaults
     };
     let report = acps_worker::serve(&run, &options, &mut Single(Bowl { spec }), &AtomicBool::new(false))?;
     eprintln!("{}: {:?} after {} rollouts", options.name, report.exit, report.rollouts);

@@ -16,7 +16,7 @@
 //! example [`Single`] around your own [`Environment`]) and an `AtomicBool` to stop it.
 #![warn(missing_docs)]
 
-use acps_shared::{Environment, EnvironmentSpec, Serves};
+use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, PendingTasks, TICK};
 /// A run's name, which a worker joins by; [`RunName::from_env`] reads the one a fleet gives the
 /// worker processes it starts.
@@ -92,6 +92,11 @@ pub struct WorkerOptions {
     /// learner then refuses it at once, naming both sides, when its jobs carry others (without,
     /// a worker of other sizes fails every rollout).
     pub sizes: Option<Sizes>,
+    /// Hand the environment every queued task of one environment at once, through
+    /// [`Environment::rollout_batch`] (a vectorised simulator), instead of one per
+    /// [`Environment::rollout`]: at most 32 (one request's outcomes) and at most `queue_depth`.
+    /// Off by default: one by one, outcomes go back while later tasks are simulated.
+    pub batches: bool,
 }
 
 pub use acps_wire::ipc::DEFAULT_QUEUE_DEPTH;
@@ -104,6 +109,7 @@ impl Default for WorkerOptions {
             startup_timeout: Duration::from_secs(10),
             spin: Duration::ZERO,
             sizes: None,
+            batches: false,
         }
     }
 }
@@ -169,6 +175,15 @@ pub enum WorkerError {
         task_id: u64,
         /// What exceeds which capacity.
         capacity: CapacityError,
+    },
+    /// An environment's [`Environment::rollout_batch`] did not return one outcome per task in
+    /// the tasks' order: the outcomes cannot be matched to their tasks.
+    #[error("a batch of job {job}: {reason}; the worker stops, and the learner hands its tasks to another worker")]
+    Batch {
+        /// The job of the batch's first task.
+        job: u32,
+        /// What is wrong.
+        reason: String,
     },
     /// A task needs another environment than the one the factory provided for it (for example
     /// one the learner's build configures differently).
@@ -427,6 +442,15 @@ pub fn serve(
                 task_id: task.id,
                 reason,
             };
+            // With batches, the queued tasks of the same environment that the outbox has room
+            // for go with this one.
+            let mut batch = Vec::new();
+            if options.batches {
+                let room = MAX_BATCH - outbox.count as usize - 1;
+                while batch.len() < room && queue.front().is_some_and(|next| next.environment == wire.environment) {
+                    batch.push(queue.pop_front().expect("a front task"));
+                }
+            }
             let known = checked
                 .filter(|(seen, _)| *seen == wire.environment)
                 .map(|(_, spec)| spec);
@@ -449,22 +473,38 @@ pub fn serve(
                 checked = Some((wire.environment, spec));
             }
             let started = Instant::now();
-            let outcome = environment.rollout(&task);
+            let outcomes = if options.batches {
+                batch.insert(0, wire);
+                let tasks: Vec<Task> = batch.iter().map(WireTask::to_task).collect();
+                let outcomes = environment.rollout_batch(&tasks);
+                if let Some(wrong) = batched_wrongly(&tasks, &outcomes) {
+                    return Err(WorkerError::Batch {
+                        job: wire.job,
+                        reason: wrong,
+                    });
+                }
+                outcomes
+            } else {
+                batch.push(wire);
+                vec![environment.rollout(&task)]
+            };
             let took = started.elapsed();
-            batching.observe(took);
+            batching.observe(took / outcomes.len() as u32);
             slowest = slowest.max(took);
-            rollouts += 1;
-            // An outcome the wire cannot carry stops the worker: reported as failed, it would
-            // read as the environment's failure and change the run's result.
-            let wire_outcome =
-                WireOutcome::new(wire.job, &outcome).map_err(|capacity| WorkerError::OutcomeTooLarge {
-                    job: wire.job,
-                    task_id: task.id,
-                    capacity,
-                })?;
-            outbox
-                .push(wire_outcome)
-                .expect("a full outbox stops the simulation until it is sent");
+            rollouts += outcomes.len() as u64;
+            for (wire, outcome) in batch.iter().zip(&outcomes) {
+                // An outcome the wire cannot carry stops the worker: reported as failed, it would
+                // read as the environment's failure and change the run's result.
+                let wire_outcome =
+                    WireOutcome::new(wire.job, outcome).map_err(|capacity| WorkerError::OutcomeTooLarge {
+                        job: wire.job,
+                        task_id: outcome.task_id,
+                        capacity,
+                    })?;
+                outbox
+                    .push(wire_outcome)
+                    .expect("a full outbox stops the simulation until it is sent");
+            }
             idle_since = None;
             // A task came from a live learner.
             silence.heard();
@@ -500,6 +540,27 @@ pub fn serve(
             silence.looked();
         }
     }
+}
+
+/// Why the outcomes of a batch are not one per task in the tasks' order, if they are not.
+fn batched_wrongly(tasks: &[Task], outcomes: &[Outcome]) -> Option<String> {
+    if outcomes.len() != tasks.len() {
+        return Some(format!(
+            "rollout_batch returned {} outcomes for {} tasks",
+            outcomes.len(),
+            tasks.len()
+        ));
+    }
+    tasks
+        .iter()
+        .zip(outcomes)
+        .find(|(task, outcome)| task.id != outcome.task_id)
+        .map(|(task, outcome)| {
+            format!(
+                "rollout_batch returned the outcome of task {} where task {}'s belongs",
+                outcome.task_id, task.id
+            )
+        })
 }
 
 /// Why the learner's `answer` refused this worker (of run `identity`, 0 before it learnt one,

@@ -1,6 +1,7 @@
 //! A worker refused by the learner, or refusing a task, stops with a message naming both sides;
 //! one whose environment returns more than the wire carries stops naming the limit; one whose
-//! factory has no environment stops with the factory's error.
+//! factory has no environment stops with the factory's error. A worker with batches hands its
+//! environment every queued task at once, and stops when the outcomes do not match them.
 
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task, TaskKind};
 use acps_wire::ipc::{self, RunName};
@@ -39,19 +40,27 @@ impl Environment for Zero {
 /// request with `answer`, until the worker stops (within 20 s, or the test fails).
 fn against_stand_in(
     test: &str,
+    factory: impl EnvironmentFactory + Send + 'static,
+    answer: impl FnMut(&WorkerMessage) -> (Answer, Vec<WireTask>),
+) -> Result<WorkerReport, WorkerError> {
+    let options = WorkerOptions {
+        name: "refused".into(),
+        ..WorkerOptions::default()
+    };
+    with_options(test, options, factory, answer)
+}
+
+/// [`against_stand_in`] with the worker's `options`.
+fn with_options(
+    test: &str,
+    options: WorkerOptions,
     mut factory: impl EnvironmentFactory + Send + 'static,
-    answer: impl Fn(&WorkerMessage) -> (Answer, Vec<WireTask>),
+    mut answer: impl FnMut(&WorkerMessage) -> (Answer, Vec<WireTask>),
 ) -> Result<WorkerReport, WorkerError> {
     let run = RunName::new(&format!("{test}-{}", std::process::id())).unwrap();
     let worker = {
         let run = run.clone();
-        std::thread::spawn(move || {
-            let options = WorkerOptions {
-                name: "refused".into(),
-                ..WorkerOptions::default()
-            };
-            acps_worker::serve(&run, &options, &mut factory, &AtomicBool::new(false))
-        })
+        std::thread::spawn(move || acps_worker::serve(&run, &options, &mut factory, &AtomicBool::new(false)))
     };
     {
         let node = ipc::node(&run, "stand-in").unwrap();
@@ -174,4 +183,111 @@ fn a_factory_without_the_environment_stops_the_worker_with_its_own_error() {
     assert_eq!(error.to_string(), "task 9 of job 3: no environment");
     let source = std::error::Error::source(&error).expect("the factory's error");
     assert_eq!(source.to_string(), "no simulator here");
+}
+
+/// Rollouts that return their task's id as reward, recording each batch's size; with `drop`,
+/// a batch's last outcome is left out.
+struct Batched {
+    spec: EnvironmentSpec,
+    sizes: std::sync::Arc<std::sync::Mutex<Vec<usize>>>,
+    drop: bool,
+}
+
+impl Environment for Batched {
+    fn spec(&self) -> EnvironmentSpec {
+        self.spec
+    }
+
+    fn context_dim(&self) -> usize {
+        1
+    }
+
+    fn param_dim(&self) -> usize {
+        1
+    }
+
+    fn rollout(&mut self, task: &Task) -> Outcome {
+        Outcome::new(task.id, task.id as f64, 0.0)
+    }
+
+    fn rollout_batch(&mut self, tasks: &[Task]) -> Vec<Outcome> {
+        self.sizes.lock().unwrap().push(tasks.len());
+        let keep = tasks.len() - usize::from(self.drop);
+        tasks[..keep].iter().map(|task| self.rollout(task)).collect()
+    }
+}
+
+/// Five tasks (ids 10..15) in the first answer, then the end of the run once their outcomes
+/// came back; the batch sizes and the outcomes the worker delivered, in order.
+fn five_tasks_then_stop(test: &str, drop: bool) -> (Result<WorkerReport, WorkerError>, Vec<usize>, Vec<u64>) {
+    let sizes = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let environment = Batched {
+        spec: spec(1.0),
+        sizes: sizes.clone(),
+        drop,
+    };
+    let options = WorkerOptions {
+        name: "batches".into(),
+        queue_depth: 8,
+        batches: true,
+        ..WorkerOptions::default()
+    };
+    let mut handed_out = false;
+    let mut delivered = Vec::new();
+    let result = with_options(test, options, Single(environment), |message| {
+        for outcome in &message.outcomes[..message.count as usize] {
+            assert_eq!(outcome.reward, outcome.task_id as f64, "each outcome is its task's");
+            delivered.push(outcome.task_id);
+        }
+        if handed_out {
+            // The run ends once the five came back (or the worker stopped); until then,
+            // requests get no tasks.
+            let done = delivered.len() >= 5;
+            return (
+                Answer::new(if done { Response::Stop } else { Response::Task }, 42),
+                vec![],
+            );
+        }
+        handed_out = true;
+        let tasks = (10..15)
+            .map(|id| {
+                let task = Task {
+                    id,
+                    kind: TaskKind::Train,
+                    seed: id,
+                    context: vec![0.0],
+                    theta: vec![0.0],
+                };
+                WireTask::new(0, &task, spec(1.0)).unwrap()
+            })
+            .collect();
+        (Answer::new(Response::Task, 42), tasks)
+    });
+    let sizes = sizes.lock().unwrap().clone();
+    (result, sizes, delivered)
+}
+
+#[test]
+fn a_worker_with_batches_hands_every_queued_task_to_one_call() {
+    let (result, sizes, delivered) = five_tasks_then_stop("batches", false);
+    let report = result.unwrap();
+    assert_eq!(report.rollouts, 5);
+    assert_eq!(sizes, vec![5], "one call for the five queued tasks");
+    assert_eq!(delivered, vec![10, 11, 12, 13, 14]);
+}
+
+#[test]
+fn a_batch_whose_outcomes_do_not_match_its_tasks_stops_the_worker() {
+    let (result, sizes, delivered) = five_tasks_then_stop("batch-short", true);
+    let error = result.unwrap_err();
+    assert!(matches!(error, WorkerError::Batch { job: 0, .. }), "{error:?}");
+    assert_eq!(
+        error.to_string(),
+        "a batch of job 0: rollout_batch returned 4 outcomes for 5 tasks; the worker stops, and the learner hands its tasks to another worker"
+    );
+    assert_eq!(sizes, vec![5]);
+    assert!(
+        delivered.is_empty(),
+        "no outcome of the broken batch went out: {delivered:?}"
+    );
 }

@@ -277,6 +277,18 @@ fn python_bowl_workers_give_rust_bowl_workers_bits() {
         String::from_utf8_lossy(&batch),
         String::from_utf8_lossy(&rust)
     );
+    let rust_batch = bowl_summary(
+        &format!("'{}' --batch", bowl_worker().display()),
+        "bowl-rust-batch",
+        &dir,
+        &wide,
+    );
+    assert!(
+        rust_batch == rust,
+        "summary.json of 2 Rust batch workers differs from 2 Rust workers':\n{}\n{}",
+        String::from_utf8_lossy(&rust_batch),
+        String::from_utf8_lossy(&rust)
+    );
 }
 
 #[test]
