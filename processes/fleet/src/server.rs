@@ -508,8 +508,9 @@ pub enum FleetError {
     /// No worker was connected and none was on its way for the grace period
     /// ([`Liveness::no_workers`]): every started worker exited, and no other joined.
     #[error(
-        "no worker can go on with run '{run}': none connected for {waited:?}{started}",
-        started = if *started > 0 { format!(", and all {started} started worker processes exited (see their messages above)") } else { String::new() }
+        "no worker can go on with run '{run}': none connected for {waited:?}{started}{why}",
+        started = if *started > 0 { format!(", and all {started} started worker processes exited (see their messages above)") } else { String::new() },
+        why = refused.as_ref().map_or(String::new(), |reason| format!("; the learner refused a worker: {reason}"))
     )]
     NoWorkers {
         /// The run.
@@ -518,6 +519,10 @@ pub enum FleetError {
         started: usize,
         /// How long the run was without a worker.
         waited: Duration,
+        /// Why the learner refused the last worker it refused, if it refused any and no
+        /// worker served since: the workers (or the problem) must change before the run can go
+        /// on.
+        refused: Option<String>,
     },
     /// A worker process could not be started.
     #[error("starting worker process {program}: {error}")]
@@ -693,6 +698,8 @@ pub(crate) fn serve<'r>(
     let mut next_job = 0;
     let mut last_tick = Instant::now();
     let mut refused_clients = HashSet::new();
+    // The last refusal's reason and the outcomes taken by then.
+    let mut last_refusal: Option<(String, u64)> = None;
     // Clients that sent a request since the last look for dead workers.
     let mut heard = HashSet::new();
     let mut idle_since: Option<Instant> = None;
@@ -733,6 +740,7 @@ pub(crate) fn serve<'r>(
                         tracing::warn!("refused a worker of run '{run}': {reason}");
                         source.refused(&reason);
                     }
+                    last_refusal = Some((reason, progress.outcomes));
                     let _ = ipc::reply(&request, answer, &[]);
                     continue;
                 }
@@ -950,6 +958,10 @@ pub(crate) fn serve<'r>(
             hung.retain(known);
             if progress.workers > 0 || progress.relays > 0 || progress.started_running > 0 {
                 without_workers = None;
+                // Someone served since: an old refusal is not why the run would stop.
+                if last_refusal.as_ref().is_some_and(|(_, at)| progress.outcomes > *at) {
+                    last_refusal = None;
+                }
             } else if let Some(grace) = options.liveness.no_workers {
                 let since = *without_workers.get_or_insert_with(Instant::now);
                 if since.elapsed() >= grace {
@@ -957,6 +969,7 @@ pub(crate) fn serve<'r>(
                         run: run.clone(),
                         started: launched,
                         waited: since.elapsed(),
+                        refused: last_refusal.map(|(reason, _)| reason),
                     });
                 }
             }

@@ -11,7 +11,7 @@ use acps_experiments::plan::{Job, Plan};
 use acps_experiments::run_dir::{self, RunDir, RunDirError, RunReport};
 use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
-use acps_fleet::{Fleet, FleetBuilder, FleetProgress};
+use acps_fleet::{Fleet, FleetBuilder, FleetError, FleetProgress};
 use acps_relay::{Listener, NetOptions, RelayOptions};
 use acps_wire::ipc::{self, RunName};
 use acps_worker::{WorkerExit, WorkerOptions};
@@ -112,9 +112,12 @@ fn stopped(
     if interrupted(&error) {
         return Stopped::Interrupted { resume, fleet }.into();
     }
-    // A fleet can fail half-way (its workers gone, refused or silent); other errors happen
-    // before the run starts or concern the checkpoints themselves.
-    let fleet_failed = run_errors(&error).any(|e| matches!(e, RunError::Fleet(_)));
+    // A fleet can fail half-way (its workers gone or silent); other errors happen before the
+    // run starts or concern the checkpoints themselves. Workers the learner refused would be
+    // refused again by the same run resumed: they, or the problem, must change first.
+    let fleet_failed = run_errors(&error).any(|e| {
+        matches!(e, RunError::Fleet(_)) && !matches!(e, RunError::Fleet(FleetError::NoWorkers { refused: Some(_), .. }))
+    });
     match resume {
         Some(resume) if fleet_failed && checkpoints.is_some_and(|c| c.dir.is_dir()) => {
             Stopped::Failed { error, resume }.into()
@@ -133,7 +136,6 @@ fn run_errors(error: &anyhow::Error) -> impl Iterator<Item = &RunError> {
 
 /// True when `error` is a run stopped by Ctrl-C.
 fn interrupted(error: &anyhow::Error) -> bool {
-    use acps_fleet::FleetError;
     run_errors(error).any(|e| matches!(e, RunError::Fleet(FleetError::Interrupted) | RunError::Interrupted))
         || error
             .chain()

@@ -452,6 +452,12 @@ fn a_worker_of_other_settings_is_refused_and_the_run_says_so() {
         "{stderr}"
     );
     assert!(stderr.contains("no worker can go on"), "{stderr}");
+    // The run ends on the refusal, and does not offer a --resume that would meet it again.
+    assert!(
+        stderr.contains(&format!("the learner refused a worker: {reason}")),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("--resume"), "{stderr}");
     assert!(!dir.join("out").join("summary.json").exists());
 }
 
