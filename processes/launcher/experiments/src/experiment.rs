@@ -14,7 +14,7 @@ use acps_learner::checkpoint::Stamp;
 use acps_learner::{
     Episode, Learner, LearnerConfig, LearnerCreateError, LearningProgress, Records, SelectorConfig, run_in_process,
 };
-use acps_shared::{Environment, EnvironmentMatchError, Problem};
+use acps_shared::{Environment, EnvironmentMatchError, Outcome, Problem, Task};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -183,6 +183,13 @@ pub enum RunError {
         /// The experiment's name.
         experiment: String,
     },
+    /// The outcomes of [`Experiment::run_batched`]'s `perform` were not one per task in the
+    /// tasks' order.
+    #[error("the batch's outcomes do not answer its tasks: {what}")]
+    Performed {
+        /// What does not match.
+        what: String,
+    },
     /// A run whose every training rollout, or every rollout of every evaluation, failed: it
     /// learnt or measured nothing.
     #[error("experiment '{experiment}', method {method}, run {run} (seed {seed}): {what}")]
@@ -198,6 +205,23 @@ pub enum RunError {
         /// Which rollouts failed, and where the first did.
         what: String,
     },
+}
+
+/// Why `outcomes` do not answer `tasks` one by one, if they do not.
+fn mismatched(tasks: &[(usize, Task)], outcomes: &[Outcome]) -> Option<String> {
+    if tasks.len() != outcomes.len() {
+        return Some(format!("{} outcomes for {} tasks", outcomes.len(), tasks.len()));
+    }
+    tasks
+        .iter()
+        .zip(outcomes)
+        .find(|((_, task), outcome)| task.id != outcome.task_id)
+        .map(|((job, task), outcome)| {
+            format!(
+                "the outcome of task {} where task {} of job {job} belongs",
+                outcome.task_id, task.id
+            )
+        })
 }
 
 impl Experiment {
@@ -302,6 +326,65 @@ impl Experiment {
         stop: &AtomicBool,
     ) -> Result<Summary, RunError> {
         self.run_jobs(self.jobs_writing(checkpoints)?, progress, stop)
+    }
+
+    /// Run every (method, run) job in this thread, handing `perform` every task all jobs have
+    /// ready at once, tagged with its job's index (method-major): one call per round, for a
+    /// vectorised simulator of the caller's (the jobs need no environment of their own).
+    /// `perform` returns one outcome per task in their order, or `None` to stop: every
+    /// unfinished job then writes its checkpoint, as when `stop` is set, and the run ends with
+    /// [`RunError::Interrupted`]. The summary is the same bit for bit as that of any other way
+    /// of running the jobs.
+    pub fn run_batched(
+        &self,
+        progress: &Progress,
+        checkpoints: Option<&Checkpoints>,
+        stop: &AtomicBool,
+        perform: &mut dyn FnMut(&[(usize, Task)]) -> Option<Vec<Outcome>>,
+    ) -> Result<Summary, RunError> {
+        let mut jobs = self.jobs_writing(checkpoints)?;
+        let mut rollouts = 0;
+        loop {
+            let mut tasks = Vec::new();
+            if !stop.load(Ordering::Relaxed) {
+                for (index, (job, _)) in jobs.iter_mut().enumerate() {
+                    while let Some(task) = job.learner.ask() {
+                        tasks.push((index, task));
+                    }
+                }
+                if tasks.is_empty() {
+                    break;
+                }
+            }
+            let outcomes = match stop.load(Ordering::Relaxed) {
+                true => None,
+                false => perform(&tasks),
+            };
+            let Some(outcomes) = outcomes else {
+                for (job, writer) in &mut jobs {
+                    if let Some(writer) = writer.as_mut().filter(|w| w.enabled()) {
+                        writer.write(&mut job.learner, job.environment.as_deref())?;
+                    }
+                }
+                return Err(RunError::Interrupted);
+            };
+            if let Some(what) = mismatched(&tasks, &outcomes) {
+                return Err(RunError::Performed { what });
+            }
+            for ((index, _), outcome) in tasks.iter().zip(outcomes) {
+                let (job, writer) = &mut jobs[*index];
+                job.learner
+                    .tell(outcome)
+                    .expect("the outcome answers a task just handed out");
+                if let Some(writer) = writer {
+                    writer.after_tell(&mut job.learner, job.environment.as_deref())?;
+                }
+            }
+            rollouts += tasks.len() as u64;
+            let learning = LearningProgress::combine(jobs.iter().map(|(job, _)| job.learner.progress()));
+            progress.show(&learning, rollouts, None);
+        }
+        self.finished(jobs)
     }
 
     fn run_jobs(

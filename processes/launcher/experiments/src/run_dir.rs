@@ -29,6 +29,7 @@ use crate::records::{self, RecordsError};
 use crate::settings::ExperimentFile;
 use crate::summary::{Failures, Summary};
 use acps_fleet::FleetProgress;
+use acps_shared::{Outcome, Task};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -233,11 +234,41 @@ impl RunDir {
                 .check_in_process()
                 .map_err(|e| RunDirError::Refused(Box::new(e)))?;
         }
+        self.each(quiet, pictures, |experiment, progress, checkpoints| {
+            experiment.run_until(progress, checkpoints, stop)
+        })
+    }
+
+    /// Run every experiment in this thread, one after another, handing `perform` every task its
+    /// jobs have ready at once ([`Experiment::run_batched`]: a vectorised simulator of the
+    /// caller's, also for a problem file's problem), and write each one's directory. Stops
+    /// with [`RunError::Interrupted`] once `stop` is set or `perform` returns `None`, after
+    /// every unfinished job wrote its checkpoint.
+    pub fn batched(
+        &self,
+        quiet: bool,
+        stop: &AtomicBool,
+        pictures: Pictures,
+        perform: &mut dyn FnMut(&[(usize, Task)]) -> Option<Vec<Outcome>>,
+    ) -> Result<Vec<Summary>, RunDirError> {
+        self.each(quiet, pictures, |experiment, progress, checkpoints| {
+            experiment.run_batched(progress, checkpoints, stop, perform)
+        })
+    }
+
+    /// Each experiment run by `run` with its progress line and checkpoints, its directory
+    /// written and its failures checked.
+    fn each(
+        &self,
+        quiet: bool,
+        pictures: Pictures,
+        mut run: impl FnMut(&Experiment, &Progress, Option<&Checkpoints>) -> Result<Summary, RunError>,
+    ) -> Result<Vec<Summary>, RunDirError> {
         let mut summaries = Vec::with_capacity(self.jobs.len());
         for Job { experiment, dir, .. } in &self.jobs {
             let progress = experiment.progress(quiet, self.progress_every);
             let checkpoints = self.checkpoints(dir);
-            let outcome = experiment.run_until(&progress, checkpoints.as_ref(), stop);
+            let outcome = run(experiment, &progress, checkpoints.as_ref());
             match &outcome {
                 Ok(summary) => progress.finish(summary),
                 Err(_) => progress.abandon(),

@@ -1,6 +1,7 @@
 //! Record files and checkpoints through the library's run directory: a run resumed from its
 //! checkpoints writes the same bytes whatever was appended to its record files after them, and
-//! record files cut short of, or changed before, their checkpoint's mark are refused by name.
+//! record files cut short of, or changed before, their checkpoint's mark are refused by name; a
+//! batched run (one call for every job's ready tasks) writes the same bytes, also resumed.
 
 use acps_experiments::run_dir::{RunDir, RunDirError};
 use acps_experiments::settings::ExperimentFile;
@@ -199,4 +200,57 @@ fn a_checkpoint_whose_record_mark_is_missing_or_does_not_fit_its_learner_is_refu
     checkpoint::write(&path, stamp, &good).unwrap();
     run(&dir, true).unwrap();
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The function experiment into `dir` through [`RunDir::batched`], its environments built as
+/// the in-process run builds them; `stop_after` rounds of batches, then `perform` says stop.
+fn run_batched(dir: &Path, resume: bool, stop_after: Option<usize>) -> Result<Vec<usize>, RunDirError> {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../experiments/function-fig4.toml");
+    let run = RunDir::plan(Some(&file), &settings(), Some(dir.to_path_buf()))?.checkpointing(1, resume)?;
+    run.prepare()?;
+    let mut environments: Vec<_> = run.jobs[0]
+        .experiment
+        .jobs()
+        .unwrap()
+        .into_iter()
+        .map(|job| job.environment.unwrap())
+        .collect();
+    let mut sizes = Vec::new();
+    let mut perform = |tasks: &[(usize, acps_shared::Task)]| {
+        if stop_after.is_some_and(|rounds| sizes.len() == rounds) {
+            return None;
+        }
+        sizes.push(tasks.len());
+        Some(
+            tasks
+                .iter()
+                .map(|(job, task)| environments[*job].rollout(task))
+                .collect(),
+        )
+    };
+    run.batched(true, &AtomicBool::new(false), &|_, _| Ok(()), &mut perform)?;
+    Ok(sizes)
+}
+
+#[test]
+fn a_batched_run_writes_the_in_process_bytes_and_resumes_to_them_after_a_stop() {
+    let (reference, batched, stopped) = (out("batched-ref"), out("batched"), out("batched-stop"));
+    run(&reference, false).unwrap();
+    let sizes = run_batched(&batched, false, None).unwrap();
+    assert_eq!(outputs(&batched), outputs(&reference));
+    // Every job's ready tasks go in one call: 4 jobs, so batches of more than one task.
+    assert!(sizes.iter().any(|&n| n >= 4), "{sizes:?}");
+    let error = run_batched(&stopped, false, Some(40)).unwrap_err();
+    assert!(
+        matches!(
+            error.run_error(),
+            Some(acps_experiments::experiment::RunError::Interrupted)
+        ),
+        "{error}"
+    );
+    run_batched(&stopped, true, None).unwrap();
+    assert_eq!(outputs(&stopped), outputs(&reference));
+    for dir in [reference, batched, stopped] {
+        std::fs::remove_dir_all(dir).unwrap();
+    }
 }
