@@ -35,6 +35,10 @@ pub struct Instance {
     pub keeps_state: bool,
 }
 
+/// What performs a batched run's rollouts ([`Experiment::run_batched`]): every ready task,
+/// with its job's index, in one call; one outcome per task in their order, or `None` to stop.
+pub type Perform<'a> = dyn FnMut(&[(usize, Task)]) -> Option<Vec<Outcome>> + 'a;
+
 /// Builds the problem instance of a run from the run's seed.
 pub type InstanceFactory = Box<dyn Fn(u64) -> Instance + Send + Sync>;
 
@@ -340,7 +344,7 @@ impl Experiment {
         progress: &Progress,
         checkpoints: Option<&Checkpoints>,
         stop: &AtomicBool,
-        perform: &mut dyn FnMut(&[(usize, Task)]) -> Option<Vec<Outcome>>,
+        perform: &mut Perform<'_>,
     ) -> Result<Summary, RunError> {
         let mut jobs = self.jobs_writing(checkpoints)?;
         let mut rollouts = 0;

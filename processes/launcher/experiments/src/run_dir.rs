@@ -20,7 +20,7 @@
 //! ```
 
 use crate::checkpoints::Checkpoints;
-use crate::experiment::{Experiment, RunError};
+use crate::experiment::{Experiment, Perform, RunError};
 use crate::file::LoadedFile;
 use crate::keys::ConfigError;
 use crate::plan::{self, Job, Plan};
@@ -29,7 +29,6 @@ use crate::records::{self, RecordsError};
 use crate::settings::ExperimentFile;
 use crate::summary::{Failures, Summary};
 use acps_fleet::FleetProgress;
-use acps_shared::{Outcome, Task};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -249,7 +248,7 @@ impl RunDir {
         quiet: bool,
         stop: &AtomicBool,
         pictures: Pictures,
-        perform: &mut dyn FnMut(&[(usize, Task)]) -> Option<Vec<Outcome>>,
+        perform: &mut Perform<'_>,
     ) -> Result<Vec<Summary>, RunDirError> {
         self.each(quiet, pictures, |experiment, progress, checkpoints| {
             experiment.run_batched(progress, checkpoints, stop, perform)
