@@ -1,7 +1,22 @@
 """Type stubs of the extension module ``acps._native`` (python/src)."""
 
+from collections.abc import Callable
+from typing import TypeAlias
+
 import numpy as np
 import numpy.typing as npt
+
+#: ``perform(ids, kinds, seeds, contexts, thetas) -> (rewards, scores, ok)`` of :func:`run`.
+Perform: TypeAlias = Callable[
+    [
+        npt.NDArray[np.uint64],
+        npt.NDArray[np.uint8],
+        npt.NDArray[np.uint64],
+        npt.NDArray[np.float64],
+        npt.NDArray[np.float64],
+    ],
+    tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_]],
+]
 
 __version__: str
 
@@ -19,6 +34,18 @@ class CheckpointError(AcpsError):
 
 def cli(argv: list[str], program: list[str]) -> int:
     """Run the acps command line ``argv``; ``program`` is how it starts itself again."""
+
+def run(
+    path: str | None,
+    json: str | None,
+    origin: str,
+    out: str | None,
+    perform: Perform | None,
+    quiet: bool,
+    checkpoint_every: int,
+    resume: bool,
+) -> str:
+    """Run a whole experiment into its run directory; returns the directory."""
 
 class NativeLearner:
     """A learner of one (method, run) of an experiment."""

@@ -7,7 +7,7 @@ use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::Plan;
 use acps_experiments::settings::ExperimentFile;
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
-use acps_shared::{Outcome, OutcomeStatus, TaskKind};
+use acps_shared::{Outcome, OutcomeStatus, Task, TaskKind};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use std::collections::HashSet;
@@ -16,7 +16,7 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 
 /// The arrays of a batch of tasks: ids, kinds (0 train, 1 evaluate, 2 baseline), seeds,
 /// contexts `(n, n_s)` and parameters `(n, n_theta)`.
-type Batch<'py> = (
+pub(crate) type Batch<'py> = (
     Bound<'py, PyArray1<u64>>,
     Bound<'py, PyArray1<u8>>,
     Bound<'py, PyArray1<u64>>,
@@ -112,6 +112,19 @@ impl NativeLearner {
     }
 }
 
+/// The arrays of `tasks`, whose contexts have `n_s` values and parameters `n_theta`.
+pub(crate) fn batch<'py>(py: Python<'py>, tasks: &[&Task], n_s: usize, n_theta: usize) -> PyResult<Batch<'py>> {
+    let count = tasks.len();
+    let ids = PyArray1::from_vec(py, tasks.iter().map(|t| t.id).collect());
+    let kinds = PyArray1::from_vec(py, tasks.iter().map(|t| kind_code(t.kind)).collect());
+    let seeds = PyArray1::from_vec(py, tasks.iter().map(|t| t.seed).collect());
+    let contexts: Vec<f64> = tasks.iter().flat_map(|t| t.context.iter().copied()).collect();
+    let thetas: Vec<f64> = tasks.iter().flat_map(|t| t.theta.iter().copied()).collect();
+    let contexts = PyArray1::from_vec(py, contexts).reshape([count, n_s])?;
+    let thetas = PyArray1::from_vec(py, thetas).reshape([count, n_theta])?;
+    Ok((ids, kinds, seeds, contexts, thetas))
+}
+
 fn kind_code(kind: TaskKind) -> u8 {
     match kind {
         TaskKind::Train => 0,
@@ -134,8 +147,7 @@ impl NativeLearner {
     #[staticmethod]
     #[pyo3(signature = (path, method, run))]
     fn from_path(path: &str, method: Option<&str>, run: usize) -> PyResult<Self> {
-        let file = LoadedFile::read(Path::new(path)).map_err(|e| SettingsError::new_err(e.to_string()))?;
-        Ok(Self::of(build(&file, method, run)?))
+        Ok(Self::of(build(&crate::read_file(path)?, method, run)?))
     }
 
     /// The learner of `method` and `run` of the settings `json` (an experiment file's keys as
@@ -143,11 +155,7 @@ impl NativeLearner {
     #[staticmethod]
     #[pyo3(signature = (json, origin, method, run))]
     fn from_json(json: &str, origin: &str, method: Option<&str>, run: usize) -> PyResult<Self> {
-        let refused = |e: &dyn std::fmt::Display| SettingsError::new_err(format!("{origin}: {e}"));
-        let value: serde_json::Value = serde_json::from_str(json).map_err(|e| refused(&e))?;
-        let text = toml::to_string(&value).map_err(|e| refused(&e))?;
-        let file = LoadedFile::parse(Path::new(origin), text).map_err(|e| SettingsError::new_err(e.to_string()))?;
-        Ok(Self::of(build(&file, method, run)?))
+        Ok(Self::of(build(&crate::parse_json(json, origin)?, method, run)?))
     }
 
     /// Up to `n` tasks: every task the learner has ready, at most `n`. Fewer (even none) when
@@ -163,16 +171,7 @@ impl NativeLearner {
                 None => break,
             }
         }
-        let count = tasks.len();
-        let ids = PyArray1::from_vec(py, tasks.iter().map(|t| t.id).collect());
-        let kinds = PyArray1::from_vec(py, tasks.iter().map(|t| kind_code(t.kind)).collect());
-        let seeds = PyArray1::from_vec(py, tasks.iter().map(|t| t.seed).collect());
-        let contexts: Vec<f64> = tasks.iter().flat_map(|t| t.context.iter().copied()).collect();
-        // Evaluation tasks of a problem without parameters carry none; every row has n_theta.
-        let thetas: Vec<f64> = tasks.iter().flat_map(|t| t.theta.iter().copied()).collect();
-        let contexts = PyArray1::from_vec(py, contexts).reshape([count, n_s])?;
-        let thetas = PyArray1::from_vec(py, thetas).reshape([count, n_theta])?;
-        Ok((ids, kinds, seeds, contexts, thetas))
+        batch(py, &tasks.iter().collect::<Vec<_>>(), n_s, n_theta)
     }
 
     /// Take the outcomes of tasks `ids`: their `rewards` (what the learner maximises) and

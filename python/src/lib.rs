@@ -4,8 +4,11 @@
 #![warn(missing_docs)]
 
 mod learner;
+mod run;
 
+use acps_experiments::file::LoadedFile;
 use pyo3::prelude::*;
+use std::path::Path;
 
 pyo3::create_exception!(
     _native,
@@ -32,6 +35,19 @@ pyo3::create_exception!(
     "A checkpoint that cannot be written, read or applied: another experiment's, another job's, truncated or corrupted."
 );
 
+/// The experiment or problem file at `path`.
+fn read_file(path: &str) -> PyResult<LoadedFile> {
+    LoadedFile::read(Path::new(path)).map_err(|e| SettingsError::new_err(e.to_string()))
+}
+
+/// An experiment file's keys given as a JSON object (a Python dict), named `origin` in errors.
+fn parse_json(json: &str, origin: &str) -> PyResult<LoadedFile> {
+    let refused = |e: &dyn std::fmt::Display| SettingsError::new_err(format!("{origin}: {e}"));
+    let value: serde_json::Value = serde_json::from_str(json).map_err(|e| refused(&e))?;
+    let text = toml::to_string(&value).map_err(|e| refused(&e))?;
+    LoadedFile::parse(Path::new(origin), text).map_err(|e| SettingsError::new_err(e.to_string()))
+}
+
 /// Run the acps command line with `argv` (the program's name first) and return its exit
 /// status. `program` is how the command starts itself again (its workers and relays), for
 /// example `[sys.executable, "-m", "acps"]`; the console script passes it.
@@ -49,6 +65,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<learner::NativeLearner>()?;
     m.add_function(wrap_pyfunction!(cli, m)?)?;
+    m.add_function(wrap_pyfunction!(run::run, m)?)?;
     m.add("AcpsError", py.get_type::<AcpsError>())?;
     m.add("SettingsError", py.get_type::<SettingsError>())?;
     m.add("TellError", py.get_type::<TellError>())?;

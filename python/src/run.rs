@@ -1,0 +1,159 @@
+//! A whole experiment from Python: every (method, run) job in this process through the library
+//! runner, writing the run directory `acps run` writes, with its pictures.
+
+use crate::learner::batch;
+use crate::{AcpsError, SettingsError};
+use acps_experiments::file::LoadedFile;
+use acps_experiments::plan::Plan;
+use acps_experiments::run_dir::{RunDir, RunDirError};
+use acps_experiments::settings::ExperimentFile;
+use acps_experiments::summary::Summary;
+use acps_shared::{Outcome, OutcomeStatus, Task};
+use numpy::PyReadonlyArray1;
+use pyo3::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// The pictures of a run directory, as `acps run` draws them.
+fn pictures(summary: &Summary, dir: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    acps_reports::plot::write_all(summary, dir)
+}
+
+/// Run the experiment of the file at `path` or of the settings `json` (`origin` names them)
+/// into `out` (default `runs/NAME`), and return its directory. With `perform`, a Python
+/// callable `perform(ids, kinds, seeds, contexts, thetas) -> (rewards, scores, ok)`, every
+/// ready task of every job goes to one call of it; without, the experiment's own environments
+/// run in parallel in this process. Ctrl-C (KeyboardInterrupt), or an exception of `perform`,
+/// stops the run after every unfinished job wrote its checkpoint, and is raised here.
+#[pyfunction]
+#[pyo3(signature = (path, json, origin, out, perform, quiet, checkpoint_every, resume))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run(
+    py: Python<'_>,
+    path: Option<&str>,
+    json: Option<&str>,
+    origin: &str,
+    out: Option<String>,
+    perform: Option<Py<PyAny>>,
+    quiet: bool,
+    checkpoint_every: u64,
+    resume: bool,
+) -> PyResult<String> {
+    let file = match (path, json) {
+        (Some(path), _) => crate::read_file(path)?,
+        (None, Some(json)) => crate::parse_json(json, origin)?,
+        (None, None) => return Err(SettingsError::new_err("run: neither a file nor settings")),
+    };
+    let run_dir = plan(
+        &file,
+        path.map(Path::new),
+        out.map(PathBuf::from),
+        checkpoint_every,
+        resume,
+    )?;
+    let stop = AtomicBool::new(false);
+    let mut raised: Option<PyErr> = None;
+    let result = match perform {
+        Some(perform) => {
+            let mut call = |tasks: &[(usize, Task)]| match perform_batch(py, &perform, tasks) {
+                Ok(outcomes) => Some(outcomes),
+                Err(error) => {
+                    raised = Some(error);
+                    None
+                }
+            };
+            run_dir.batched(quiet, &stop, &pictures, &mut call)
+        }
+        None => in_process(py, &run_dir, quiet, &stop, &mut raised),
+    };
+    if let Some(error) = raised {
+        return Err(error);
+    }
+    result.map_err(|e| match e {
+        RunDirError::Config(_) | RunDirError::Refused(_) => SettingsError::new_err(e.to_string()),
+        _ => AcpsError::new_err(e.to_string()),
+    })?;
+    Ok(run_dir.out.display().to_string())
+}
+
+/// The checked run directory of `file` (read from `path`, if it was) writing into `out`.
+fn plan(
+    file: &LoadedFile,
+    path: Option<&Path>,
+    out: Option<PathBuf>,
+    checkpoint_every: u64,
+    resume: bool,
+) -> PyResult<RunDir> {
+    let refused = |e: RunDirError| SettingsError::new_err(e.to_string());
+    let plan = Plan::new(Some(file), &ExperimentFile::default()).map_err(|e| SettingsError::new_err(e.to_string()))?;
+    let run_dir = RunDir::of(&plan, path, out)
+        .and_then(|r| r.checkpointing(checkpoint_every, resume))
+        .map_err(refused)?;
+    run_dir.prepare().map_err(refused)?;
+    Ok(run_dir)
+}
+
+/// One call of the Python `perform` for `tasks`: their outcomes, in order.
+fn perform_batch(py: Python<'_>, perform: &Py<PyAny>, tasks: &[(usize, Task)]) -> PyResult<Vec<Outcome>> {
+    // Ctrl-C between two batches stops the run here.
+    py.check_signals()?;
+    let first = &tasks[0].1;
+    let (n_s, n_theta) = (first.context.len(), first.theta.len());
+    let refs: Vec<&Task> = tasks.iter().map(|(_, task)| task).collect();
+    let arrays = batch(py, &refs, n_s, n_theta)?;
+    let returned = perform.call1(py, arrays)?;
+    let (rewards, scores, ok): (
+        PyReadonlyArray1<'_, f64>,
+        PyReadonlyArray1<'_, f64>,
+        PyReadonlyArray1<'_, bool>,
+    ) = returned.extract(py)?;
+    let (rewards, scores, ok) = (rewards.as_array(), scores.as_array(), ok.as_array());
+    if [rewards.len(), scores.len(), ok.len()] != [tasks.len(); 3] {
+        return Err(AcpsError::new_err(format!(
+            "a batch of {} tasks got {} rewards, {} scores and {} ok flags",
+            tasks.len(),
+            rewards.len(),
+            scores.len(),
+            ok.len()
+        )));
+    }
+    Ok(tasks
+        .iter()
+        .enumerate()
+        .map(|(i, (_, task))| {
+            let mut outcome = Outcome::new(task.id, rewards[i], scores[i]);
+            if !ok[i] {
+                outcome.status = OutcomeStatus::Failed;
+            }
+            outcome
+        })
+        .collect())
+}
+
+/// The experiment's own environments in this process, on a thread of their own, while this
+/// one (without the interpreter's lock) looks for Ctrl-C every 50 ms: a KeyboardInterrupt
+/// sets `stop` and is kept in `raised`.
+fn in_process(
+    py: Python<'_>,
+    run_dir: &RunDir,
+    quiet: bool,
+    stop: &AtomicBool,
+    raised: &mut Option<PyErr>,
+) -> Result<Vec<Summary>, RunDirError> {
+    py.detach(|| {
+        std::thread::scope(|scope| {
+            let running = scope.spawn(|| run_dir.in_process(quiet, stop, &pictures));
+            while !running.is_finished() {
+                std::thread::sleep(Duration::from_millis(50));
+                if raised.is_none()
+                    && let Err(error) = Python::attach(|py| py.check_signals())
+                {
+                    *raised = Some(error);
+                    stop.store(true, Ordering::Relaxed);
+                }
+            }
+            running.join().expect("the run's thread does not panic")
+        })
+    })
+}

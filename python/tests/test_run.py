@@ -1,0 +1,168 @@
+"""acps.run: a whole experiment in this process writes `acps run`'s run directory bit for bit,
+with a batch rollout, a per-task rollout or a paper experiment's own simulators; an exception
+of the rollout stops the run with checkpoints that resume to the same bytes."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from test_learner import BOWL_TOML, BOWL_WORKER, bowl
+
+import acps
+
+TABLES = ("summary.json", "runs.csv", "curves.csv", "selections.csv", "updates.csv")
+
+
+def acps_command(*args: str) -> None:
+    """The installed `acps` command with `args`, quiet."""
+    acps_bin = Path(sys.executable).parent / "acps"
+    subprocess.run([str(acps_bin), *args, "-q"], check=True, timeout=600)
+
+
+def tables(out: Path) -> dict[str, bytes]:
+    return {name: (out / name).read_bytes() for name in TABLES}
+
+
+def batch_bowl(tasks: acps.Tasks) -> tuple[Any, Any]:
+    return bowl(tasks.contexts, tasks.thetas)
+
+
+def one_bowl(context: Any, theta: Any, seed: int) -> tuple[float, float]:
+    rewards, scores = bowl(context[None, :], theta[None, :])
+    return float(rewards[0]), float(scores[0])
+
+
+class RunTest(unittest.TestCase):
+    reference: dict[str, bytes]
+
+    @classmethod
+    def setUpClass(cls) -> None:
+        """The bowl file through `acps run` with two Python bowl workers."""
+        with tempfile.TemporaryDirectory() as out:
+            acps_command(
+                "run",
+                "--config",
+                str(BOWL_TOML),
+                "--out",
+                out,
+                "--workers",
+                "2",
+                "--worker-command",
+                f"{sys.executable} {BOWL_WORKER}",
+            )
+            cls.reference = tables(Path(out))
+
+    def test_batch_and_per_task_rollouts_write_the_command_lines_run_directory(self) -> None:
+        for name, options in (
+            ("batch", {"batch_rollout": batch_bowl}),
+            ("one", {"rollout": one_bowl}),
+        ):
+            with self.subTest(name), tempfile.TemporaryDirectory() as d:
+                out = acps.run(BOWL_TOML, out=Path(d) / "bowl", quiet=True, **options)
+                self.assertEqual(out, Path(d) / "bowl")
+                self.assertEqual(tables(out), self.reference)
+                self.assertTrue((out / "curves.png").is_file())
+                self.assertEqual(len(list((out / "policies").iterdir())), 4)
+
+    def test_an_exception_stops_the_run_with_checkpoints_that_resume_to_the_same_bytes(
+        self,
+    ) -> None:
+        calls = [0]
+
+        def breaks(tasks: acps.Tasks) -> tuple[Any, Any]:
+            calls[0] += 1
+            if calls[0] == 60:
+                raise RuntimeError("the simulator crashed")
+            return batch_bowl(tasks)
+
+        with tempfile.TemporaryDirectory() as d:
+            out = Path(d) / "bowl"
+            with self.assertRaises(RuntimeError):
+                acps.run(BOWL_TOML, batch_rollout=breaks, out=out, quiet=True, checkpoint_every=1)
+            self.assertTrue(any((out / "checkpoints").glob("*.ckpt")))
+            self.assertFalse((out / "summary.json").exists())
+            acps.run(BOWL_TOML, batch_rollout=batch_bowl, out=out, quiet=True, resume=True)
+            self.assertEqual(tables(out), self.reference)
+
+    def test_a_paper_experiment_runs_its_own_simulators_as_acps_experiment_does(self) -> None:
+        settings = {"experiment": "function", "runs": 2, "episodes": 200, "methods": ["random"]}
+        with tempfile.TemporaryDirectory() as d:
+            acps_command(
+                "experiment",
+                "function",
+                "--runs",
+                "2",
+                "--episodes",
+                "200",
+                "--method",
+                "random",
+                "--out",
+                f"{d}/cli",
+            )
+            out = acps.run(settings, out=f"{d}/py", quiet=True)
+            self.assertEqual(tables(out), tables(Path(d) / "cli"))
+
+    def test_bad_arguments_and_bad_batches_are_refused(self) -> None:
+        with self.assertRaises(TypeError):
+            acps.run(BOWL_TOML, rollout=one_bowl, batch_rollout=batch_bowl)
+        with tempfile.TemporaryDirectory() as d:
+            with self.assertRaises(acps.SettingsError) as refused:
+                acps.run({"experiment": "function", "runs": 0}, out=d)
+            self.assertIn("runs", str(refused.exception))
+            with self.assertRaises(ValueError) as short:
+                acps.run(
+                    BOWL_TOML,
+                    batch_rollout=lambda tasks: (np.zeros(len(tasks) - 1), np.zeros(len(tasks))),
+                    out=f"{d}/short",
+                    quiet=True,
+                )
+            self.assertIn("returned", str(short.exception))
+
+    def test_ctrl_c_stops_the_run_with_checkpoints(self) -> None:
+        """SIGINT to a process inside acps.run: KeyboardInterrupt, after the checkpoints."""
+        with tempfile.TemporaryDirectory() as d:
+            started, out = Path(d) / "started", Path(d) / "long"
+            script = (
+                "import sys, pathlib, tomllib, acps\n"
+                "sys.path.insert(0, sys.argv[1])\n"
+                "from test_run import batch_bowl\n"
+                "settings = tomllib.load(open(sys.argv[2], 'rb'))\n"
+                "settings['episodes'] = 10_000_000\n"
+                "def f(tasks):\n"
+                "    pathlib.Path(sys.argv[3]).touch()\n"
+                "    return batch_bowl(tasks)\n"
+                "acps.run(settings, batch_rollout=f, out=sys.argv[4], quiet=True,"
+                " checkpoint_every=1)\n"
+            )
+            tests = str(Path(__file__).parent)
+            child = subprocess.Popen(
+                [sys.executable, "-c", script, tests, str(BOWL_TOML), str(started), str(out)],
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            try:
+                deadline = time.monotonic() + 120
+                while not started.exists():
+                    self.assertIsNone(child.poll(), "the run ended before its first batch")
+                    self.assertLess(time.monotonic(), deadline, "no batch within 120 s")
+                    time.sleep(0.01)
+                child.send_signal(signal.SIGINT)
+                _, stderr = child.communicate(timeout=120)
+            finally:
+                child.kill()
+            self.assertNotEqual(child.returncode, 0)
+            self.assertIn("KeyboardInterrupt", stderr)
+            self.assertEqual(len(list((out / "checkpoints").glob("*.ckpt"))), 4)
+            self.assertFalse((out / "summary.json").exists())
+
+
+if __name__ == "__main__":
+    unittest.main()
