@@ -58,7 +58,7 @@ def run(
     if batch_rollout is not None:
         perform = _batched(batch_rollout)
     elif rollout is not None:
-        perform = _one_by_one(rollout)
+        perform = _batched(_one_by_one(rollout))
     path, text = (
         (None, json.dumps(settings))
         if isinstance(settings, Mapping)
@@ -115,22 +115,18 @@ def _batched(batch_rollout: BatchRollout) -> _native.Perform:
     return perform
 
 
-def _one_by_one(rollout: Rollout) -> _native.Perform:
-    def perform(
-        ids: npt.NDArray[np.uint64],
-        kinds: npt.NDArray[np.uint8],
-        seeds: npt.NDArray[np.uint64],
-        contexts: Floats,
-        thetas: Floats,
-    ) -> tuple[Floats, Floats, npt.NDArray[np.bool_]]:
-        n = len(ids)
+def _one_by_one(rollout: Rollout) -> BatchRollout:
+    """``rollout`` called task by task, as a batch rollout."""
+
+    def batch_rollout(tasks: Tasks) -> tuple[Floats, Floats, npt.NDArray[np.bool_]]:
+        n = len(tasks)
         rewards, scores = np.zeros(n), np.zeros(n)
         ok = np.zeros(n, dtype=np.bool_)
         for i in range(n):
-            result = rollout(contexts[i], thetas[i], int(seeds[i]))
+            result = rollout(tasks.contexts[i], tasks.thetas[i], int(tasks.seeds[i]))
             if result is not None:
                 rewards[i], scores[i] = result
                 ok[i] = True
         return rewards, scores, ok
 
-    return perform
+    return batch_rollout

@@ -7,6 +7,7 @@ use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::Plan;
 use acps_experiments::settings::ExperimentFile;
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
+use acps_learner::{Learner, Search};
 use acps_shared::{Outcome, OutcomeStatus, Task, TaskKind};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -123,6 +124,13 @@ pub(crate) fn batch<'py>(py: Python<'py>, tasks: &[&Task], n_s: usize, n_theta: 
     let contexts = PyArray1::from_vec(py, contexts).reshape([count, n_s])?;
     let thetas = PyArray1::from_vec(py, thetas).reshape([count, n_theta])?;
     Ok((ids, kinds, seeds, contexts, thetas))
+}
+
+/// The learner's policy, or the error of a problem without one (the Section 4 model's).
+fn policy(learner: &Learner) -> PyResult<&Search> {
+    learner
+        .policy()
+        .ok_or_else(|| AcpsError::new_err(format!("problem '{}' has no policy", learner.problem().name)))
 }
 
 fn kind_code(kind: TaskKind) -> u8 {
@@ -289,9 +297,7 @@ impl NativeLearner {
     fn mean<'py>(&self, py: Python<'py>, contexts: PyReadonlyArray2<'_, f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let inner = self.lock();
         let learner = &inner.job.learner;
-        let policy = learner
-            .policy()
-            .ok_or_else(|| AcpsError::new_err(format!("problem '{}' has no policy", learner.problem().name)))?;
+        let policy = policy(learner)?;
         let n_s = learner.problem().context_dim();
         let contexts = contexts.as_array();
         if contexts.ncols() != n_s {
@@ -312,11 +318,7 @@ impl NativeLearner {
     /// The policy's covariance of the parameters, `(n_theta, n_theta)`.
     fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let inner = self.lock();
-        let learner = &inner.job.learner;
-        let policy = learner
-            .policy()
-            .ok_or_else(|| AcpsError::new_err(format!("problem '{}' has no policy", learner.problem().name)))?;
-        let covariance = policy.policy().covariance();
+        let covariance = policy(&inner.job.learner)?.policy().covariance();
         let n = covariance.nrows();
         // nalgebra is column-major; the matrix is symmetric, so the order of its entries is moot.
         PyArray1::from_vec(py, covariance.as_slice().to_vec()).reshape([n, n])

@@ -4,12 +4,15 @@ of tells; checkpoints continue bit for bit; bad settings and bad outcomes are re
 from __future__ import annotations
 
 import csv
+import functools
+import importlib.util
 import os
 import subprocess
 import sys
 import tempfile
 import unittest
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import numpy.typing as npt
@@ -23,14 +26,20 @@ BOWL_WORKER = ROOT / "processes" / "worker" / "python" / "examples" / "bowl.py"
 Floats = npt.NDArray[np.float64]
 
 
+@functools.cache
+def bowl_example() -> ModuleType:
+    """processes/worker/python/examples/bowl.py as a module."""
+    spec = importlib.util.spec_from_file_location("bowl_example", BOWL_WORKER)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def bowl(contexts: Floats, thetas: Floats) -> tuple[Floats, Floats]:
-    """examples/bowl.py over a batch, with its arithmetic in its order: the same bits."""
-    n, d = thetas.shape[1], contexts.shape[1]
-    total = np.zeros(len(thetas))
-    for i in range(n):
-        e = thetas[:, i] - contexts[:, i % d] * (i + 1) / n
-        total = total + e * e
-    return -total, np.sqrt(total)
+    """The example's arithmetic over rows: the bits of its per-task worker."""
+    rewards, scores = bowl_example().bowl(contexts, thetas)
+    return rewards, scores
 
 
 def learn(learner: acps.Learner, rng: np.random.Generator, stop_at: int | None = None) -> None:

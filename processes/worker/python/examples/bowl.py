@@ -35,19 +35,26 @@ def rollout(task: acps_worker.Task) -> tuple[float, float] | None:
     return -total, math.sqrt(total)
 
 
-def batch_rollout(
-    batch: TaskBatch,
+def bowl(
+    contexts: npt.NDArray[np.float64], thetas: npt.NDArray[np.float64]
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """:func:`rollout` of a whole batch, column by column in the same order of operations."""
+    """:func:`rollout` of rows of contexts and parameters, column by column in the same order
+    of operations."""
     import numpy as np
 
-    contexts, thetas = batch.contexts, batch.thetas
     n, d = thetas.shape[1], contexts.shape[1]
-    total = np.zeros(len(batch))
+    total = np.zeros(len(thetas))
     for i in range(n):
         e = thetas[:, i] - contexts[:, i % d] * (i + 1) / n
         total = total + e * e
     return -total, np.sqrt(total)
+
+
+def batch_rollout(
+    batch: TaskBatch,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """:func:`rollout` of a whole batch."""
+    return bowl(batch.contexts, batch.thetas)
 
 
 if __name__ == "__main__":

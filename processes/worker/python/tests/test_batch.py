@@ -3,9 +3,7 @@ task, and a run served to its end with the per-task worker's results."""
 
 from __future__ import annotations
 
-import importlib.util
 import unittest
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -15,19 +13,10 @@ from acps_worker import Exit
 from acps_worker.batch import TaskBatch
 
 from .support import ROOT, Learner, leftovers, run_name
+from .test_bowl import bowl_example
 
 BOWL_TOML = ROOT / "experiments" / "bowl.toml"
 WIDE = ["--config", str(BOWL_TOML), "--in-flight", "32", "--episodes", "320", "--runs", "1"]
-
-
-def bowl_example() -> ModuleType:
-    """examples/bowl.py as a module."""
-    path = ROOT / "processes" / "worker" / "python" / "examples" / "bowl.py"
-    spec = importlib.util.spec_from_file_location("bowl_example_batch", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def final_scores(summary: dict[str, Any]) -> dict[str, list[float]]:
