@@ -11,10 +11,15 @@
 //! The learner's own cost per rollout (ask, tell, the C-REPS updates, no simulation), as in
 //! `acps bench --env trivial`'s in-process rows, guards the transport's figures against
 //! regressions of the core: 2000 trivial rollouts with P = 1 and P = 64, and with C-CMA-ES at P = 64.
+//! The bowl problem's learner driven in batches of 1,024 is the Rust side of
+//! `python/benches/ask_tell.py`: the difference is the Python boundary's cost per task.
 //!
 //! Before measuring, the Newton steps per update of 200 seeded data sets of each scale are
 //! printed.
 
+use acps_experiments::file::LoadedFile;
+use acps_experiments::plan::Plan;
+use acps_experiments::settings::ExperimentFile;
 use acps_learner::ccmaes::{CCmaes, CCmaesConfig};
 use acps_learner::creps::{CReps, CRepsConfig, DEFAULT_ETA_MIN, FeatureMap, MemoryConfig};
 use acps_learner::selection::{
@@ -23,7 +28,7 @@ use acps_learner::selection::{
 };
 use acps_learner::{Learner, LearnerConfig, SearchConfig, run_in_process};
 use acps_models::environment::TrivialEnvironment;
-use acps_shared::ContextSpace;
+use acps_shared::{ContextSpace, Outcome, Task};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -372,6 +377,63 @@ fn learner_rollouts(c: &mut Criterion) {
     }
 }
 
+/// The learner of `experiments/bowl.toml`'s random method with a window of `in_flight` (as
+/// `python/benches/ask_tell.py` builds it from Python), for `episodes` episodes.
+fn bowl_learner(in_flight: usize, episodes: u64) -> Learner {
+    let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../experiments/bowl.toml");
+    let file = LoadedFile::read(&file).unwrap();
+    let request = ExperimentFile {
+        methods: Some(vec![acps_learner::Method::Random]),
+        runs: Some(1),
+        episodes: Some(episodes),
+        in_flight: Some(in_flight),
+        ..Default::default()
+    };
+    let plan = Plan::new(Some(&file), &request).unwrap();
+    let experiment = plan.jobs(std::path::Path::new("")).remove(0).experiment;
+    experiment
+        .job(&experiment.methods[0], experiment.base_seed)
+        .unwrap()
+        .learner
+}
+
+/// The bowl's arithmetic (`processes/worker/examples/bowl.rs`).
+fn bowl(task: &Task) -> Outcome {
+    let (d, n) = (task.context.len(), task.theta.len());
+    let total: f64 = task
+        .theta
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (t - task.context[i % d] * (i + 1) as f64 / n as f64).powi(2))
+        .sum();
+    Outcome::new(task.id, -total, total.sqrt())
+}
+
+/// The Rust side of `python/benches/ask_tell.py`: the bowl learner with a window of 1,024
+/// driven in Rust, ask every ready task then tell them all. Its time per task is what the
+/// Python ask/tell costs without the Python boundary.
+fn bowl_ask_tell(c: &mut Criterion) {
+    let mut group = c.benchmark_group("bowl_ask_tell");
+    group.sample_size(10);
+    group.bench_function("bowl_20000_episodes_batches_of_1024", |b| {
+        b.iter_batched(
+            || bowl_learner(1024, 20_000),
+            |mut learner| {
+                let mut tasks = Vec::with_capacity(1024);
+                while !learner.is_done() {
+                    tasks.extend(std::iter::from_fn(|| learner.ask()));
+                    for task in tasks.drain(..) {
+                        learner.tell(bowl(&task)).unwrap();
+                    }
+                }
+                black_box(learner.stats().updates)
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    group.finish();
+}
+
 criterion_group!(
     benches,
     creps_update,
@@ -379,6 +441,7 @@ criterion_group!(
     selector_steps,
     alp_gmm,
     self_paced,
-    learner_rollouts
+    learner_rollouts,
+    bowl_ask_tell
 );
 criterion_main!(benches);
