@@ -700,6 +700,8 @@ pub(crate) fn serve<'r>(
     let mut refused_clients = HashSet::new();
     // The last refusal's reason and the outcomes taken by then.
     let mut last_refusal: Option<(String, u64)> = None;
+    // Workers whose first outcome the learner has seen.
+    let mut first_outcomes = HashSet::new();
     // Clients that sent a request since the last look for dead workers.
     let mut heard = HashSet::new();
     let mut idle_since: Option<Instant> = None;
@@ -751,7 +753,22 @@ pub(crate) fn serve<'r>(
                     serving_since = Some(Instant::now());
                 }
             }
-            for (job, outcome) in message.outcomes() {
+            let mut delivered = message.outcomes().peekable();
+            if let Some((job, first)) = delivered.peek()
+                && message.sizes().is_none()
+                && first_outcomes.insert(client)
+                && !first.is_ok()
+                && (*job as usize) < source.jobs()
+            {
+                // A worker that declared no sizes is checked on its first outcome: one written
+                // for another problem fails every rollout, and is told of now, not at the end.
+                tracing::warn!(
+                    "run '{run}': a worker's first rollout (task {} of job {job}) failed; the job's tasks carry {}: a worker written for other sizes fails every rollout (a worker that declares its sizes is refused at once, naming both)",
+                    first.task_id,
+                    source.sizes(*job as usize)
+                );
+            }
+            for (job, outcome) in delivered {
                 holders.remove(&(job, outcome.task_id));
                 outcomes.push_back((job, outcome));
             }

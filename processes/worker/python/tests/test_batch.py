@@ -25,6 +25,14 @@ def final_scores(summary: dict[str, Any]) -> dict[str, list[float]]:
 
 class BatchTest(unittest.TestCase):
     def serve_bowl(self, test: str, **kwargs: Any) -> tuple[acps_worker.Report, dict[str, Any]]:
+        report, summary, _ = self.serve_bowl_logged(test, **kwargs)
+        return report, summary
+
+    def serve_bowl_logged(
+        self, test: str, **kwargs: Any
+    ) -> tuple[acps_worker.Report, dict[str, Any], str]:
+        """A worker serving the wide bowl run to its end: its report, the summary and what the
+        learner printed."""
         bowl = bowl_example()
         run = run_name(test)
         learner = Learner(run, WIDE)
@@ -33,7 +41,7 @@ class BatchTest(unittest.TestCase):
         finally:
             summary = learner.finished()
         self.assertEqual(leftovers(run), [])
-        return report, summary
+        return report, summary, learner.output()
 
     def test_batches_hold_many_tasks_and_give_the_per_task_results(self) -> None:
         bowl = bowl_example()
@@ -72,7 +80,12 @@ class BatchTest(unittest.TestCase):
             return rewards, scores, ok
 
         with self.assertLogs("acps_worker", level="ERROR") as logs:
-            report, summary = self.serve_bowl("batch-fail", batch_rollout=flaky, queue_depth=32)
+            report, summary, learner_log = self.serve_bowl_logged(
+                "batch-fail", batch_rollout=flaky, queue_depth=32
+            )
+        # The learner says so at the worker's first outcome, with the sizes its tasks carry.
+        self.assertIn("a worker's first rollout (task", learner_log)
+        self.assertIn("the job's tasks carry contexts of 2 and parameters of 4 values", learner_log)
         self.assertEqual(report.exit, Exit.FINISHED)
         self.assertIn("the batch rollout of", logs.output[0])
         self.assertIn("RuntimeError: the simulator is not warm yet", logs.output[0])
