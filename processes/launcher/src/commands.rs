@@ -38,6 +38,9 @@ pub enum Stopped {
         /// Whether the run served a fleet.
         fleet: bool,
     },
+    /// The reader of this command's output closed it: nothing more to say.
+    #[error("the output was closed")]
+    Closed,
     /// Ctrl-C of a relay: its workers were stopped; the learner hands their tasks to others.
     #[error(
         "interrupted; this host's workers were stopped and its shared memory removed; the learner hands their tasks to other hosts"
@@ -51,6 +54,17 @@ pub enum Stopped {
         /// The command that continues the run.
         resume: String,
     },
+}
+
+/// Write `text` to stdout. A reader that closed it (`acps protocol | head`) ends the command
+/// quietly ([`Stopped::Closed`]) instead of a panic of `print!`.
+pub(crate) fn out(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush()) {
+        Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Err(Stopped::Closed.into()),
+        written => Ok(written?),
+    }
 }
 
 fn continue_hint(resume: Option<&str>) -> String {
@@ -591,7 +605,7 @@ pub(crate) fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     };
     let replay = evaluate::replay(&saved, &policy, environment.as_mut(), &contexts)
         .with_context(|| format!("replaying {}", path.display()))?;
-    print!("{}", evaluate::report(&saved, &replay, test_set));
+    out(&evaluate::report(&saved, &replay, test_set))?;
     if let Some(file) = args.render {
         let first = replay.throws.first().context("--render: there is no throw to draw")?;
         evaluate::render(&saved, first, &file)?;
@@ -622,13 +636,9 @@ pub(crate) fn run(command: Command) -> anyhow::Result<()> {
                     (false, false) => acps_reports::compare::Layout::Long,
                 },
             )?;
-            print!("{report}");
-            Ok(())
+            out(&report)
         }
-        Command::Protocol => {
-            println!("{}", serde_json::to_string_pretty(&acps_wire::layout::describe())?);
-            Ok(())
-        }
+        Command::Protocol => out(&(serde_json::to_string_pretty(&acps_wire::layout::describe())? + "\n")),
     }
 }
 

@@ -77,6 +77,8 @@ where
     match commands::run(cli.command) {
         Ok(()) => 0,
         Err(error) => match error.downcast_ref::<commands::Stopped>() {
+            // As other Unix tools: whoever closed the output has what they wanted.
+            Some(commands::Stopped::Closed) => 0,
             Some(stopped @ (commands::Stopped::Interrupted { .. } | commands::Stopped::RelayInterrupted)) => {
                 eprintln!("{stopped}");
                 130

@@ -1130,3 +1130,21 @@ fn a_piped_run_writes_plain_progress_lines() {
         assert_eq!((progress >= 1, done), (!quiet, usize::from(!quiet)), "{stderr}");
     }
 }
+
+#[test]
+fn a_closed_output_ends_a_command_quietly() {
+    // `acps protocol | head -1` where head has gone before acps writes: its output closed first.
+    for args in [&["protocol"][..], &["evaluate", "--help"][..]] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_acps"))
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("acps runs");
+        drop(child.stdout.take());
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!stderr.contains("panicked"), "acps {args:?}: {stderr}");
+        assert!(output.status.success(), "acps {args:?}: {} {stderr}", output.status);
+    }
+}
