@@ -30,6 +30,7 @@ use crate::settings::ExperimentFile;
 use crate::summary::{Failures, Summary};
 use acps_fleet::FleetProgress;
 use serde::Serialize;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -86,7 +87,7 @@ pub enum RunDirError {
         #[source]
         source: std::io::Error,
     },
-    /// `summary.json` could not be written.
+    /// `summary.json`, `run.json` or the summary lines on stdout could not be written.
     #[error("writing {}", path.display())]
     Summary {
         /// The file.
@@ -438,12 +439,26 @@ pub fn write(
         for failures in summary.failures() {
             eprintln!("warning: experiment {}, {failures}", experiment.name);
         }
-        println!("{}", report.line(&experiment.name));
-        println!("{} -> {}", experiment.name, dir.join("summary.json").display());
+        let mut lines = format!(
+            "{}\n{} -> {}\n",
+            report.line(&experiment.name),
+            experiment.name,
+            dir.join("summary.json").display()
+        );
         let score = experiment.score_format();
         for (method, result) in &summary.methods {
             let line = score.final_line(result.final_mean, result.final_sem, summary.runs);
-            println!("  {method:>20}: {line}");
+            lines.push_str(&format!("  {method:>20}: {line}\n"));
+        }
+        // The run directory is the record; a reader that closed the output (`acps run ... |
+        // head -1`) misses only these lines, and the run still succeeds.
+        let mut stdout = std::io::stdout().lock();
+        match stdout.write_all(lines.as_bytes()).and_then(|()| stdout.flush()) {
+            Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => {}
+            written => written.map_err(|source| RunDirError::Summary {
+                path: PathBuf::from("<stdout>"),
+                source,
+            })?,
         }
     }
     Ok(())

@@ -1134,7 +1134,21 @@ fn a_piped_run_writes_plain_progress_lines() {
 #[test]
 fn a_closed_output_ends_a_command_quietly() {
     // `acps protocol | head -1` where head has gone before acps writes: its output closed first.
-    for args in [&["protocol"][..], &["evaluate", "--help"][..]] {
+    let dir = temp_dir("closed-output");
+    let out = dir.join("function");
+    let run: &[&str] = &[
+        "experiment",
+        "function",
+        "--runs",
+        "1",
+        "--episodes",
+        "50",
+        "--method",
+        "random",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    for args in [&["protocol"][..], &["evaluate", "--help"][..], run] {
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_acps"))
             .args(args)
             .stdout(std::process::Stdio::piped())
@@ -1147,4 +1161,5 @@ fn a_closed_output_ends_a_command_quietly() {
         assert!(!stderr.contains("panicked"), "acps {args:?}: {stderr}");
         assert!(output.status.success(), "acps {args:?}: {} {stderr}", output.status);
     }
+    assert!(out.join("summary.json").is_file(), "the run's record is whole");
 }
