@@ -124,10 +124,14 @@ def main() -> None:
     import acps_worker
 
     environment = acps_worker.Environment(name="mujoco-reach-batch", settings=SETTINGS)
+    # Targets (x, y) and two joint-angle pairs: a problem of other sizes refuses this worker.
+    sizes = (2, 4)
     if "--batch" in sys.argv[1:]:
-        acps_worker.serve(batch_rollout=batch_rollout, environment=environment, queue_depth=32)
+        acps_worker.serve(
+            batch_rollout=batch_rollout, environment=environment, sizes=sizes, queue_depth=32
+        )
     else:
-        acps_worker.serve(rollout, environment=environment)
+        acps_worker.serve(rollout, environment=environment, sizes=sizes)
 
 
 if __name__ == "__main__":
