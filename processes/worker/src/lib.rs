@@ -442,15 +442,6 @@ pub fn serve(
                 task_id: task.id,
                 reason,
             };
-            // With batches, the queued tasks of the same environment that the outbox has room
-            // for go with this one.
-            let mut batch = Vec::new();
-            if options.batches {
-                let room = MAX_BATCH - outbox.count as usize - 1;
-                while batch.len() < room && queue.front().is_some_and(|next| next.environment == wire.environment) {
-                    batch.push(queue.pop_front().expect("a front task"));
-                }
-            }
             let known = checked
                 .filter(|(seen, _)| *seen == wire.environment)
                 .map(|(_, spec)| spec);
@@ -473,37 +464,35 @@ pub fn serve(
                 checked = Some((wire.environment, spec));
             }
             let started = Instant::now();
-            let outcomes = if options.batches {
-                batch.insert(0, wire);
-                let tasks: Vec<Task> = batch.iter().map(WireTask::to_task).collect();
-                let outcomes = environment.rollout_batch(&tasks);
-                if let Some(wrong) = batched_wrongly(&tasks, &outcomes) {
-                    return Err(WorkerError::Batch {
-                        job: wire.job,
-                        reason: wrong,
-                    });
+            if options.batches {
+                // The queued tasks of the same environment that the outbox has room for go
+                // with this one, in one call.
+                let room = MAX_BATCH - outbox.count as usize;
+                let mut batch = vec![wire];
+                while batch.len() < room && queue.front().is_some_and(|next| next.environment == wire.environment) {
+                    batch.push(queue.pop_front().expect("a front task"));
                 }
-                outcomes
+                let tasks: Vec<Task> = std::iter::once(task)
+                    .chain(batch[1..].iter().map(WireTask::to_task))
+                    .collect();
+                let outcomes = environment.rollout_batch(&tasks);
+                if let Some(reason) = batched_wrongly(&tasks, &outcomes) {
+                    return Err(WorkerError::Batch { job: wire.job, reason });
+                }
+                let took = started.elapsed();
+                batching.observe(took / batch.len() as u32);
+                slowest = slowest.max(took);
+                rollouts += batch.len() as u64;
+                for (wire, outcome) in batch.iter().zip(&outcomes) {
+                    deliver(&mut outbox, wire, outcome)?;
+                }
             } else {
-                batch.push(wire);
-                vec![environment.rollout(&task)]
-            };
-            let took = started.elapsed();
-            batching.observe(took / outcomes.len() as u32);
-            slowest = slowest.max(took);
-            rollouts += outcomes.len() as u64;
-            for (wire, outcome) in batch.iter().zip(&outcomes) {
-                // An outcome the wire cannot carry stops the worker: reported as failed, it would
-                // read as the environment's failure and change the run's result.
-                let wire_outcome =
-                    WireOutcome::new(wire.job, outcome).map_err(|capacity| WorkerError::OutcomeTooLarge {
-                        job: wire.job,
-                        task_id: outcome.task_id,
-                        capacity,
-                    })?;
-                outbox
-                    .push(wire_outcome)
-                    .expect("a full outbox stops the simulation until it is sent");
+                let outcome = environment.rollout(&task);
+                let took = started.elapsed();
+                batching.observe(took);
+                slowest = slowest.max(took);
+                rollouts += 1;
+                deliver(&mut outbox, &wire, &outcome)?;
             }
             idle_since = None;
             // A task came from a live learner.
@@ -540,6 +529,21 @@ pub fn serve(
             silence.looked();
         }
     }
+}
+
+/// Put the `outcome` of `wire`'s task into `outbox`. An outcome the wire cannot carry stops
+/// the worker: reported as failed, it would read as the environment's failure and change the
+/// run's result.
+fn deliver(outbox: &mut WorkerMessage, wire: &WireTask, outcome: &Outcome) -> Result<(), WorkerError> {
+    let wire_outcome = WireOutcome::new(wire.job, outcome).map_err(|capacity| WorkerError::OutcomeTooLarge {
+        job: wire.job,
+        task_id: wire.task_id,
+        capacity,
+    })?;
+    outbox
+        .push(wire_outcome)
+        .expect("a full outbox stops the simulation until it is sent");
+    Ok(())
 }
 
 /// Why the outcomes of a batch are not one per task in the tasks' order, if they are not.
