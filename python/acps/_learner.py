@@ -169,7 +169,8 @@ class Learner:
 
     def mean(self, contexts: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """The greedy policy's parameters at each context: ``(m, n_theta)`` for contexts
-        ``(m, n_s)``; a single context ``(n_s,)`` gives ``(n_theta,)``."""
+        ``(m, n_s)``; a single context ``(n_s,)`` gives ``(n_theta,)``. Contexts of another
+        length raise :class:`ValueError` naming both."""
         array = np.asarray(contexts, dtype=np.float64)
         if array.ndim == 1:
             means = self._native.mean(array.reshape(1, -1))
@@ -188,7 +189,8 @@ class Learner:
     def restore(self, path: str | os.PathLike[str]) -> None:
         """Continue from the checkpoint ``path`` of a learner of the same experiment, method
         and run; tasks that were out are asked again. Another job's, truncated or corrupted
-        checkpoints raise :class:`acps.CheckpointError` naming the file."""
+        checkpoints raise :class:`acps.CheckpointError` naming the file, and so does a run
+        directory's (continue those with ``acps run --resume`` or :func:`acps.run`)."""
         self._native.restore(os.fspath(path))
 
     def __repr__(self) -> str:

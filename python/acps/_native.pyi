@@ -10,7 +10,7 @@ import numpy.typing as npt
 Perform: TypeAlias = Callable[
     [
         npt.NDArray[np.uint64],
-        npt.NDArray[np.uint8],
+        npt.NDArray[np.uint32],
         npt.NDArray[np.uint64],
         npt.NDArray[np.float64],
         npt.NDArray[np.float64],
@@ -58,7 +58,7 @@ class NativeLearner:
         self, n: int
     ) -> tuple[
         npt.NDArray[np.uint64],
-        npt.NDArray[np.uint8],
+        npt.NDArray[np.uint32],
         npt.NDArray[np.uint64],
         npt.NDArray[np.float64],
         npt.NDArray[np.float64],

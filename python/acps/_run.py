@@ -104,7 +104,7 @@ def _outcomes(result: Any, n: int) -> tuple[Floats, Floats, npt.NDArray[np.bool_
 def _batched(batch_rollout: BatchRollout) -> _native.Perform:
     def perform(
         ids: npt.NDArray[np.uint64],
-        kinds: npt.NDArray[np.uint8],
+        kinds: npt.NDArray[np.uint32],
         seeds: npt.NDArray[np.uint64],
         contexts: Floats,
         thetas: Floats,

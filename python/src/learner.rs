@@ -8,8 +8,10 @@ use acps_experiments::plan::Plan;
 use acps_experiments::settings::ExperimentFile;
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
 use acps_learner::{Learner, Search};
-use acps_shared::{Outcome, OutcomeStatus, Task, TaskKind};
+use acps_shared::{Outcome, OutcomeStatus, Task};
+use acps_wire::wire::kind_code;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use std::collections::HashSet;
 use std::path::Path;
@@ -19,7 +21,7 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 /// contexts `(n, n_s)` and parameters `(n, n_theta)`.
 pub(crate) type Batch<'py> = (
     Bound<'py, PyArray1<u64>>,
-    Bound<'py, PyArray1<u8>>,
+    Bound<'py, PyArray1<u32>>,
     Bound<'py, PyArray1<u64>>,
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray2<f64>>,
@@ -102,7 +104,8 @@ fn build(file: &LoadedFile, method: Option<&str>, run: usize) -> PyResult<Inner>
 
 impl NativeLearner {
     fn lock(&self) -> MutexGuard<'_, Inner> {
-        // A panic inside a call leaves the learner as it was before the call's first change.
+        // A panic inside a call (a bug) is raised in Python; the learner stays usable as it
+        // was left, rather than every later call failing on the poisoned lock.
         self.inner.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
@@ -133,12 +136,14 @@ fn policy(learner: &Learner) -> PyResult<&Search> {
         .ok_or_else(|| AcpsError::new_err(format!("problem '{}' has no policy", learner.problem().name)))
 }
 
-fn kind_code(kind: TaskKind) -> u8 {
-    match kind {
-        TaskKind::Train => 0,
-        TaskKind::Evaluate => 1,
-        TaskKind::Baseline => 2,
+/// The outcome of task `id`: a failed one when `ok` is false (a non-finite reward or score
+/// fails it too, in `Outcome::new`).
+pub(crate) fn outcome(id: u64, reward: f64, score: f64, ok: bool) -> Outcome {
+    let mut outcome = Outcome::new(id, reward, score);
+    if !ok {
+        outcome.status = OutcomeStatus::Failed;
     }
+    outcome
 }
 
 /// A 1-D array's values, contiguous or not.
@@ -222,12 +227,9 @@ impl NativeLearner {
             }
         }
         for (i, &id) in ids.iter().enumerate() {
-            let mut outcome = Outcome::new(id, rewards[i], scores[i]);
-            if ok.as_ref().is_some_and(|ok| !ok[i]) {
-                outcome.status = OutcomeStatus::Failed;
-            }
+            let ok = ok.as_ref().is_none_or(|ok| ok[i]);
             learner
-                .tell(outcome)
+                .tell(outcome(id, rewards[i], scores[i], ok))
                 .map_err(|e| AcpsError::new_err(format!("tell: {e} (after the batch was checked: a bug)")))?;
         }
         Ok(())
@@ -301,8 +303,8 @@ impl NativeLearner {
         let n_s = learner.problem().context_dim();
         let contexts = contexts.as_array();
         if contexts.ncols() != n_s {
-            return Err(TellError::new_err(format!(
-                "mean: contexts have {} columns, the problem's contexts {n_s}",
+            return Err(PyValueError::new_err(format!(
+                "mean: contexts of {} values, the problem's have {n_s}",
                 contexts.ncols()
             )));
         }
@@ -350,6 +352,14 @@ impl NativeLearner {
         let checkpoint = checkpoint::read(Path::new(path), inner.stamp)
             .map_err(|e| refused(&e))?
             .ok_or_else(|| CheckpointError::new_err(format!("checkpoint {path}: no such file")))?;
+        // A run's checkpoint keeps its learner's records in a record file beside it: restored
+        // here, the evaluations before it would be missing without a word.
+        if checkpoint.records.is_some() {
+            return Err(CheckpointError::new_err(format!(
+                "checkpoint {path} belongs to a run directory (its records are in {}); continue that run with `acps run --resume` or acps.run(..., resume=True)",
+                acps_experiments::checkpoints::Checkpoints::records_file(Path::new(path)).display()
+            )));
+        }
         let Inner { job, .. } = &mut *inner;
         job.learner.restore(checkpoint.learner).map_err(|e| refused(&e))?;
         if let Some(environment) = job.environment.as_deref_mut() {

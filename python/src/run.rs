@@ -1,14 +1,14 @@
 //! A whole experiment from Python: every (method, run) job in this process through the library
 //! runner, writing the run directory `acps run` writes, with its pictures.
 
-use crate::learner::batch;
+use crate::learner::{batch, outcome};
 use crate::{AcpsError, SettingsError};
 use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::Plan;
 use acps_experiments::run_dir::{RunDir, RunDirError};
 use acps_experiments::settings::ExperimentFile;
 use acps_experiments::summary::Summary;
-use acps_shared::{Outcome, OutcomeStatus, Task};
+use acps_shared::{Outcome, Task};
 use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
 use std::path::{Path, PathBuf};
@@ -121,13 +121,7 @@ fn perform_batch(py: Python<'_>, perform: &Py<PyAny>, tasks: &[(usize, Task)]) -
     Ok(tasks
         .iter()
         .enumerate()
-        .map(|(i, (_, task))| {
-            let mut outcome = Outcome::new(task.id, rewards[i], scores[i]);
-            if !ok[i] {
-                outcome.status = OutcomeStatus::Failed;
-            }
-            outcome
-        })
+        .map(|(i, (_, task))| outcome(task.id, rewards[i], scores[i], ok[i]))
         .collect())
 }
 

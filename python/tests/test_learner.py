@@ -120,6 +120,9 @@ class LearnerTest(unittest.TestCase):
         # Near the bowl's bottom after 400 episodes: theta_i = s_(i mod 2) (i + 1) / 4.
         best = np.stack([contexts[:, i % 2] * (i + 1) / 4 for i in range(4)], axis=1)
         self.assertLess(float(np.abs(means - best).max()), 0.5)
+        with self.assertRaises(ValueError) as wrong:
+            from_file.mean(np.zeros((2, 3)))
+        self.assertIn("contexts of 3 values, the problem's have 2", str(wrong.exception))
         covariance = from_file.covariance()
         np.testing.assert_array_equal(covariance, covariance.T)
         self.assertGreater(float(np.linalg.eigvalsh(covariance).min()), 0.0)

@@ -87,8 +87,14 @@ class RunTest(unittest.TestCase):
             out = Path(d) / "bowl"
             with self.assertRaises(RuntimeError):
                 acps.run(BOWL_TOML, batch_rollout=breaks, out=out, quiet=True, checkpoint_every=1)
-            self.assertTrue(any((out / "checkpoints").glob("*.ckpt")))
+            checkpoints = sorted((out / "checkpoints").glob("*.ckpt"))
+            self.assertTrue(checkpoints)
             self.assertFalse((out / "summary.json").exists())
+            # A run's checkpoint keeps its records beside it: a lone learner refuses it.
+            learner = acps.Learner(BOWL_TOML, method="monotonic-progress", run=0)
+            with self.assertRaises(acps.CheckpointError) as refused:
+                learner.restore(out / "checkpoints" / "monotonic-progress-run-0.ckpt")
+            self.assertIn("acps run --resume", str(refused.exception))
             acps.run(BOWL_TOML, batch_rollout=batch_bowl, out=out, quiet=True, resume=True)
             self.assertEqual(tables(out), self.reference)
 

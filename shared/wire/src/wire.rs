@@ -270,7 +270,9 @@ pub fn check_task_sizes(context: usize, theta: usize) -> Result<(), CapacityErro
     check_capacity(THETA, theta, MAX_THETA)
 }
 
-fn kind_code(kind: TaskKind) -> u32 {
+/// A task kind's code on the wire, also in the Python package's arrays: 0 train, 1 evaluate, 2
+/// baseline.
+pub fn kind_code(kind: TaskKind) -> u32 {
     match kind {
         TaskKind::Train => 0,
         TaskKind::Evaluate => 1,
