@@ -416,7 +416,6 @@ class _Session:
         self.rollout_seconds = 0.0
         self.joined: float | None = None
         self.logged_failure = False
-        self.batch_slowest_us = 0
 
     def report(self, exit: Exit) -> Report:
         """What the worker did, ending for ``exit``."""
@@ -668,8 +667,9 @@ class _Session:
                     _delete(pending)
                     slots[i] = None
             if queue and not outbox_full and batches is not None:
-                count = self.perform_batch(batches, queue, outcome_rows, count, batching)
-                slowest_us = max(slowest_us, self.batch_slowest_us)
+                count, took = self.perform_batch(batches, queue, outcome_rows, count, batching)
+                # Every task of the batch waited for all of it.
+                slowest_us = max(slowest_us, min(int(took * 1e6), _U32_MAX))
                 silence.heard()
                 continue
             if queue and not outbox_full:
@@ -734,9 +734,10 @@ class _Session:
 
     def perform_batch(
         self, batches: Any, queue: Any, outcome_rows: Any, count: int, batching: _Batching
-    ) -> int:
+    ) -> tuple[int, float]:
         """Perform the front of ``queue`` with one call of the batch rollout, writing the
-        outcomes after the ``count`` already in the outbox; returns the new count."""
+        outcomes after the ``count`` already in the outbox; returns the new count and the
+        seconds the call took."""
         np = batches.np
         rows = queue.take(_wire.MAX_BATCH - count)
         n = len(rows)
@@ -746,20 +747,19 @@ class _Session:
         try:
             result = self.batch_rollout(tasks)  # type: ignore[misc]
         except Exception:  # noqa: BLE001 - any failure of a rollout is a failed outcome
+            took = time.perf_counter() - started
             why = f"the batch rollout of {n} tasks raised"
             # Here, where the traceback is the one being handled.
             self.failure(int(tasks.ids[0]), int(tasks.jobs[0]), why, exc=True)
             logged = True
         else:
+            took = time.perf_counter() - started
             rewards, scores, ok, why = batches.checked(result, n)
-        took = time.perf_counter() - started
         if why is not None:
             rewards = scores = None
             ok = np.zeros(n, dtype=bool)
         batching.observe(took / n)
         self.rollout_seconds += took
-        # Every task of the batch waited for all of it.
-        self.batch_slowest_us = min(int(took * 1e6), _U32_MAX)
         self.rollouts += n
         failed = n - int(ok.sum())
         if failed:
@@ -774,7 +774,7 @@ class _Session:
             # failure() counted one.
             self.failed += failed - 1
         batches.write(outcome_rows[count : count + n], rows, rewards, scores, ok)
-        return count + n
+        return count + n, took
 
     def fill(
         self,
