@@ -350,16 +350,13 @@ impl Experiment {
         let mut rollouts = 0;
         loop {
             let mut tasks = Vec::new();
-            if !stop.load(Ordering::Relaxed) {
-                for (index, (job, _)) in jobs.iter_mut().enumerate() {
-                    while let Some(task) = job.learner.ask() {
-                        tasks.push((index, task));
-                    }
-                }
-                if tasks.is_empty() {
-                    break;
-                }
+            for (index, (job, _)) in jobs.iter_mut().enumerate() {
+                tasks.extend(std::iter::from_fn(|| job.learner.ask()).map(|task| (index, task)));
             }
+            if tasks.is_empty() {
+                break;
+            }
+            // Tasks handed out when the run stops are asked again after a restore.
             let outcomes = match stop.load(Ordering::Relaxed) {
                 true => None,
                 false => perform(&tasks),
