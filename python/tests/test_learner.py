@@ -158,6 +158,7 @@ class LearnerTest(unittest.TestCase):
             (BOWL_TOML, {"method": "random", "run": 2}, "run must be in 0..2"),
             (ROOT / "no-such.toml", {}, "no-such.toml: cannot read"),
             ({"methods": ["random"]}, {}, "experiment must be set"),
+            ({"experiment": "toy"}, {}, "set `panel` (toy) or `n_s` (dims)"),
             ({"experiment": "function", "epsilon": -1.0}, {}, "epsilon must be a number in"),
         ]
         for settings, options, message in cases:
@@ -193,6 +194,17 @@ class LearnerTest(unittest.TestCase):
         clean = acps.Learner(BOWL_TOML, method="random")
         learn(clean, np.random.default_rng(8))
         self.assertEqual(scores(learner), scores(clean))
+
+    def test_bad_calls_are_refused_by_name(self) -> None:
+        learner = acps.Learner(BOWL_TOML, method="random")
+        with self.assertRaises(ValueError) as negative:
+            learner.ask(-1)
+        self.assertIn("n must be >= 0, got -1", str(negative.exception))
+        with tempfile.TemporaryDirectory() as d:
+            missing = Path(d) / "none.ckpt"
+            with self.assertRaises(acps.CheckpointError) as refused:
+                learner.restore(missing)
+            self.assertIn(f"{missing}: no such file", str(refused.exception))
 
     def test_a_failed_rollout_is_asked_again_once(self) -> None:
         learner = acps.Learner(BOWL_TOML, method="random")

@@ -131,6 +131,16 @@ class RunTest(unittest.TestCase):
                     quiet=True,
                 )
             self.assertIn("returned", str(short.exception))
+            with self.assertRaises(TypeError) as not_a_pair:
+                acps.run(
+                    BOWL_TOML,
+                    batch_rollout=lambda tasks: [np.zeros(len(tasks))],  # type: ignore[arg-type, return-value]
+                    out=f"{d}/list",
+                    quiet=True,
+                )
+            self.assertIn(
+                "returns (rewards, scores) or (rewards, scores, ok)", str(not_a_pair.exception)
+            )
 
     def test_ctrl_c_stops_the_run_with_checkpoints(self) -> None:
         """SIGINT to a process inside acps.run: KeyboardInterrupt, after the checkpoints."""
