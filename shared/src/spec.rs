@@ -3,7 +3,9 @@
 
 use crate::{FNV_OFFSET, fnv1a};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::fmt;
+use std::sync::{Arc, Mutex, PoisonError};
 
 /// The name of [`EnvironmentSpec::unnamed`].
 const UNNAMED: &str = "unnamed";
@@ -47,8 +49,7 @@ impl EnvironmentSpec {
     /// The spec of the environment `name` built from `parameters` with `settings`, everything
     /// that changes its rollouts (see the type's documentation for what the hash promises).
     pub fn new(name: &str, parameters: [u64; 3], settings: &impl fmt::Debug) -> Result<Self, SpecBuildError> {
-        let text = format!("{settings:?}");
-        Self::from_parts(name.as_bytes(), fnv1a(FNV_OFFSET, text.as_bytes()), parameters)
+        Self::from_text(name, parameters, &format!("{settings:?}"))
     }
 
     /// The spec of an environment whose settings are given as text, such as a problem file's
@@ -61,14 +62,16 @@ impl EnvironmentSpec {
     /// assert_eq!(spec.to_string(), "reach-2d [1, 0, 0] (settings 30178b206d634ad5)");
     /// ```
     pub fn from_text(name: &str, parameters: [u64; 3], settings: &str) -> Result<Self, SpecBuildError> {
-        Self::from_parts(name.as_bytes(), fnv1a(FNV_OFFSET, settings.as_bytes()), parameters)
+        let spec = Self::from_parts(name.as_bytes(), fnv1a(FNV_OFFSET, settings.as_bytes()), parameters)?;
+        remember(spec.settings, settings);
+        Ok(spec)
     }
 
     /// The identity of an environment nobody named: a problem file without one, and a worker
     /// that declares none, have it, so that they match each other and nothing else
     /// (docs/PROTOCOL.md, "Environment identity").
     pub fn unnamed() -> Self {
-        Self::from_text(UNNAMED, [0; 3], "").expect("a valid name")
+        Self::from_parts(UNNAMED.as_bytes(), FNV_OFFSET, [0; 3]).expect("a valid name")
     }
 
     /// Whether this is [`EnvironmentSpec::unnamed`].
@@ -117,6 +120,39 @@ impl EnvironmentSpec {
     pub fn parameters(&self) -> [u64; 3] {
         self.parameters
     }
+
+    /// The settings text this process hashed into this spec's settings (by
+    /// [`new`](Self::new) or [`from_text`](Self::from_text)), `None` for a spec made only from
+    /// its hash (one read from a file or a message): what a refusal shows beside the hash, since
+    /// two hashes alone do not tell a user which setting differs.
+    ///
+    /// ```
+    /// use acps_shared::EnvironmentSpec;
+    /// let spec = EnvironmentSpec::new("arm", [0; 3], &(0.01, 3)).unwrap();
+    /// assert_eq!(spec.settings_text().as_deref(), Some("(0.01, 3)"));
+    /// let sent = EnvironmentSpec::from_parts(b"arm", 0x1234, [0; 3]).unwrap();
+    /// assert_eq!(sent.settings_text(), None);
+    /// ```
+    pub fn settings_text(&self) -> Option<Arc<str>> {
+        TEXTS
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .get(&self.settings)
+            .cloned()
+    }
+}
+
+/// The settings texts hashed in this process, by hash. It grows with the distinct settings a
+/// process builds environments of (a handful), not with their uses.
+static TEXTS: Mutex<BTreeMap<u64, Arc<str>>> = Mutex::new(BTreeMap::new());
+
+/// Keep `text` as the settings text of `hash`.
+fn remember(hash: u64, text: &str) {
+    TEXTS
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .entry(hash)
+        .or_insert_with(|| Arc::from(text));
 }
 
 /// `contextual-function [2, 20, 7] (settings 9f3a0c12d4e5b6a7)`.

@@ -113,7 +113,7 @@ pub trait Environment: Send {
 
     /// Perform `tasks`, returning one outcome per task in their order: a vectorised simulator
     /// overrides it to step them together. A worker with `WorkerOptions::batches` hands it every
-    /// queued task of this environment at once (up to 32); the default performs them one by one.
+    /// queued task of this environment at once (up to 64); the default performs them one by one.
     fn rollout_batch(&mut self, tasks: &[Task]) -> Vec<Outcome> {
         tasks.iter().map(|task| self.rollout(task)).collect()
     }

@@ -1159,8 +1159,9 @@ enum Mismatch {
     Protocol(u32),
     /// Another run identity.
     Run(u64),
-    /// An environment none of the jobs needs.
-    Environment(EnvironmentSpec),
+    /// An environment none of the jobs needs, and how the worker described it (with the
+    /// settings text it sent).
+    Environment(EnvironmentSpec, String),
     /// An environment description that is none.
     Unreadable(SpecBuildError),
     /// Declared lengths of contexts and parameters other than those of a job it would serve.
@@ -1185,7 +1186,7 @@ fn admit(message: &WorkerMessage, identity: u64, source: &dyn TaskSource) -> Res
     if let Serves::One(spec) = serves
         && !(0..source.jobs()).any(|job| source.environment(job) == spec)
     {
-        return Err(Mismatch::Environment(spec));
+        return Err(Mismatch::Environment(spec, message.serves_shown()));
     }
     // A declared size must be every served job's: a worker of other sizes would fail each of
     // its rollouts, and the run would find out only at its end.
@@ -1212,7 +1213,7 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
         }
     }
     let closest = match mismatch {
-        Mismatch::Environment(spec) => needed.iter().find(|need| need.name() == spec.name()),
+        Mismatch::Environment(spec, _) => needed.iter().find(|need| need.name() == spec.name()),
         _ => None,
     }
     .or(needed.first())
@@ -1220,7 +1221,7 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
     let answer = match mismatch {
         Mismatch::Protocol(_) => Answer::refused(Refusal::Protocol, identity, closest, needed.len()),
         Mismatch::Run(_) => Answer::refused(Refusal::Run, identity, closest, needed.len()),
-        Mismatch::Environment(_) | Mismatch::Unreadable(_) => {
+        Mismatch::Environment(..) | Mismatch::Unreadable(_) => {
             Answer::refused(Refusal::Environment, identity, closest, needed.len())
         }
         Mismatch::Sizes { job, .. } => Answer::refused_sizes(identity, *job),
@@ -1228,7 +1229,7 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
     let reason = match mismatch {
         Mismatch::Protocol(protocol) => format!("protocol {protocol} (ours {PROTOCOL_VERSION})"),
         Mismatch::Run(run) => format!("run identity {run:016x} (ours {identity:016x})"),
-        Mismatch::Environment(spec) => format!("it serves environment {spec}; the jobs need {}", answer.needs()),
+        Mismatch::Environment(_, shown) => format!("it serves environment {shown}; the jobs need {}", answer.needs()),
         Mismatch::Unreadable(error) => format!(
             "its environment cannot be read ({error}); the jobs need {}",
             answer.needs()

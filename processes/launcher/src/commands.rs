@@ -13,7 +13,9 @@ use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetBuilder, FleetError, FleetProgress};
 use acps_relay::{Listener, NetOptions, RelayOptions};
+use acps_shared::Serves;
 use acps_wire::ipc::{self, RunName};
+use acps_wire::wire;
 use acps_worker::{WorkerExit, WorkerOptions};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -293,9 +295,10 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
                 Some(_) => {
                     let environment = (experiment.instance)(experiment.base_seed).problem.environment;
                     eprintln!(
-                        "run '{run}' waits for your workers: start each with {}={run} in its environment (`{}={run} CMD`); they must declare {environment}",
+                        "run '{run}' waits for your workers: start each with {}={run} in its environment (`{}={run} CMD`); they must declare {}",
                         ipc::RUN_ENV,
-                        ipc::RUN_ENV
+                        ipc::RUN_ENV,
+                        wire::serves_shown(&Serves::One(environment))
                     );
                 }
             }

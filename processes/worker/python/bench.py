@@ -1,10 +1,12 @@
 """Rollouts per second of Python workers through a real fleet.
 
 A learner (``acps run function --workers 0``, the built-in contextual function with a random
-context choice and 64 training tasks in flight) serves W Python worker processes, each with a
-queue of ``--queue-depth`` tasks, whose rollout is trivial (``--rollout-us 0``) or busy-waits
-that many microseconds. Each worker reports its rollouts and the seconds from joining to the
-run's end; the rate is their total rollouts over the longest of those times.
+context choice and ``--in-flight`` training tasks in flight) serves W Python worker processes,
+each with a queue of ``--queue-depth`` tasks, whose rollout is trivial (``--rollout-us 0``) or
+busy-waits that many microseconds. Each worker reports its rollouts, the seconds from joining
+to the run's end and the CPU seconds it used; the rate is their total rollouts over the longest
+of those times, and the workers' CPU per rollout says what one worker could deliver on a core of
+its own (the learner's cost, 2-2.5 us per rollout of this problem, bounds the rate).
 
     python bench.py                                  # trivial rollouts, W = 1
     python bench.py --workers 1 2 --rollout-us 1000  # ~1 ms rollouts at W = 1 and W = 2
@@ -58,6 +60,7 @@ def worker(run: str, identity: str, rollout_us: int, queue_depth: int, batch: bo
         first = np.abs(tasks.thetas[:, 0])
         return -first, 1.0 + first
 
+    cpu = time.process_time()
     if batch:
         report = acps_worker.serve(
             run=run, batch_rollout=batch_rollout, environment=environment, queue_depth=queue_depth
@@ -66,13 +69,24 @@ def worker(run: str, identity: str, rollout_us: int, queue_depth: int, batch: bo
         report = acps_worker.serve(rollout, run, environment=environment, queue_depth=queue_depth)
     print(
         json.dumps(
-            {"exit": report.exit.value, "rollouts": report.rollouts, "seconds": report.seconds}
+            {
+                "exit": report.exit.value,
+                "rollouts": report.rollouts,
+                "seconds": report.seconds,
+                "cpu": time.process_time() - cpu,
+            }
         )
     )
 
 
 def measure(
-    acps: str, workers: int, episodes: int, rollout_us: int, queue_depth: int, batch: bool
+    acps: str,
+    workers: int,
+    episodes: int,
+    rollout_us: int,
+    queue_depth: int,
+    batch: bool,
+    in_flight: int,
 ) -> float:
     """Rollouts per second of ``workers`` Python workers; also prints the row."""
     run = f"bench-{os.getpid()}-{workers}"
@@ -115,7 +129,7 @@ def measure(
                 "--method",
                 "random",
                 "--in-flight",
-                "64",
+                str(in_flight),
                 "--workers",
                 "0",
                 "--run",
@@ -143,16 +157,22 @@ def measure(
             )
             for _ in range(workers)
         ]
-        reports = [
-            json.loads(p.communicate(timeout=600)[0].strip().splitlines()[-1]) for p in procs
-        ]
+        outputs = [p.communicate(timeout=600)[0] for p in procs]
+        if any(p.returncode != 0 for p in procs):
+            # The learner would wait for workers for ever.
+            learner.kill()
+            learner.wait()
+            raise SystemExit(f"a worker failed (exit codes {[p.returncode for p in procs]})")
+        reports = [json.loads(out.strip().splitlines()[-1]) for out in outputs]
         rollouts = int(sum(r["rollouts"] for r in reports))
         seconds = float(max(r["seconds"] for r in reports))
         rate = rollouts / seconds
+        cpu_us = 1e6 * sum(r["cpu"] for r in reports) / rollouts
         print(
             f"W={workers} {'batch ' if batch else ''}rollout={rollout_us} us "
-            f"queue_depth={queue_depth}: {rollouts} rollouts in "
-            f"{seconds:.3f} s = {rate:,.0f} rollouts/s",
+            f"queue_depth={queue_depth} in_flight={in_flight}: {rollouts} rollouts in "
+            f"{seconds:.3f} s = {rate:,.0f} rollouts/s; worker CPU {cpu_us:.2f} us per rollout "
+            f"({1 / cpu_us:.2f} M/s per core)",
             flush=True,
         )
         try:
@@ -184,15 +204,33 @@ def main() -> None:
     )
     parser.add_argument("--rollout-us", type=int, default=0)
     parser.add_argument(
-        "--queue-depth", type=int, default=64, help="tasks each worker keeps asked for or queued"
+        "--queue-depth",
+        type=int,
+        help="tasks each worker keeps asked for or queued (default: 128 with --batch, so that "
+        "batches reach the wire's 64; else 64)",
+    )
+    parser.add_argument(
+        "--in-flight",
+        type=int,
+        help="the learner's training tasks in flight (default: the queue depth)",
     )
     parser.add_argument(
         "--batch", action="store_true", help="batch workers: one numpy call per batch of tasks"
     )
     args = parser.parse_args()
     episodes = args.episodes or (2000 if args.rollout_us >= 100 else 100_000)
+    queue_depth = args.queue_depth or (128 if args.batch else 64)
+    in_flight = args.in_flight or queue_depth
     rates = [
-        measure(args.acps, w, episodes, args.rollout_us, args.queue_depth, args.batch)
+        measure(
+            args.acps,
+            w,
+            episodes,
+            args.rollout_us,
+            queue_depth,
+            args.batch,
+            in_flight,
+        )
         for w in args.workers
     ]
     if len(rates) > 1:

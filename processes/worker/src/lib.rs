@@ -23,8 +23,8 @@ use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORK
 pub use acps_wire::ipc::{RunName, RunNameParseError};
 pub use acps_wire::wire::Sizes;
 use acps_wire::wire::{
-    Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireEnvironment, WireOutcome, WireTask,
-    WorkerMessage,
+    self, Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireEnvironment, WireOutcome,
+    WireTask, WorkerMessage,
 };
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::{CallbackProgression, PortFactory as _};
@@ -94,7 +94,7 @@ pub struct WorkerOptions {
     pub sizes: Option<Sizes>,
     /// Hand the environment every queued task of one environment at once, through
     /// [`Environment::rollout_batch`] (a vectorised simulator), instead of one per
-    /// [`Environment::rollout`]: at most 32 (one request's outcomes) and at most `queue_depth`.
+    /// [`Environment::rollout`]: at most 64 (one request's outcomes) and at most `queue_depth`.
     /// Off by default: one by one, outcomes go back while later tasks are simulated.
     pub batches: bool,
 }
@@ -578,7 +578,11 @@ fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves, sizes: Option
     }
     match answer.refusal() {
         Some(Refusal::Environment) => {
-            format!("this worker serves {serves}; the run's jobs need {}", answer.needs())
+            format!(
+                "this worker serves {}; the run's jobs need {}",
+                wire::serves_shown(serves),
+                answer.needs()
+            )
         }
         Some(Refusal::Sizes) => match sizes {
             Some(sizes) => format!(
@@ -778,7 +782,8 @@ mod tests {
             "800 us of 25 us rollouts"
         );
         assert_eq!(batch(64, Some(Duration::from_micros(40))), 20);
-        assert_eq!(batch(64, Some(Duration::from_nanos(100))), MAX_BATCH);
+        assert_eq!(batch(64, Some(Duration::from_nanos(100))), 32, "half the budget");
+        assert_eq!(batch(128, Some(Duration::from_nanos(100))), MAX_BATCH);
         assert_eq!(batch(3, Some(Duration::from_nanos(100))), 1, "half of 3 is 1");
         let mut batching = Batching::new(16);
         batching.observe(Duration::from_micros(25));

@@ -102,7 +102,7 @@ fn a_worker_serving_an_environment_no_job_needs_names_both() {
         Err(WorkerError::Refused { reason, .. }) => assert_eq!(
             reason,
             format!(
-                "this worker serves {}; the run's jobs need {} and 1 other",
+                "this worker serves {} = \"2.0\"; the run's jobs need {} = \"1.0\" and 1 other",
                 spec(2.0),
                 spec(1.0)
             )

@@ -6,8 +6,8 @@
 
 use crate::ipc::{DEFAULT_QUEUE_DEPTH, LIMITS, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS, RUN_ENV};
 use crate::wire::{
-    Answer, MAX_BATCH, MAX_CONTEXT, MAX_DIAGNOSTICS, MAX_THETA, PROTOCOL_VERSION, Refusal, Response, WireEnvironment,
-    WireOutcome, WireTask, WorkerMessage,
+    Answer, MAX_BATCH, MAX_CONTEXT, MAX_DIAGNOSTICS, MAX_SETTINGS_TEXT, MAX_THETA, PROTOCOL_VERSION, Refusal, Response,
+    WireEnvironment, WireOutcome, WireTask, WorkerMessage,
 };
 use acps_shared::MAX_NAME;
 use iceoryx2::prelude::ZeroCopySend;
@@ -108,6 +108,9 @@ pub fn describe() -> Value {
             field!(Answer, environment, "WireEnvironment"),
             field!(Answer, context_len, "u32"),
             field!(Answer, theta_len, "u32"),
+            field!(Answer, settings_text_len, "u32"),
+            field!(Answer, reserved, "u32"),
+            field!(Answer, settings_text, "u8", Some(MAX_SETTINGS_TEXT)),
         ],
     );
     let outcome = payload::<WireOutcome>(
@@ -134,8 +137,9 @@ pub fn describe() -> Value {
             field!(WorkerMessage, serves_one, "u32"),
             field!(WorkerMessage, context_len, "u32"),
             field!(WorkerMessage, theta_len, "u32"),
-            field!(WorkerMessage, reserved, "u32"),
+            field!(WorkerMessage, settings_text_len, "u32"),
             field!(WorkerMessage, environment, "WireEnvironment"),
+            field!(WorkerMessage, settings_text, "u8", Some(MAX_SETTINGS_TEXT)),
             field!(WorkerMessage, outcomes, "WireOutcome", Some(MAX_BATCH)),
         ],
     );
@@ -148,7 +152,8 @@ pub fn describe() -> Value {
         "iceoryx2": "0.10.0",
         "limits": {
             "MAX_NAME": MAX_NAME, "MAX_CONTEXT": MAX_CONTEXT, "MAX_THETA": MAX_THETA,
-            "MAX_DIAGNOSTICS": MAX_DIAGNOSTICS, "MAX_BATCH": MAX_BATCH, "MAX_WORKERS": MAX_WORKERS,
+            "MAX_DIAGNOSTICS": MAX_DIAGNOSTICS, "MAX_BATCH": MAX_BATCH,
+            "MAX_SETTINGS_TEXT": MAX_SETTINGS_TEXT, "MAX_WORKERS": MAX_WORKERS,
             "MAX_IN_FLIGHT_PER_WORKER": MAX_IN_FLIGHT_PER_WORKER,
             "MAX_ASKING_REQUESTS": MAX_ASKING_REQUESTS, "DEFAULT_QUEUE_DEPTH": DEFAULT_QUEUE_DEPTH,
         },

@@ -15,7 +15,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use std::time::Duration;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 8;
+pub const PROTOCOL_VERSION: u32 = 9;
 /// Largest context a task can carry (docs/CHOICES.md: why 8).
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -23,7 +23,53 @@ pub const MAX_THETA: usize = 64;
 /// Largest diagnostics vector an outcome can carry (docs/CHOICES.md: why 16).
 pub const MAX_DIAGNOSTICS: usize = 16;
 /// Most tasks one answer carries, and most outcomes one request carries.
-pub const MAX_BATCH: usize = 32;
+pub const MAX_BATCH: usize = 64;
+/// Most bytes of an environment's settings text a request or a refusal carries: enough to show
+/// which setting differs, not a copy (the hash decides; the text is for people).
+pub const MAX_SETTINGS_TEXT: usize = 256;
+
+/// The settings text this process hashed into `spec` (none known: length 0), as a message
+/// carries it: its length in bytes and its first [`MAX_SETTINGS_TEXT`] bytes, cut at a
+/// character boundary.
+fn settings_text(spec: Option<EnvironmentSpec>) -> (u32, [u8; MAX_SETTINGS_TEXT]) {
+    let mut bytes = [0; MAX_SETTINGS_TEXT];
+    let Some(text) = spec.and_then(|spec| spec.settings_text()) else {
+        return (0, bytes);
+    };
+    let mut end = text.len().min(MAX_SETTINGS_TEXT);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    bytes[..end].copy_from_slice(&text.as_bytes()[..end]);
+    (u32::try_from(text.len()).unwrap_or(u32::MAX), bytes)
+}
+
+/// `serves` in words, with the settings text this process knows for its environment: how a
+/// worker names what it serves when it is refused.
+pub fn serves_shown(serves: &Serves) -> String {
+    match serves {
+        Serves::One(spec) => {
+            let (len, bytes) = settings_text(Some(*spec));
+            format!("{serves}{}", shown_settings_text(len, &bytes))
+        }
+        Serves::Any => serves.to_string(),
+    }
+}
+
+/// A settings text as a message carried it, for people: ` = "TEXT"`, or ` = "START..." (N
+/// bytes)` when it was longer than the message holds; empty when the sender knew none.
+fn shown_settings_text(len: u32, bytes: &[u8; MAX_SETTINGS_TEXT]) -> String {
+    if len == 0 {
+        return String::new();
+    }
+    let carried = bytes.iter().position(|&b| b == 0).unwrap_or(MAX_SETTINGS_TEXT);
+    let text = String::from_utf8_lossy(&bytes[..carried.min(len as usize)]);
+    if len as usize > carried {
+        format!(" = {:?}... ({len} bytes)", text.as_ref())
+    } else {
+        format!(" = {:?}", text.as_ref())
+    }
+}
 
 /// An [`EnvironmentSpec`] as it crosses the wire (all zeros: none).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
@@ -132,7 +178,7 @@ pub struct WireTask {
 /// The header of the learner's answer to a worker's request; the answer's payload is the slice of
 /// tasks it hands out (none for `Stop` and `Refused`). iceoryx2 starts a header from `Default`
 /// (an unknown response) before the learner writes it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
 #[type_name("acps::Answer")]
 pub struct Answer {
@@ -152,6 +198,13 @@ pub struct Answer {
     pub context_len: u32,
     /// For a [`Refusal::Sizes`], the parameter length the worker's jobs need; else 0.
     pub theta_len: u32,
+    /// For a refusal, the length in bytes of `environment`'s settings text, 0 when the learner
+    /// knows none.
+    pub settings_text_len: u32,
+    /// Padding, always 0.
+    pub reserved: u32,
+    /// Its first bytes (UTF-8, zero-padded), for the worker to show beside its own.
+    pub settings_text: [u8; MAX_SETTINGS_TEXT],
 }
 
 /// One outcome of a [`WorkerMessage`].
@@ -202,10 +255,14 @@ pub struct WorkerMessage {
     pub context_len: u32,
     /// The parameter length the worker serves (with a non-zero `context_len`).
     pub theta_len: u32,
-    /// Padding, always 0.
-    pub reserved: u32,
+    /// The length in bytes of `environment`'s settings text, 0 when the worker knows none (it
+    /// was given only the hash) or serves any environment.
+    pub settings_text_len: u32,
     /// The environment a worker that serves one serves (zeros otherwise).
     pub environment: WireEnvironment,
+    /// The first bytes of its settings text (UTF-8, zero-padded), for the learner to show
+    /// beside its own when it refuses the worker.
+    pub settings_text: [u8; MAX_SETTINGS_TEXT],
     /// The outcomes.
     pub outcomes: [WireOutcome; MAX_BATCH],
 }
@@ -321,6 +378,25 @@ impl WireTask {
     }
 }
 
+/// All zeros: an unknown response (a `Default` derive stops at arrays of 32).
+impl Default for Answer {
+    fn default() -> Self {
+        Self {
+            response: 0,
+            protocol: 0,
+            run: 0,
+            refusal: 0,
+            environments: 0,
+            environment: WireEnvironment::default(),
+            context_len: 0,
+            theta_len: 0,
+            settings_text_len: 0,
+            reserved: 0,
+            settings_text: [0; MAX_SETTINGS_TEXT],
+        }
+    }
+}
+
 impl Answer {
     /// A `response` of this build from the learner of run identity `run`.
     pub fn new(response: Response, run: u64) -> Self {
@@ -335,10 +411,13 @@ impl Answer {
     /// A refusal for `refusal` by the learner of run identity `run`, whose jobs need
     /// `environments` environments, `environment` among them (`None` when they need none).
     pub fn refused(refusal: Refusal, run: u64, environment: Option<EnvironmentSpec>, environments: usize) -> Self {
+        let (settings_text_len, settings_text) = settings_text(environment);
         Self {
             refusal: refusal as u32,
             environments: u32::try_from(environments).unwrap_or(u32::MAX),
             environment: environment.map(WireEnvironment::from).unwrap_or_default(),
+            settings_text_len,
+            settings_text,
             ..Self::new(Response::Refused, run)
         }
     }
@@ -380,11 +459,12 @@ impl Answer {
     /// What a refusal says the learner's jobs need, in words: the environment it names and how
     /// many others.
     pub fn needs(&self) -> String {
+        let text = shown_settings_text(self.settings_text_len, &self.settings_text);
         match (self.environment(), self.environments) {
             (None, _) => "no environment".to_string(),
-            (Some(spec), 0 | 1) => spec.to_string(),
-            (Some(spec), 2) => format!("{spec} and 1 other"),
-            (Some(spec), n) => format!("{spec} and {} others", n - 1),
+            (Some(spec), 0 | 1) => format!("{spec}{text}"),
+            (Some(spec), 2) => format!("{spec}{text} and 1 other"),
+            (Some(spec), n) => format!("{spec}{text} and {} others", n - 1),
         }
     }
 
@@ -445,20 +525,23 @@ impl WorkerMessage {
             reserved: 0,
             diagnostics: [0.0; MAX_DIAGNOSTICS],
         };
+        let spec = match serves {
+            Serves::One(spec) => Some(spec),
+            Serves::Any => None,
+        };
+        let (settings_text_len, settings_text) = settings_text(spec);
         Self {
             protocol: PROTOCOL_VERSION,
             want: want.min(MAX_BATCH) as u32,
             run,
             count: 0,
             slowest_rollout_us: 0,
-            serves_one: u32::from(matches!(serves, Serves::One(_))),
+            serves_one: u32::from(spec.is_some()),
             context_len: 0,
             theta_len: 0,
-            reserved: 0,
-            environment: match serves {
-                Serves::One(spec) => spec.into(),
-                Serves::Any => WireEnvironment::default(),
-            },
+            settings_text_len,
+            environment: spec.map(WireEnvironment::from).unwrap_or_default(),
+            settings_text,
             outcomes: [EMPTY; MAX_BATCH],
         }
     }
@@ -477,6 +560,20 @@ impl WorkerMessage {
             context: self.context_len as usize,
             theta: self.theta_len as usize,
         })
+    }
+
+    /// What the worker serves in words: its environment with the settings text it sent.
+    pub fn serves_shown(&self) -> String {
+        match self.serves() {
+            Ok(serves @ Serves::One(_)) => {
+                format!(
+                    "{serves}{}",
+                    shown_settings_text(self.settings_text_len, &self.settings_text)
+                )
+            }
+            Ok(serves) => serves.to_string(),
+            Err(error) => error.to_string(),
+        }
     }
 
     /// The environments the worker serves, or why its message does not say.
@@ -600,7 +697,7 @@ mod tests {
             ),
             (Some(Response::Refused), Some(Refusal::Environment), Some(spec()), 3)
         );
-        assert_eq!(answer.needs(), format!("{} and 2 others", spec()));
+        assert_eq!(answer.needs(), format!("{} = \"0.008\" and 2 others", spec()));
         let none = Answer::refused(Refusal::Run, 7, None, 0);
         assert_eq!((none.refusal(), none.environment()), (Some(Refusal::Run), None));
         assert_eq!(none.needs(), "no environment");
@@ -609,6 +706,41 @@ mod tests {
         let mut message = WorkerMessage::request(0, 1, Serves::One(spec()));
         message.environment.name[0] = b' ';
         assert!(message.serves().is_err());
+    }
+
+    #[test]
+    fn settings_texts_cross_in_requests_and_refusals_and_long_ones_are_shown_cut() {
+        // A worker's text reaches the learner, and the learner's the worker.
+        let worker = EnvironmentSpec::from_text("arm", [0; 3], "dt = 0.01").unwrap();
+        let request = WorkerMessage::request(0, 1, Serves::One(worker));
+        assert_eq!(request.serves_shown(), format!("{worker} = \"dt = 0.01\""));
+        assert_eq!(serves_shown(&Serves::One(worker)), request.serves_shown());
+        let needed = EnvironmentSpec::from_text("arm", [0; 3], "dt = 0.02").unwrap();
+        let refusal = Answer::refused(Refusal::Environment, 7, Some(needed), 1);
+        assert_eq!(refusal.needs(), format!("{needed} = \"dt = 0.02\""));
+        // A spec known only by its hash has no text to show.
+        let hashed = EnvironmentSpec::from_parts(b"arm", 0x5eed, [0; 3]).unwrap();
+        assert_eq!(
+            Answer::refused(Refusal::Environment, 7, Some(hashed), 1).needs(),
+            hashed.to_string()
+        );
+        assert_eq!(
+            WorkerMessage::request(0, 1, Serves::Any).serves_shown(),
+            Serves::Any.to_string()
+        );
+        // A longer text: its start, cut at a character boundary (the 2-byte 'é' straddles the
+        // capacity), and its length.
+        let long = format!("{}é{}", "a".repeat(MAX_SETTINGS_TEXT - 1), "b".repeat(100));
+        let spec = EnvironmentSpec::from_text("arm", [0; 3], &long).unwrap();
+        let shown = WorkerMessage::request(0, 1, Serves::One(spec)).serves_shown();
+        assert_eq!(
+            shown,
+            format!(
+                "{spec} = \"{}\"... ({} bytes)",
+                "a".repeat(MAX_SETTINGS_TEXT - 1),
+                long.len()
+            )
+        );
     }
 
     #[test]
@@ -667,7 +799,7 @@ mod tests {
         assert_eq!(size_of::<WireEnvironment>(), 64);
         assert_eq!(size_of::<WireTask>(), 672);
         assert_eq!(size_of::<WireOutcome>(), 168);
-        assert_eq!(size_of::<WorkerMessage>(), 5480);
-        assert_eq!(size_of::<Answer>(), 96);
+        assert_eq!(size_of::<WorkerMessage>(), 11_112);
+        assert_eq!(size_of::<Answer>(), 360);
     }
 }

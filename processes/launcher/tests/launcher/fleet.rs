@@ -12,7 +12,7 @@ use acps_models::robot::Robot;
 use acps_models::throw::{Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, RunName};
-use acps_wire::wire::{Answer, Response, Sizes, WorkerMessage};
+use acps_wire::wire::{self, Answer, Response, Sizes, WorkerMessage};
 use acps_worker::{EnvironmentFactory, EnvironmentProvideError, Single, WorkerError, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
@@ -654,6 +654,9 @@ fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worke
     let (theirs, ours) = (other.spec(), environment::grid(Sim::Analytic).unwrap().spec());
     assert_ne!(theirs, ours);
     let error = acps_worker::serve(&run, &options, &mut Single(other), &AtomicBool::new(false)).unwrap_err();
+    // Both sides' settings texts, not only their hashes.
+    let [theirs, ours] = [theirs, ours].map(|spec| wire::serves_shown(&Serves::One(spec)));
+    assert!(theirs.contains(" = \"") && ours.contains(" = \""), "{theirs} / {ours}");
     assert_eq!(
         error.to_string(),
         format!(
@@ -1385,7 +1388,11 @@ fn workers_of_other_environments_are_refused_and_the_result_stays_the_in_process
     match refused {
         Err(WorkerError::Refused { reason, .. }) => assert_eq!(
             reason,
-            format!("this worker serves {seed7}; the run's jobs need {seed0} and 1 other")
+            format!(
+                "this worker serves {}; the run's jobs need {} and 1 other",
+                wire::serves_shown(&Serves::One(seed7)),
+                wire::serves_shown(&Serves::One(seed0))
+            )
         ),
         other => panic!("expected a refusal at the handshake, got {other:?}"),
     }

@@ -442,8 +442,9 @@ fn a_worker_of_other_settings_is_refused_and_the_run_says_so() {
         &["-q"],
     );
     let stderr = refused(&output);
+    // Both sides' settings texts, beside their hashes.
     let reason = format!(
-        "it serves environment {}; the jobs need {}",
+        "it serves environment {} = \"bowl v2\"; the jobs need {} = \"bowl v1\"",
         bowl_spec("bowl v2"),
         bowl_spec("bowl v1")
     );
@@ -495,7 +496,7 @@ fn a_problem_without_an_environment_admits_only_workers_that_declare_none() {
     );
     let stderr = refused(&output);
     let reason = format!(
-        "it serves environment {}; the jobs need no named environment",
+        "it serves environment {} = \"bowl v1\"; the jobs need no named environment",
         bowl_spec("bowl v1")
     );
     assert!(stderr.contains(&reason), "{stderr}");

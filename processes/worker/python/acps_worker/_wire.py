@@ -12,7 +12,7 @@ from __future__ import annotations
 import ctypes
 
 #: Version of the wire format (Rust: ``PROTOCOL_VERSION``).
-PROTOCOL_VERSION = 8
+PROTOCOL_VERSION = 9
 #: Most bytes of an environment's name.
 MAX_NAME = 32
 #: Largest context a task carries.
@@ -22,7 +22,9 @@ MAX_THETA = 64
 #: Largest diagnostics vector an outcome carries.
 MAX_DIAGNOSTICS = 16
 #: Most tasks one answer carries, and most outcomes one request carries.
-MAX_BATCH = 32
+MAX_BATCH = 64
+#: Most bytes of a settings text a request or a refusal carries.
+MAX_SETTINGS_TEXT = 256
 #: Most workers one run serves.
 MAX_WORKERS = 128
 #: Most tasks one worker keeps in flight.
@@ -119,6 +121,9 @@ class Answer(ctypes.Structure):
         ("environment", WireEnvironment),
         ("context_len", ctypes.c_uint32),
         ("theta_len", ctypes.c_uint32),
+        ("settings_text_len", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+        ("settings_text", ctypes.c_uint8 * MAX_SETTINGS_TEXT),
     ]
 
     @staticmethod
@@ -159,8 +164,9 @@ class WorkerMessage(ctypes.Structure):
         ("serves_one", ctypes.c_uint32),
         ("context_len", ctypes.c_uint32),
         ("theta_len", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
+        ("settings_text_len", ctypes.c_uint32),
         ("environment", WireEnvironment),
+        ("settings_text", ctypes.c_uint8 * MAX_SETTINGS_TEXT),
         ("outcomes", WireOutcome * MAX_BATCH),
     ]
 

@@ -21,6 +21,11 @@ _KINDS = np.array(["train", "evaluate", "baseline"])
 #: buffer's format string, which costs more than the rest of a batch.
 _TASK = np.dtype(_wire.WireTask)
 _OUTCOME = np.dtype(_wire.WireOutcome)
+#: Where a wire task's environment lies in its bytes.
+_ENVIRONMENT = slice(
+    _wire.WireTask.environment.offset,
+    _wire.WireTask.environment.offset + _wire.WireTask.environment.size,
+)
 
 
 @dataclass(frozen=True)
@@ -68,10 +73,18 @@ class TaskQueue:
     def __len__(self) -> int:
         return self.size
 
-    def extend(self, tasks: ctypes.Array[_wire.WireTask]) -> None:
-        """Queue an answer's tasks (a private ctypes copy of its payload)."""
-        self.answers.append(np.frombuffer(memoryview(tasks), dtype=_TASK))
-        self.size += len(tasks)
+    def extend(self, tasks: ctypes.Array[_wire.WireTask], served: Any) -> int | None:
+        """Queue an answer's tasks (a private ctypes copy of its payload) if each is for the
+        environment ``served`` (its wire bytes, from :func:`environment_bytes`); else the index
+        of the first that is not."""
+        rows = np.frombuffer(memoryview(tasks), dtype=_TASK)
+        raw = rows.view(np.uint8).reshape(len(rows), -1)
+        foreign = (raw[:, _ENVIRONMENT] != served).any(axis=1)
+        if foreign.any():
+            return int(np.argmax(foreign))
+        self.answers.append(rows)
+        self.size += len(rows)
+        return None
 
     def take(self, most: int) -> Any:
         """Up to ``most`` tasks from the front that share the first one's context and theta
@@ -95,6 +108,11 @@ class TaskQueue:
                 break
         self.size -= taken
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+def environment_bytes(served: bytes) -> Any:
+    """An environment's wire bytes as the array :meth:`TaskQueue.extend` compares tasks with."""
+    return np.frombuffer(served, dtype=np.uint8)
 
 
 def batch_of(rows: Any) -> TaskBatch:

@@ -3,6 +3,7 @@ worker declares, exactly as Rust's ``EnvironmentSpec`` (``shared/src/spec.rs``).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 
 from . import _wire
@@ -35,11 +36,14 @@ class Environment:
     'reach-2d [1, 0, 0] (settings 30178b206d634ad5)'
     """
 
-    __slots__ = ("name", "parameters", "settings")
+    __slots__ = ("name", "parameters", "settings", "text")
 
     name: str
     settings: int
     parameters: tuple[int, int, int]
+    text: str | None
+    """The settings text, when the settings were given as text (not only their hash): a
+    refusal shows it beside the hash."""
 
     def __init__(
         self,
@@ -54,8 +58,10 @@ class Environment:
                 f"environment name {name!r} must be 1 to {_wire.MAX_NAME} characters of "
                 "ASCII letters, digits, '-', '_' and '.'"
             )
+        text = None
         if isinstance(settings, str):
             hashed = fnv1a(settings.encode("utf-8"))
+            text = settings
         elif isinstance(settings, int) and not isinstance(settings, bool):
             if not 0 <= settings <= _MASK:
                 raise ValueError(f"environment settings hash {settings} is not a u64")
@@ -70,6 +76,7 @@ class Environment:
         self.name = name
         self.settings = hashed
         self.parameters = (params[0], params[1], params[2])
+        self.text = text
 
     @classmethod
     def unnamed(cls) -> Environment:
@@ -104,6 +111,21 @@ class Environment:
         wire.parameters[:] = self.parameters
         return wire
 
+    def shown(self) -> str:
+        """As :meth:`__str__`, followed by the settings text when it is known."""
+        if self.text is None or self.is_unnamed():
+            return str(self)
+        raw = self.text.encode("utf-8")
+        return f"{self}{shown_settings_text(len(raw), raw[: _wire.MAX_SETTINGS_TEXT])}"
+
+    def settings_text_to_wire(self) -> tuple[int, bytes]:
+        """The settings text as a message carries it: its length in bytes and its first
+        ``MAX_SETTINGS_TEXT`` bytes, cut at a character boundary ((0, b"") when unknown)."""
+        if self.text is None:
+            return 0, b""
+        raw = self.text.encode("utf-8")
+        return len(raw), raw[: _wire.MAX_SETTINGS_TEXT].decode("utf-8", "ignore").encode("utf-8")
+
     def __eq__(self, other: object) -> bool:
         """Equal identities: the same name, settings hash and parameters."""
         if not isinstance(other, Environment):
@@ -131,3 +153,15 @@ class Environment:
             f"Environment({self.name!r}, settings=0x{self.settings:016x}, "
             f"parameters={self.parameters!r})"
         )
+
+
+def shown_settings_text(length: int, carried: bytes) -> str:
+    """A settings text as a message carried it, for people (Rust: ``shown_settings_text``):
+    `` = "TEXT"``, or `` = "START..." (N bytes)`` when it was longer than the message holds;
+    empty when the sender knew none."""
+    if length == 0:
+        return ""
+    end = carried.find(b"\0")
+    carried = carried if end < 0 else carried[:end]
+    text = json.dumps(carried[:length].decode("utf-8", "replace"), ensure_ascii=False)
+    return f" = {text}... ({length} bytes)" if length > len(carried) else f" = {text}"

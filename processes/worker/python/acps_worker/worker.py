@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import iceoryx2 as iox2
 
 from . import _ipc, _wire
-from .environment import Environment
+from .environment import Environment, shown_settings_text
 from .errors import NoLearnerError, ProtocolError, RefusedError
 
 if TYPE_CHECKING:
@@ -179,12 +179,13 @@ def _needs(answer: _wire.Answer) -> str:
     spec = Environment.from_wire(answer.environment)
     if spec is None:
         return "no environment"
+    text = shown_settings_text(int(answer.settings_text_len), bytes(answer.settings_text))
     n = int(answer.environments)
     if n <= 1:
-        return str(spec)
+        return f"{spec}{text}"
     if n == 2:
-        return f"{spec} and 1 other"
-    return f"{spec} and {n - 1} others"
+        return f"{spec}{text} and 1 other"
+    return f"{spec}{text} and {n - 1} others"
 
 
 def _sizes(context: int, theta: int) -> str:
@@ -205,7 +206,7 @@ def refusal_reason(
     if answer.protocol != protocol:
         return f"protocol version {protocol} here, {answer.protocol} at the learner (another build)"
     if answer.refusal == _wire.REFUSAL_ENVIRONMENT:
-        return f"this worker serves {serves}; the run's jobs need {_needs(answer)}"
+        return f"this worker serves {serves.shown()}; the run's jobs need {_needs(answer)}"
     if answer.refusal == _wire.REFUSAL_SIZES:
         needed = _sizes(int(answer.context_len), int(answer.theta_len))
         if sizes is None:
@@ -221,6 +222,15 @@ def _copy(ctype: type[Any], address: int) -> Any:
     value = ctype()
     ctypes.memmove(ctypes.addressof(value), address, ctypes.sizeof(ctype))
     return value
+
+
+def _first_foreign(tasks: ctypes.Array[_wire.WireTask], served: bytes) -> int | None:
+    """The index of the first of ``tasks`` that is not for the environment whose wire bytes
+    are ``served``, if any."""
+    for i, wire in enumerate(tasks):
+        if bytes(wire.environment) != served:
+            return i
+    return None
 
 
 @dataclass
@@ -308,7 +318,7 @@ def serve(
     the worker holds that shares the first one's shapes, as a :class:`TaskBatch` of numpy
     arrays, and returns arrays ``(rewards, scores)`` or ``(rewards, scores, ok)``; an exception
     or a result of the wrong shape fails the whole batch, a false ``ok`` or a non-finite number
-    its task. A batch holds at most 32 tasks (the outcomes of one request) and at most what the
+    its task. A batch holds at most 64 tasks (the outcomes of one request) and at most what the
     worker keeps queued (``queue_depth``), and the learner's window (its ``in_flight``) bounds
     how many tasks exist at once: a batch worker wants a ``queue_depth`` of at least the
     window's share of each worker. ``sizes=(n_context, n_theta)`` declares the lengths of
@@ -548,6 +558,7 @@ class _Session:
             from . import batch as batches
 
             queue = batches.TaskQueue()
+            served_array = batches.environment_bytes(bytes(self.environment.to_wire()))
         served = self.environment.to_wire()
         served_bytes = bytes(served)
         identity = 0
@@ -557,6 +568,8 @@ class _Session:
         outbox.protocol = self.protocol
         outbox.serves_one = 1
         outbox.environment = served
+        outbox.settings_text_len, text = self.environment.settings_text_to_wire()
+        ctypes.memmove(outbox.settings_text, text, len(text))
         if self.sizes is not None:
             outbox.context_len, outbox.theta_len = self.sizes
         outcomes = outbox.outcomes
@@ -642,14 +655,20 @@ class _Session:
                             )
                         if n:
                             tasks = _copy(_wire.WireTask * n, payload.as_ptr())
-                            for wire in tasks:
-                                if bytes(wire.environment) != served_bytes:
-                                    raise ProtocolError(
-                                        f"task {wire.task_id} of job {wire.job} needs environment "
-                                        f"{Environment.from_wire(wire.environment)}, this worker "
-                                        f"serves {self.environment}"
-                                    )
-                            queue.extend(tasks)
+                            foreign = (
+                                _first_foreign(tasks, served_bytes)
+                                if batches is None
+                                else queue.extend(tasks, served_array)
+                            )
+                            if foreign is not None:
+                                wire = tasks[foreign]
+                                raise ProtocolError(
+                                    f"task {wire.task_id} of job {wire.job} needs environment "
+                                    f"{Environment.from_wire(wire.environment)}, this worker "
+                                    f"serves {self.environment}"
+                                )
+                            if batches is None:
+                                queue.extend(tasks)
                     elif code == _wire.RESPONSE_STOP:
                         _delete(response)
                         return self.report(Exit.FINISHED)

@@ -8,7 +8,7 @@ import unittest
 from types import ModuleType
 
 import acps_worker
-from acps_worker import Environment, Exit, RefusedError
+from acps_worker import Environment, Exit, RefusedError, _wire
 
 from .support import ROOT, Learner, leftovers, run_name
 
@@ -41,15 +41,17 @@ class BowlTest(unittest.TestCase):
                 acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL, _protocol=6)
             self.assertEqual(
                 refused.exception.reason,
-                "protocol version 6 here, 8 at the learner (another build)",
+                f"protocol version 6 here, {_wire.PROTOCOL_VERSION} at the learner (another build)",
             )
             other = Environment("bowl", "bowl v2")
             with self.assertRaises(RefusedError) as refused:
                 acps_worker.serve(bowl.rollout, run, environment=other)
-            self.assertEqual(
-                refused.exception.reason,
-                f"this worker serves {other}; the run's jobs need {wanted}",
+            # Both sides' settings texts, not only their hashes: the learner's comes from the
+            # problem file (the learner's log names both too, checked below).
+            both = (
+                f'this worker serves {other} = "bowl v2"; the run\'s jobs need {wanted} = "bowl v1"'
             )
+            self.assertEqual(refused.exception.reason, both)
             self.assertIn(
                 f"refused this worker: {refused.exception.reason}", str(refused.exception)
             )
@@ -57,7 +59,7 @@ class BowlTest(unittest.TestCase):
                 acps_worker.serve(bowl.rollout, run)
             self.assertEqual(
                 refused.exception.reason,
-                f"this worker serves no named environment; the run's jobs need {wanted}",
+                f'this worker serves no named environment; the run\'s jobs need {wanted} = "bowl v1"',
             )
             with self.assertRaises(RefusedError) as refused:
                 acps_worker.serve(bowl.rollout, run, environment=bowl.BOWL, sizes=(2, 5))
@@ -74,9 +76,13 @@ class BowlTest(unittest.TestCase):
             summary = learner.finished()
         self.assertEqual(summary["experiment"], "bowl")
         log = learner.output()
-        self.assertIn("protocol 6 (ours 8)", log)
-        self.assertIn(f"it serves environment {other}; the jobs need {wanted}", log)
-        self.assertIn(f"it serves environment no named environment; the jobs need {wanted}", log)
+        self.assertIn(f"protocol 6 (ours {_wire.PROTOCOL_VERSION})", log)
+        self.assertIn(
+            f'it serves environment {other} = "bowl v2"; the jobs need {wanted} = "bowl v1"', log
+        )
+        self.assertIn(
+            f'it serves environment no named environment; the jobs need {wanted} = "bowl v1"', log
+        )
         self.assertIn(
             "it serves contexts of 2 and parameters of 5 values; "
             "the jobs need contexts of 2 and parameters of 4 values",
