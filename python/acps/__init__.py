@@ -10,7 +10,7 @@ plots.
 
 from acps._learner import KINDS, Evaluation, Learner, Settings, Tasks
 from acps._native import AcpsError, CheckpointError, SettingsError, TellError, __version__
-from acps._run import BatchRollout, Rollout, run
+from acps._run import BatchRollout, Progress, Rollout, TqdmBars, run
 
 __all__ = [
     "KINDS",
@@ -19,11 +19,13 @@ __all__ = [
     "CheckpointError",
     "Evaluation",
     "Learner",
+    "Progress",
     "Rollout",
     "Settings",
     "SettingsError",
     "Tasks",
     "TellError",
+    "TqdmBars",
     "__version__",
     "run",
 ]

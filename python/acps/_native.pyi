@@ -44,6 +44,8 @@ def run(
     quiet: bool,
     checkpoint_every: int,
     resume: bool,
+    progress: Callable[[str, int, int, str, bool], None] | None,
+    line: bool,
 ) -> str:
     """Run a whole experiment into its run directory; returns the directory."""
 

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Union
 
@@ -25,6 +27,22 @@ Rollout = Callable[[Floats, Floats, int], Union[tuple[float, float], None]]
 BatchRollout = Callable[[Tasks], tuple[Any, ...]]
 
 
+@dataclass(frozen=True)
+class Progress:
+    """Where a running experiment is, as :func:`run` reports it to a ``progress`` callback."""
+
+    experiment: str
+    """The experiment's name."""
+    episodes: int
+    """Training episodes done, over all its (method, run) jobs."""
+    total: int
+    """Training episodes in all."""
+    message: str
+    """The latest test score and rollouts per second; once done, the final score."""
+    done: bool
+    """Whether the experiment is done (its last report)."""
+
+
 def run(
     settings: Settings,
     *,
@@ -34,6 +52,7 @@ def run(
     quiet: bool = False,
     checkpoint_every: int = 10,
     resume: bool = False,
+    progress: Callable[[Progress], None] | None = None,
 ) -> Path:
     """Run every (method, run) of the experiment or problem file ``settings`` (a path, or a
     dict of the same keys) in this process and write the run directory ``acps run`` writes
@@ -44,8 +63,11 @@ def run(
     :class:`Tasks` of numpy arrays (a vectorised simulator); with ``rollout``, one call per
     task; with neither, a paper experiment runs its own simulators. The results are those of
     ``acps run`` of the same file, bit for bit. Progress shows on stderr (a live line on a
-    terminal, a plain line every 5 s otherwise; ``quiet`` hides it). Ctrl-C, or an exception of
-    your function, stops the run after every unfinished job wrote its checkpoint
+    terminal, a plain line every 5 s otherwise), or as a tqdm bar in a Jupyter notebook (with
+    tqdm installed); ``quiet`` hides it. ``progress`` is called with a :class:`Progress` at most
+    every 0.1 s and once when an experiment is done (your own log or bar; it is called from the
+    threads that run the jobs). Ctrl-C, or an exception of your function or of ``progress``,
+    stops the run after every unfinished job wrote its checkpoint
     (``checkpoint_every`` learning rounds apart; 0 writes none) and is raised here;
     ``resume=True`` continues from them.
 
@@ -67,6 +89,10 @@ def run(
             None,
         )
     )
+    line = True
+    if progress is None and not quiet:
+        progress = _notebook_bars()
+        line = progress is None
     done = _native.run(
         path,
         text,
@@ -76,8 +102,64 @@ def run(
         quiet,
         checkpoint_every,
         resume,
+        None if progress is None else _reporting(progress),
+        line,
     )
     return Path(done)
+
+
+def _reporting(progress: Callable[[Progress], None]) -> Callable[[str, int, int, str, bool], None]:
+    """``progress`` as the extension calls it."""
+
+    def report(experiment: str, episodes: int, total: int, message: str, done: bool) -> None:
+        progress(Progress(experiment, episodes, total, message, done))
+
+    return report
+
+
+def _in_notebook() -> bool:
+    """Whether this runs in a Jupyter kernel, whose cells do not show a terminal's live line."""
+    shell = sys.modules.get("IPython")
+    get_ipython = getattr(shell, "get_ipython", None)
+    if get_ipython is None:
+        return False
+    ipython = get_ipython()
+    return ipython is not None and type(ipython).__name__ == "ZMQInteractiveShell"
+
+
+def _notebook_bars() -> Callable[[Progress], None] | None:
+    """In a Jupyter notebook with tqdm installed, a tqdm bar per experiment; else ``None`` (the
+    extension's own line on stderr)."""
+    if not _in_notebook():
+        return None
+    try:
+        from tqdm.auto import tqdm  # type: ignore[import-untyped, unused-ignore]
+    except ImportError:
+        return None
+    return TqdmBars(tqdm)
+
+
+class TqdmBars:
+    """Progress reports drawn as one bar per experiment by ``tqdm`` (a tqdm class: the notebook
+    one in Jupyter)."""
+
+    def __init__(self, tqdm: Any) -> None:
+        """Bars of the class ``tqdm``."""
+        self.tqdm = tqdm
+        self.bars: dict[str, Any] = {}
+
+    def __call__(self, report: Progress) -> None:
+        """Move the experiment's bar to ``report``; close it when it is done."""
+        bar = self.bars.get(report.experiment)
+        if bar is None:
+            bar = self.tqdm(total=report.total, desc=report.experiment, unit="episodes")
+            self.bars[report.experiment] = bar
+        bar.total = report.total
+        bar.update(report.episodes - bar.n)
+        bar.set_postfix_str(report.message, refresh=False)
+        if report.done:
+            bar.close()
+            del self.bars[report.experiment]
 
 
 def _outcomes(result: Any, n: int) -> tuple[Floats, Floats, npt.NDArray[np.bool_]]:

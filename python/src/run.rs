@@ -5,6 +5,7 @@ use crate::learner::{batch, outcome};
 use crate::{AcpsError, SettingsError};
 use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::Plan;
+use acps_experiments::progress::{Observer, ProgressReport};
 use acps_experiments::run_dir::{RunDir, RunDirError};
 use acps_experiments::settings::ExperimentFile;
 use acps_experiments::summary::Summary;
@@ -13,6 +14,7 @@ use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 /// The pictures of a run directory, as `acps run` draws them.
@@ -24,10 +26,13 @@ fn pictures(summary: &Summary, dir: &Path) -> Result<(), Box<dyn std::error::Err
 /// into `out` (default `runs/NAME`), and return its directory. With `perform`, a Python
 /// callable `perform(ids, kinds, seeds, contexts, thetas) -> (rewards, scores, ok)`, every
 /// ready task of every job goes to one call of it; without, the experiment's own environments
-/// run in parallel in this process. Ctrl-C (KeyboardInterrupt), or an exception of `perform`,
-/// stops the run after every unfinished job wrote its checkpoint, and is raised here.
+/// run in parallel in this process. `progress`, a Python callable, is called with
+/// `(experiment, episodes, total, message, done)` at most every 100 ms and once when an
+/// experiment is done (instead of the progress line when `line` is false). Ctrl-C
+/// (KeyboardInterrupt), or an exception of `perform` or `progress`, stops the run after every
+/// unfinished job wrote its checkpoint, and is raised here.
 #[pyfunction]
-#[pyo3(signature = (path, json, origin, out, perform, quiet, checkpoint_every, resume))]
+#[pyo3(signature = (path, json, origin, out, perform, quiet, checkpoint_every, resume, progress, line))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run(
     py: Python<'_>,
@@ -39,20 +44,27 @@ pub(crate) fn run(
     quiet: bool,
     checkpoint_every: u64,
     resume: bool,
+    progress: Option<Py<PyAny>>,
+    line: bool,
 ) -> PyResult<String> {
     let file = match (path, json) {
         (Some(path), _) => crate::read_file(path)?,
         (None, Some(json)) => crate::parse_json(json, origin)?,
         (None, None) => return Err(SettingsError::new_err("run: neither a file nor settings")),
     };
-    let run_dir = plan(
-        &file,
-        path.map(Path::new),
-        out.map(PathBuf::from),
-        checkpoint_every,
-        resume,
-    )?;
-    let stop = AtomicBool::new(false);
+    let stop = Arc::new(AtomicBool::new(false));
+    let failed: Arc<Mutex<Option<PyErr>>> = Arc::default();
+    let run_dir = RunDir {
+        progress_line: line,
+        observer: progress.map(|progress| observer(progress, Arc::clone(&stop), Arc::clone(&failed))),
+        ..plan(
+            &file,
+            path.map(Path::new),
+            out.map(PathBuf::from),
+            checkpoint_every,
+            resume,
+        )?
+    };
     let mut raised: Option<PyErr> = None;
     let result = match perform {
         Some(perform) => {
@@ -67,7 +79,7 @@ pub(crate) fn run(
         }
         None => in_process(py, &run_dir, quiet, &stop, &mut raised),
     };
-    if let Some(error) = raised {
+    if let Some(error) = raised.or_else(|| failed.lock().unwrap_or_else(PoisonError::into_inner).take()) {
         return Err(error);
     }
     result.map_err(|e| match e {
@@ -75,6 +87,32 @@ pub(crate) fn run(
         _ => AcpsError::new_err(e.to_string()),
     })?;
     Ok(run_dir.out.display().to_string())
+}
+
+/// An observer that calls the Python `progress` with each report; its first exception is kept
+/// in `failed` and stops the run.
+fn observer(progress: Py<PyAny>, stop: Arc<AtomicBool>, failed: Arc<Mutex<Option<PyErr>>>) -> Observer {
+    Arc::new(move |report: &ProgressReport<'_>| {
+        Python::attach(|py| {
+            let called = progress.call1(
+                py,
+                (
+                    report.experiment,
+                    report.episodes,
+                    report.total,
+                    report.message,
+                    report.done,
+                ),
+            );
+            if let Err(error) = called {
+                let mut failed = failed.lock().unwrap_or_else(PoisonError::into_inner);
+                if failed.is_none() {
+                    *failed = Some(error);
+                    stop.store(true, Ordering::Relaxed);
+                }
+            }
+        })
+    })
 }
 
 /// The checked run directory of `file` (read from `path`, if it was) writing into `out`.

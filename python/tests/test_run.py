@@ -11,7 +11,7 @@ import tempfile
 import time
 import unittest
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from test_learner import BOWL_TOML, BOWL_WORKER, bowl
@@ -115,6 +115,65 @@ class RunTest(unittest.TestCase):
             )
             out = acps.run(settings, out=f"{d}/py", quiet=True)
             self.assertEqual(tables(out), tables(Path(d) / "cli"))
+
+    def test_progress_reports_reach_a_callback_and_tqdm_bars_and_a_failing_one_stops_the_run(
+        self,
+    ) -> None:
+        reports: list[acps.Progress] = []
+        with tempfile.TemporaryDirectory() as d:
+            out = acps.run(
+                BOWL_TOML,
+                batch_rollout=batch_bowl,
+                out=Path(d) / "bowl",
+                quiet=True,
+                progress=reports.append,
+            )
+            # The callback changes nothing of the run.
+            self.assertEqual(tables(out), self.reference)
+        self.assertGreater(len(reports), 1)
+        self.assertTrue(
+            all(r.experiment == "bowl" and r.total == reports[0].total for r in reports)
+        )
+        episodes = [r.episodes for r in reports]
+        self.assertEqual(episodes, sorted(episodes))
+        self.assertEqual([r.done for r in reports], [False] * (len(reports) - 1) + [True])
+        self.assertEqual(reports[-1].episodes, reports[-1].total)
+        self.assertTrue(reports[-1].message.startswith("final "), reports[-1].message)
+
+        class Bar:
+            """The part of tqdm's interface TqdmBars uses, recording what it is told."""
+
+            made: ClassVar[list[Bar]] = []
+
+            def __init__(self, total: int, desc: str, unit: str) -> None:
+                self.total, self.desc, self.n, self.postfix, self.closed = total, desc, 0, "", False
+                Bar.made.append(self)
+
+            def update(self, n: int) -> None:
+                self.n += n
+
+            def set_postfix_str(self, text: str, refresh: bool) -> None:
+                self.postfix = text
+
+            def close(self) -> None:
+                self.closed = True
+
+        bars = acps.TqdmBars(Bar)
+        for report in reports:
+            bars(report)
+        [bar] = Bar.made
+        self.assertEqual(
+            (bar.desc, bar.n, bar.total, bar.closed), ("bowl", bar.total, bar.total, True)
+        )
+        self.assertEqual(bar.postfix, reports[-1].message)
+
+        def fails(report: acps.Progress) -> None:
+            raise KeyError("the log is full")
+
+        with tempfile.TemporaryDirectory() as d:
+            with self.assertRaises(KeyError):
+                acps.run(BOWL_TOML, batch_rollout=batch_bowl, out=d, quiet=True, progress=fails)
+            self.assertFalse((Path(d) / "summary.json").exists())
 
     def test_bad_arguments_and_bad_batches_are_refused(self) -> None:
         with self.assertRaises(TypeError):

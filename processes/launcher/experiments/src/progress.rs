@@ -7,7 +7,7 @@ use acps_learner::LearningProgress;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 /// How an experiment's score reads: its name and unit (with a leading space, or empty).
@@ -67,14 +67,40 @@ impl ScoreFormat {
     }
 }
 
+/// What an [`Observer`] is told of a running experiment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProgressReport<'a> {
+    /// The experiment's name.
+    pub experiment: &'a str,
+    /// Training episodes done, over all its runs.
+    pub episodes: u64,
+    /// Training episodes in all.
+    pub total: u64,
+    /// What the line shows beside them: the latest test score and the rollouts per second,
+    /// or, once done, the final score.
+    pub message: &'a str,
+    /// Whether the experiment is done (the last report).
+    pub done: bool,
+}
+
+/// Who watches a run's progress besides its line (a notebook's progress bar, a user's log): told
+/// at most every [`OBSERVE_EVERY`], and once more when an experiment is done. It is called from
+/// the threads that run the jobs.
+pub type Observer = Arc<dyn Fn(&ProgressReport<'_>) + Send + Sync>;
+
+/// The least time between two reports to an [`Observer`] (a notebook redraws no faster).
+pub const OBSERVE_EVERY: Duration = Duration::from_millis(100);
+
 /// A progress line for an experiment: a live bar on a terminal, a plain line every few seconds
-/// when stderr is a file or a pipe (a log), nothing when quiet.
+/// when stderr is a file or a pipe (a log), nothing when quiet; and reports to an [`Observer`].
 pub struct Progress {
     bar: ProgressBar,
     score: ScoreFormat,
     /// When stderr is not a terminal: the interval of the plain lines and when the last was
     /// written (none yet: the first report is written at once).
     lines: Option<(Duration, Mutex<Option<Instant>>)>,
+    /// The observer and when it was last told.
+    observer: Option<(Observer, Mutex<Option<Instant>>)>,
     /// The rollouts it was last shown.
     rollouts: AtomicU64,
 }
@@ -119,8 +145,39 @@ impl Progress {
             bar,
             score: ScoreFormat::of_paper(experiment),
             lines,
+            observer: None,
             rollouts: AtomicU64::new(0),
         }
+    }
+
+    /// The same progress, reported to `observer` too.
+    pub fn observed(self, observer: Option<Observer>) -> Self {
+        Self {
+            observer: observer.map(|observer| (observer, Mutex::new(None))),
+            ..self
+        }
+    }
+
+    /// Tell the observer, if there is one and it is due (always when `done`).
+    fn report(&self, episodes: u64, message: &str, done: bool) {
+        let Some((observer, last)) = &self.observer else {
+            return;
+        };
+        {
+            let mut last = last.lock().unwrap_or_else(PoisonError::into_inner);
+            let now = Instant::now();
+            if !done && last.is_some_and(|last| now.duration_since(last) < OBSERVE_EVERY) {
+                return;
+            }
+            *last = Some(now);
+        }
+        observer(&ProgressReport {
+            experiment: &self.bar.prefix(),
+            episodes,
+            total: self.bar.length().unwrap_or(episodes),
+            message,
+            done,
+        });
     }
 
     /// A progress line for experiment `name` of `total` episodes, in the unit a problem file
@@ -160,6 +217,7 @@ impl Progress {
                 );
             }
         }
+        self.report(learning.episodes, &message, false);
         self.bar.set_message(message);
     }
 
@@ -178,6 +236,7 @@ impl Progress {
         };
         self.bar.set_position(self.bar.length().unwrap_or(0));
         let message = format!("final {} {}{of}", self.score.name, self.score.value(score));
+        self.report(self.bar.position(), &message, true);
         if self.lines.is_some() {
             eprintln!(
                 "{}: done, {message}, {:.1} s",

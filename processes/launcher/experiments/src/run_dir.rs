@@ -24,7 +24,7 @@ use crate::experiment::{Experiment, Perform, RunError};
 use crate::file::LoadedFile;
 use crate::keys::ConfigError;
 use crate::plan::{self, Job, Plan};
-use crate::progress::{PROGRESS_EVERY, Progress};
+use crate::progress::{Observer, PROGRESS_EVERY, Progress};
 use crate::records::{self, RecordsError};
 use crate::settings::ExperimentFile;
 use crate::summary::{Failures, Summary};
@@ -145,6 +145,11 @@ pub struct RunDir {
     pub resume: bool,
     /// When stderr is not a terminal, write the progress as a plain line this often.
     pub progress_every: Duration,
+    /// Whether each experiment shows its progress line (unless quiet); off when an observer
+    /// draws its own.
+    pub progress_line: bool,
+    /// Who else is told each experiment's progress.
+    pub observer: Option<Observer>,
     /// The largest share of a method's rollouts (training and evaluation) that may fail before
     /// the run is an error ([`MAX_FAILED_SHARE`] unless set).
     pub max_failed_share: f64,
@@ -180,6 +185,8 @@ impl RunDir {
             checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
             resume: false,
             progress_every: PROGRESS_EVERY,
+            progress_line: true,
+            observer: None,
             max_failed_share: MAX_FAILED_SHARE,
         })
     }
@@ -266,7 +273,9 @@ impl RunDir {
     ) -> Result<Vec<Summary>, RunDirError> {
         let mut summaries = Vec::with_capacity(self.jobs.len());
         for Job { experiment, dir, .. } in &self.jobs {
-            let progress = experiment.progress(quiet, self.progress_every);
+            let progress = experiment
+                .progress(quiet || !self.progress_line, self.progress_every)
+                .observed(self.observer.clone());
             let checkpoints = self.checkpoints(dir);
             let outcome = run(experiment, &progress, checkpoints.as_ref());
             match &outcome {
