@@ -356,36 +356,27 @@ pub fn serve(
                 rollouts,
             });
         }
-        // Budget: tasks queued, unsent or asked for stay within `queue_depth`. The outcomes of a
-        // batch go out when the batch is full or nothing else is left to simulate, and ask for
-        // as many tasks as the budget then allows; a worker with room to spare asks for more.
-        // Outcomes never wait for tasks: when every asking slot is taken they go out alone in
-        // the delivery slot, which the learner answers at once (its asking requests may wait
-        // for tasks that need these very outcomes). A worker with both kinds of slot taken
-        // stops simulating once its outbox is full, until an answer frees one.
+        // Send what `next_request` says, until it says nothing.
         let mut sent = false;
         loop {
             let asked: usize = slots.iter().flatten().map(|(_, want)| want).sum();
-            // Saturating: a learner that answered with more tasks than asked for cannot make
-            // the budget underflow.
-            let room = options.queue_depth.saturating_sub(queue.len() + asked);
-            let batch = batching.size();
-            let flush = outbox.count > 0 && (outbox.count as usize >= batch || queue.is_empty());
-            let top_up = outbox.count == 0 && (room >= batch || (asked == 0 && queue.is_empty()));
-            if !(flush || top_up) || room == 0 {
+            let Some((slot, want)) = next_request(Budget {
+                queue_depth: options.queue_depth,
+                queued: queue.len(),
+                asked,
+                outbox: outbox.count as usize,
+                batch: batching.size(),
+                free_asking: slots[..asking].iter().position(Option::is_none),
+                delivery_free: slots[asking].is_none(),
+            }) else {
                 break;
-            }
-            let (asking_slots, delivery) = slots.split_at_mut(asking);
-            let (slot, want) = match asking_slots.iter_mut().find(|slot| slot.is_none()) {
-                Some(slot) => (slot, room.min(batch)),
-                None if flush && delivery[0].is_none() => (&mut delivery[0], 0),
-                None => break,
             };
             outbox.run = identity;
             outbox.want = want as u32;
             outbox.observe_rollout(slowest);
             let request = client.send_copy(outbox).map_err(IpcError::RequestSend)?;
-            *slot = Some((request, want));
+            // The delivery slot is the last, after the asking ones.
+            slots[slot.unwrap_or(asking)] = Some((request, want));
             outbox = fresh_outbox(identity);
             sent = true;
         }
@@ -657,6 +648,59 @@ impl Silence {
     }
 }
 
+/// What a worker holds when it decides on its next request.
+#[derive(Debug, Clone, Copy)]
+struct Budget {
+    /// Most tasks it keeps asked for or queued.
+    queue_depth: usize,
+    /// Tasks queued, not yet simulated.
+    queued: usize,
+    /// Tasks its pending requests asked for.
+    asked: usize,
+    /// Outcomes in its outbox.
+    outbox: usize,
+    /// Tasks per request ([`Batching::size`]).
+    batch: usize,
+    /// Its first free asking slot, if any.
+    free_asking: Option<usize>,
+    /// Whether its delivery slot (outcomes alone) is free.
+    delivery_free: bool,
+}
+
+/// The request a worker sends next, if any: the asking slot it takes (`None`: the delivery
+/// slot) and the tasks it asks for. Tasks queued, unsent or asked for stay within the queue
+/// depth. The outbox goes out when it holds a batch or nothing else is left to simulate, and
+/// asks for as many tasks as the budget then allows; a worker with room for a batch (or with
+/// nothing at all) asks for more. Outcomes never wait for tasks: when every asking slot is
+/// taken they go out alone in the delivery slot, which the learner answers at once (its asking
+/// requests may wait for tasks that need these very outcomes). A worker with both kinds of
+/// slot taken stops simulating once its outbox is full, until an answer frees one. The cases
+/// of `decisions.json` hold for this and for the Python worker's `_next_request`.
+fn next_request(budget: Budget) -> Option<(Option<usize>, usize)> {
+    let Budget {
+        queue_depth,
+        queued,
+        asked,
+        outbox,
+        batch,
+        free_asking,
+        delivery_free,
+    } = budget;
+    // Saturating: a learner that answered with more tasks than asked for cannot make the
+    // budget underflow.
+    let room = queue_depth.saturating_sub(queued + asked);
+    let flush = outbox > 0 && (outbox >= batch || queued == 0);
+    let top_up = outbox == 0 && (room >= batch || (asked == 0 && queued == 0));
+    if !(flush || top_up) || room == 0 {
+        return None;
+    }
+    match free_asking {
+        Some(slot) => Some((Some(slot), room.min(batch))),
+        None if flush && delivery_free => Some((None, 0)),
+        None => None,
+    }
+}
+
 /// Whether a worker with `queued` tasks left wakes the learner for the requests it sent. At
 /// W = cores the learner has no core of its own, so every wake-up preempts a worker. A worker
 /// therefore wakes it only once it could run dry before the learner next looks (fewer than two
@@ -706,6 +750,112 @@ impl Batching {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cases of `decisions.json`, which the Python worker's tests read too.
+    #[derive(serde::Deserialize)]
+    struct Decisions {
+        requests: Cases<RequestCase>,
+        wakes_learner: Cases<WakeCase>,
+        batch_size: Cases<BatchCase>,
+        silence: SilenceCase,
+    }
+
+    #[derive(serde::Deserialize)]
+    struct Cases<T> {
+        cases: Vec<T>,
+    }
+
+    #[derive(serde::Deserialize)]
+    struct RequestCase {
+        name: String,
+        queue_depth: usize,
+        batch: usize,
+        queued: usize,
+        outbox: usize,
+        slots: Vec<Option<usize>>,
+        delivery: Option<usize>,
+        sent: Vec<(usize, usize)>,
+    }
+
+    #[derive(serde::Deserialize)]
+    struct WakeCase {
+        queued: usize,
+        batch: usize,
+        outbox_full: bool,
+        wakes: bool,
+    }
+
+    #[derive(serde::Deserialize)]
+    struct BatchCase {
+        queue_depth: usize,
+        rollouts_ns: Vec<u64>,
+        size: usize,
+    }
+
+    #[derive(serde::Deserialize)]
+    struct SilenceCase {
+        waits: u32,
+        looks: Vec<(u32, bool)>,
+    }
+
+    #[test]
+    fn the_worker_loop_follows_the_shared_decision_table() {
+        let table: Decisions = serde_json::from_str(include_str!("../decisions.json")).expect("decisions.json parses");
+        for case in &table.requests.cases {
+            assert_eq!(case.slots.len(), MAX_ASKING_REQUESTS, "{}", case.name);
+            let (mut slots, mut delivery, mut outbox) = (case.slots.clone(), case.delivery, case.outbox);
+            let mut sent = Vec::new();
+            while let Some((slot, want)) = next_request(Budget {
+                queue_depth: case.queue_depth,
+                queued: case.queued,
+                asked: slots.iter().flatten().chain(&delivery).sum(),
+                outbox,
+                batch: case.batch,
+                free_asking: slots.iter().position(Option::is_none),
+                delivery_free: delivery.is_none(),
+            }) {
+                match slot {
+                    Some(slot) => slots[slot] = Some(want),
+                    None => delivery = Some(want),
+                }
+                sent.push((slot.unwrap_or(MAX_ASKING_REQUESTS), want));
+                outbox = 0;
+            }
+            assert_eq!(sent, case.sent, "{}", case.name);
+        }
+        for case in &table.wakes_learner.cases {
+            assert_eq!(
+                wakes_learner(case.queued, case.batch, case.outbox_full),
+                case.wakes,
+                "{} queued, batch {}, outbox full {}",
+                case.queued,
+                case.batch,
+                case.outbox_full
+            );
+        }
+        for case in &table.batch_size.cases {
+            let mut batching = Batching::new(case.queue_depth);
+            for &ns in &case.rollouts_ns {
+                batching.observe(Duration::from_nanos(ns));
+            }
+            assert_eq!(
+                batching.size(),
+                case.size,
+                "{} after {:?}",
+                case.queue_depth,
+                case.rollouts_ns
+            );
+        }
+        let mut silence = Silence::default();
+        let mut looks = Vec::new();
+        for wait in 1..=table.silence.waits {
+            if silence.look_due() {
+                looks.push((wait, silence.lists()));
+                silence.looked();
+            }
+        }
+        assert_eq!(looks, table.silence.looks);
+    }
 
     #[test]
     fn a_worker_wakes_the_learner_only_when_it_could_run_dry() {

@@ -116,6 +116,36 @@ class Report:
     rollout_seconds: float
 
 
+def _next_request(
+    queue_depth: int,
+    queued: int,
+    asked: int,
+    outbox: int,
+    batch: int,
+    free_asking: int | None,
+    delivery_free: bool,
+) -> tuple[int | None, int] | None:
+    """The request a worker sends next, if any: the asking slot it takes (``None``: the
+    delivery slot) and the tasks it asks for (Rust: ``next_request``; the cases of
+    ``decisions.json`` hold for both)."""
+    room = max(queue_depth - (queued + asked), 0)
+    flush = outbox > 0 and (outbox >= batch or queued == 0)
+    top_up = outbox == 0 and (room >= batch or (asked == 0 and queued == 0))
+    if not (flush or top_up) or room == 0:
+        return None
+    if free_asking is not None:
+        return free_asking, min(room, batch)
+    if flush and delivery_free:
+        return None, 0
+    return None
+
+
+def _wakes_learner(queued: int, batch: int, outbox_full: bool) -> bool:
+    """Whether a worker that sent requests wakes the learner: only when it could run dry before
+    the learner next looks, or is about to stop simulating (Rust: ``wakes_learner``)."""
+    return queued < 2 * batch or outbox_full
+
+
 class _Batching:
     """Tasks per request from the measured rollout time (Rust: ``Batching``)."""
 
@@ -588,26 +618,26 @@ class _Session:
             sent = False
             while True:
                 asked = 0
-                for slot in slots:
+                free = None
+                for i, slot in enumerate(slots):
                     if slot is not None:
                         asked += slot[1]
-                room = max(in_flight - (len(queue) + asked), 0)
-                batch = batching.size()
-                flush = count > 0 and (count >= batch or not queue)
-                top_up = count == 0 and (room >= batch or (asked == 0 and not queue))
-                if not (flush or top_up) or room == 0:
+                    elif free is None and i < asking:
+                        free = i
+                request = _next_request(
+                    in_flight,
+                    len(queue),
+                    asked,
+                    count,
+                    batching.size(),
+                    free,
+                    slots[asking] is None,
+                )
+                if request is None:
                     break
-                index = None
-                for i in range(asking):
-                    if slots[i] is None:
-                        index = i
-                        break
-                if index is not None:
-                    want = min(room, batch)
-                elif flush and slots[asking] is None:
-                    index, want = asking, 0
-                else:
-                    break
+                index, want = request
+                if index is None:
+                    index = asking
                 outbox.run = identity
                 outbox.want = want
                 outbox.count = count
@@ -621,7 +651,7 @@ class _Session:
                 sent = True
             unannounced |= sent
             outbox_full = count >= _wire.MAX_BATCH
-            if unannounced and (len(queue) < 2 * batching.size() or outbox_full):
+            if unannounced and _wakes_learner(len(queue), batching.size(), outbox_full):
                 try:
                     notifier.notify()
                 except Exception as error:
