@@ -300,8 +300,13 @@ pub fn check_endpoint(endpoint: &str) -> Result<(), NetError> {
         return Err(error("no host"));
     }
     match port.parse::<u16>() {
+        // The system would pick a free port that nothing could tell the relays (Zenoh does not
+        // report it), and a relay cannot connect to port 0.
+        Ok(0) => Err(error(
+            "port 0 is no port relays could reach (listening on it would take any free port, which relays would not know): give one in 1..=65535, such as 7447",
+        )),
         Ok(_) => Ok(()),
-        Err(_) => Err(error(&format!("port {port:?} is not 0..=65535"))),
+        Err(_) => Err(error(&format!("port {port:?} is not 1..=65535"))),
     }
 }
 
@@ -393,7 +398,7 @@ mod tests {
 
     #[test]
     fn endpoints_are_checked_naming_what_is_wrong() {
-        for good in ["tcp/127.0.0.1:7447", "tcp/learner.lab:7447", "tcp/[::1]:0"] {
+        for good in ["tcp/127.0.0.1:7447", "tcp/learner.lab:7447", "tcp/[::1]:1"] {
             assert!(check_endpoint(good).is_ok(), "{good}");
         }
         for (bad, why) in [
@@ -402,7 +407,8 @@ mod tests {
             ("tls/learner.lab:7447", "issue 2557"),
             ("tcp/127.0.0.1", "no port"),
             ("tcp/:7447", "no host"),
-            ("tcp/127.0.0.1:70000", "port \"70000\" is not 0..=65535"),
+            ("tcp/127.0.0.1:70000", "port \"70000\" is not 1..=65535"),
+            ("tcp/127.0.0.1:0", "port 0 is no port relays could reach"),
         ] {
             let message = check_endpoint(bad).unwrap_err().to_string();
             assert!(message.contains(why) && message.contains(bad), "{bad}: {message}");

@@ -186,8 +186,18 @@ pub struct EnvironmentTable {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settings: Option<String>,
     /// Three numbers (default `[0, 0, 0]`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "three")]
     pub parameters: Option<[u64; 3]>,
+}
+
+/// Exactly three numbers: TOML's reader fills an array of three from a longer list and drops
+/// the rest, which would make `[0, 0, 0, 7]` the identity `[0, 0, 0]` unseen.
+fn three<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Option<[u64; 3]>, D::Error> {
+    let numbers = Vec::<u64>::deserialize(deserializer)?;
+    let len = numbers.len();
+    <[u64; 3]>::try_from(numbers)
+        .map(Some)
+        .map_err(|_| serde::de::Error::invalid_length(len, &"three integers"))
 }
 
 /// A checked problem file: the problem the learner sees, and the table with its defaults

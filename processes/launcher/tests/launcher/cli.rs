@@ -124,7 +124,7 @@ fn toy_without_panel_writes_all_four_and_function_runs_one_method() {
 
 #[test]
 fn bad_options_are_refused_naming_the_option() {
-    let cases: [(&[&str], &str); 9] = [
+    let cases: [(&[&str], &str); 10] = [
         (&["worker"], "--run is missing: name the run to join"),
         (
             &["run", "grid", "--run", "a_b"],
@@ -166,6 +166,11 @@ fn bad_options_are_refused_naming_the_option() {
         (
             &["experiment", "grid", "--method", "random", "--method", "random"],
             "--method must be a non-empty list of distinct methods",
+        ),
+        // Listening on port 0 would take a port nothing tells the relays.
+        (
+            &["run", "function", "--listen", "tcp/127.0.0.1:0", "--workers", "0"],
+            "port 0 is no port relays could reach",
         ),
     ];
     for (args, expected) in cases {

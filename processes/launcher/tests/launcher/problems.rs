@@ -273,6 +273,10 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
             "e.toml:8: problem.environment.parameters must be three integers in 0..=2^63-1, got [1, 2]",
         ),
         (
+            with("[problem.environment]\nname = \"bowl\"\nsettings = \"v1\"\nparameters = [0, 0, 0, 7]"),
+            "e.toml:8: problem.environment.parameters must be three integers in 0..=2^63-1, got [0, 0, 0, 7]",
+        ),
+        (
             with("[problem.environment]\nname = \"bowl\"\nsettings = \"v1\"\nparameters = [1, -2, 3]"),
             "e.toml:8: problem.environment.parameters must be three integers in 0..=2^63-1, got -2",
         ),
