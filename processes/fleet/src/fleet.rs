@@ -63,6 +63,7 @@ pub struct FleetBuilder {
     spawn: Option<(usize, WorkerCommand)>,
     nice: Option<u8>,
     liveness: Option<Liveness>,
+    worker_startup: Option<Duration>,
     spin: Option<Duration>,
     start_with: usize,
     ctrl_c: bool,
@@ -122,6 +123,13 @@ impl FleetBuilder {
     /// workers; when it starts none, the same but waiting for workers forever.
     pub fn liveness(mut self, liveness: Liveness) -> Self {
         self.liveness = Some(liveness);
+        self
+    }
+
+    /// How long started workers may take to connect ([`Liveness::startup`]), whatever the
+    /// liveness otherwise is. Default: [`WORKER_STARTUP`](crate::server::WORKER_STARTUP).
+    pub fn worker_startup(mut self, startup: Duration) -> Self {
+        self.worker_startup = Some(startup);
         self
     }
 
@@ -188,6 +196,14 @@ impl FleetBuilder {
                     format!("{grace:?}"),
                 )?;
             }
+            if let Some(startup) = liveness.startup {
+                setting(
+                    startup > Duration::ZERO,
+                    "liveness.startup",
+                    "> 0, or None to wait for started workers for ever",
+                    format!("{startup:?}"),
+                )?;
+            }
         }
         if self.ctrl_c {
             CTRL_C
@@ -207,10 +223,19 @@ impl FleetBuilder {
         // Before any worker starts: those of a refused fleet would join the other learner.
         let seat = Seat::take(&run)?;
         let workers = self.spawn.as_ref().map_or(0, |(count, _)| *count);
-        let liveness = self.liveness.unwrap_or(Liveness {
+        let mut liveness = self.liveness.unwrap_or(Liveness {
             no_workers: (workers > 0).then_some(Liveness::default().no_workers).flatten(),
             ..Liveness::default()
         });
+        if let Some(startup) = self.worker_startup {
+            setting(
+                startup > Duration::ZERO,
+                "worker_startup",
+                "> 0 (how long started workers may take to connect)",
+                format!("{startup:?}"),
+            )?;
+            liveness.startup = Some(startup);
+        }
         Ok(Fleet {
             seat: Some(seat),
             run: OwnedRun(run),
@@ -270,6 +295,7 @@ impl Fleet {
             spawn: None,
             nice: None,
             liveness: None,
+            worker_startup: None,
             spin: None,
             start_with: 0,
             ctrl_c: false,
@@ -378,7 +404,20 @@ impl Fleet {
         // the run ended) leaves once it finds the learner's node gone.
         drop(seat);
         processes::reap(&mut children);
-        served
+        served.map_err(|error| match (error, &self.spawn) {
+            (
+                FleetError::NeverConnected {
+                    run, started, waited, ..
+                },
+                Some(spawn),
+            ) => FleetError::NeverConnected {
+                run,
+                started,
+                waited,
+                command: shown((spawn.command)(0)),
+            },
+            (error, _) => error,
+        })
     }
 }
 
@@ -402,6 +441,22 @@ impl Drop for OwnedRun {
             ),
         }
     }
+}
+
+/// `command` as a user would type it: the program and its arguments, those with spaces quoted.
+fn shown(command: Command) -> String {
+    std::iter::once(command.get_program())
+        .chain(command.get_args())
+        .map(|part| {
+            let part = part.to_string_lossy();
+            if part.contains(char::is_whitespace) {
+                format!("'{part}'")
+            } else {
+                part.into_owned()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// Start `spawn`'s worker processes for `run`.
@@ -469,6 +524,14 @@ mod tests {
             (
                 liveness(|l| l.no_workers = Some(Duration::ZERO)),
                 "fleet setting liveness.no_workers must be > 0, or None to wait for workers for ever, got 0ns",
+            ),
+            (
+                liveness(|l| l.startup = Some(Duration::ZERO)),
+                "fleet setting liveness.startup must be > 0, or None to wait for started workers for ever, got 0ns",
+            ),
+            (
+                fleet().worker_startup(Duration::ZERO),
+                "fleet setting worker_startup must be > 0 (how long started workers may take to connect), got 0ns",
             ),
         ];
         for (builder, message) in cases {

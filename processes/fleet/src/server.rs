@@ -524,6 +524,22 @@ pub enum FleetError {
         /// on.
         refused: Option<String>,
     },
+    /// Worker processes the fleet started ran for the start-up deadline ([`Liveness::startup`])
+    /// and none connected.
+    #[error(
+        "no worker of run '{run}' connected within {seconds:.0} s: {started} started worker processes (`{command}`) ran but none asked for tasks; are they stuck starting up (see their messages above)? If they need longer, raise --worker-startup-timeout",
+        seconds = waited.as_secs_f64()
+    )]
+    NeverConnected {
+        /// The run.
+        run: RunName,
+        /// Worker processes the fleet started.
+        started: usize,
+        /// How long they ran.
+        waited: Duration,
+        /// The command they were started with.
+        command: String,
+    },
     /// A worker process could not be started.
     #[error("starting worker process {program}: {error}")]
     Spawn {
@@ -558,15 +574,26 @@ pub struct Liveness {
     /// worker process has been running, for this long; `None`: wait for workers forever (for a
     /// fleet that starts none and waits for workers started by hand).
     pub no_workers: Option<Duration>,
+    /// Stop with [`FleetError::NeverConnected`] once worker processes the fleet started have
+    /// run this long and no worker has ever connected (a worker stuck at start-up, say at an
+    /// import, would otherwise keep the run waiting for ever); `None`: wait for ever.
+    pub startup: Option<Duration>,
 }
 
+/// How long started workers may take to connect unless set: long enough for a Python worker
+/// that imports a simulator and compiles its model (seconds to a minute), short enough that a
+/// stuck one is noticed.
+pub const WORKER_STARTUP: Duration = Duration::from_secs(120);
+
 impl Default for Liveness {
-    /// 5 s of silence and 4 times the slowest rollout; 10 s without workers.
+    /// 5 s of silence and 4 times the slowest rollout; 10 s without workers; started workers
+    /// connect within [`WORKER_STARTUP`].
     fn default() -> Self {
         Self {
             silence: Duration::from_secs(5),
             rollout_factor: 4,
             no_workers: Some(Duration::from_secs(10)),
+            startup: Some(WORKER_STARTUP),
         }
     }
 }
@@ -717,6 +744,9 @@ pub(crate) fn serve<'r>(
     let mut hung: HashSet<Client> = HashSet::new();
     let mut slowest_rollout = Duration::ZERO;
     let mut without_workers: Option<Instant> = None;
+    // For the start-up deadline: when serving began, and whether any worker connected since.
+    let serving_start = Instant::now();
+    let mut ever_connected = false;
     let mut last_running = 0;
     // Workers behind each remote peer, as it last said.
     let mut peers: HashMap<PeerId, usize> = HashMap::new();
@@ -973,6 +1003,20 @@ pub(crate) fn serve<'r>(
             };
             last_heard.retain(|client, _| known(client));
             hung.retain(known);
+            if progress.workers > 0 || progress.relays > 0 {
+                ever_connected = true;
+            } else if !ever_connected
+                && progress.started_running > 0
+                && let Some(limit) = options.liveness.startup
+                && serving_start.elapsed() >= limit
+            {
+                return Err(FleetError::NeverConnected {
+                    run: run.clone(),
+                    started: launched,
+                    waited: serving_start.elapsed(),
+                    command: String::new(),
+                });
+            }
             if progress.workers > 0 || progress.relays > 0 || progress.started_running > 0 {
                 without_workers = None;
                 // Someone served since: an old refusal is not why the run would stop.

@@ -5,6 +5,7 @@ use acps_experiments::progress::PROGRESS_EVERY;
 use acps_experiments::run_dir::{DEFAULT_CHECKPOINT_EVERY, MAX_FAILED_SHARE};
 use acps_experiments::settings::{self, ExperimentFile, MAX_EPISODES, MAX_RUNS, parse_option};
 use acps_fleet::processes::MAX_NICE;
+use acps_fleet::server::WORKER_STARTUP;
 use acps_wire::ipc::{MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS};
 use acps_worker::DEFAULT_QUEUE_DEPTH;
 use clap::{Parser, Subcommand};
@@ -185,6 +186,7 @@ impl LearnArgs {
                 deprecated: DeprecatedWorkerInFlight { worker_in_flight: None },
                 worker_nice: WorkerNiceArg { worker_nice: None },
                 worker_command: None,
+                worker_startup_timeout: WORKER_STARTUP.as_secs_f64(),
             },
             run: self.run,
             listen: Vec::new(),
@@ -300,6 +302,10 @@ pub(crate) struct StartedWorkers {
     /// ACPS_WORKER_INDEX (0..W-1) set; --worker-queue-depth does not apply.
     #[arg(long, value_name = "CMD")]
     pub(crate) worker_command: Option<String>,
+    /// Seconds the started workers may take to connect (1..=86400): a run whose workers are all
+    /// still starting after it (stuck at an import, say) stops and says so.
+    #[arg(long, value_name = "SECONDS", default_value_t = WORKER_STARTUP.as_secs_f64(), allow_hyphen_values = true, value_parser = number("a number of seconds in 1..=86400", |x| (1.0..=86400.0).contains(&x)))]
+    pub(crate) worker_startup_timeout: f64,
 }
 
 #[derive(clap::Args)]

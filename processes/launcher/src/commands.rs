@@ -130,9 +130,14 @@ fn stopped(
     }
     // A fleet can fail half-way (its workers gone or silent); other errors happen before the
     // run starts or concern the checkpoints themselves. Workers the learner refused would be
-    // refused again by the same run resumed: they, or the problem, must change first.
+    // refused again by the same run resumed, and workers that never connected would hang it
+    // again: they, or the problem, must change first.
     let fleet_failed = run_errors(&error).any(|e| {
-        matches!(e, RunError::Fleet(_)) && !matches!(e, RunError::Fleet(FleetError::NoWorkers { refused: Some(_), .. }))
+        matches!(e, RunError::Fleet(_))
+            && !matches!(
+                e,
+                RunError::Fleet(FleetError::NoWorkers { refused: Some(_), .. } | FleetError::NeverConnected { .. })
+            )
     });
     match resume {
         Some(resume) if fleet_failed && checkpoints.is_some_and(|c| c.dir.is_dir()) => {
@@ -581,6 +586,7 @@ impl StartedWorkers {
             if let Some(nice) = self.worker_nice.worker_nice {
                 builder = builder.worker_niceness(nice);
             }
+            builder = builder.worker_startup(Duration::from_secs_f64(self.worker_startup_timeout));
         }
         builder
     }

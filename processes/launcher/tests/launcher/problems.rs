@@ -435,6 +435,36 @@ pub(crate) fn refused(output: &Output) -> String {
 }
 
 #[test]
+fn started_workers_that_never_connect_stop_the_run_naming_their_command() {
+    // What a Python worker stuck at an import looks like: a process that runs and never asks.
+    let dir = temp_dir("stuck");
+    let output = run(
+        &bowl_toml(),
+        "sleep 3600",
+        "1",
+        "stuck",
+        &dir.join("out"),
+        &["-q", "--worker-startup-timeout", "1"],
+    );
+    assert_eq!(
+        output.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains(
+            "connected within 1 s: 1 started worker processes (`sh -c 'exec sleep 3600'`) ran but none asked for tasks"
+        ) && stderr.contains("raise --worker-startup-timeout"),
+        "{stderr}"
+    );
+    // The same run resumed would hang the same way: no --resume is offered.
+    assert!(!stderr.contains("--resume"), "{stderr}");
+    assert!(!dir.join("out").join("summary.json").exists());
+}
+
+#[test]
 fn a_worker_of_other_settings_is_refused_and_the_run_says_so() {
     let dir = temp_dir("bowl-v2");
     let output = run(
