@@ -125,11 +125,7 @@ impl JournalWriter {
     /// is of another run or job, shorter than the mark or not the bytes the mark hashed; what
     /// follows the mark (written after the checkpoint) is cut.
     pub fn resume(path: &Path, stamp: Stamp, mark: &JournalMark) -> Result<Self, JournalError> {
-        let mut file = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(path)
-            .map_err(io(path))?;
+        let mut file = open_file(path, std::fs::OpenOptions::new().read(true).write(true))?;
         scan(path, &mut file, stamp, mark, |_, _, _| Ok(()))?;
         file.set_len(mark.len).map_err(io(path))?;
         file.seek(SeekFrom::End(0)).map_err(io(path))?;
@@ -265,6 +261,19 @@ fn scan(
     Ok(())
 }
 
+/// The record file at `path` opened with `options`, if it is a regular file (or a link to one):
+/// a FIFO would block its reader, a device such as /dev/zero never end.
+fn open_file(path: &Path, options: &std::fs::OpenOptions) -> Result<File, JournalError> {
+    let metadata = std::fs::metadata(path).map_err(io(path))?;
+    if !metadata.is_file() {
+        return Err(JournalError::Decode {
+            path: path.to_path_buf(),
+            source: CheckpointDecodeError::NotAFile(super::file_kind(&metadata)),
+        });
+    }
+    options.open(path).map_err(io(path))
+}
+
 /// The records in the record file at `path` up to `mark`, checked as
 /// [`JournalWriter::resume`] checks it; read through a buffer, so only the records take memory.
 pub fn read(path: &Path, stamp: Stamp, mark: &JournalMark) -> Result<Records, JournalError> {
@@ -297,7 +306,7 @@ pub fn read_each(
     mark: &JournalMark,
     mut each: impl FnMut(Record),
 ) -> Result<(), JournalError> {
-    let mut file = File::open(path).map_err(io(path))?;
+    let mut file = open_file(path, std::fs::OpenOptions::new().read(true))?;
     let mut counts = RecordCounts::default();
     scan(path, &mut file, stamp, mark, |kind, payload, _| {
         let undecodable = |e: bincode::error::DecodeError| e.to_string();

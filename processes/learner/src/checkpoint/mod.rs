@@ -174,10 +174,35 @@ pub enum CheckpointDecodeError {
     /// The payload does not decode (a build with another payload layout under the same version).
     #[error("the payload cannot be decoded: {0}")]
     Payload(String),
+    /// Larger than any checkpoint this build writes could be.
+    #[error("{len} bytes, more than the {MAX_CHECKPOINT_BYTES} a checkpoint may have")]
+    TooLarge {
+        /// Its length, or the payload length its header announces.
+        len: u64,
+    },
+    /// Not a regular file (a FIFO, a device, a directory), which reading could block on or
+    /// never finish.
+    #[error("not a regular file but {0}")]
+    NotAFile(&'static str),
 }
 
 fn config() -> bincode::config::Configuration {
     bincode::config::standard()
+}
+
+/// The most bytes a checkpoint may have. A learner's bounded state takes kilobytes; the
+/// largest unbounded ones (a bandit over many arms, ALP-GMM's history, best-per-task memory)
+/// reach tens of megabytes over the longest runs a file allows (10,000,000 episodes). Decoding
+/// claims no more than this either, so that a forged length cannot ask for exabytes.
+pub const MAX_CHECKPOINT_BYTES: u64 = 1 << 30;
+
+/// How a checkpoint's payload is decoded: as written, with every length it claims limited.
+fn decode_config() -> bincode::config::Configuration<
+    bincode::config::LittleEndian,
+    bincode::config::Varint,
+    bincode::config::Limit<{ MAX_CHECKPOINT_BYTES as usize }>,
+> {
+    config().with_limit::<{ MAX_CHECKPOINT_BYTES as usize }>()
 }
 
 /// The bytes of a checkpoint file.
@@ -201,6 +226,9 @@ pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, CheckpointDecode
     check_kind(bytes, MAGIC, FORMAT_VERSION, HEADER_LEN)?;
     let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
     let payload_len = u64_at(32);
+    if payload_len > MAX_CHECKPOINT_BYTES {
+        return Err(CheckpointDecodeError::TooLarge { len: payload_len });
+    }
     let expected = (HEADER_LEN as u64).saturating_add(payload_len);
     let len = bytes.len() as u64;
     if len < expected {
@@ -219,7 +247,7 @@ pub fn decode(bytes: &[u8], stamp: Stamp) -> Result<Checkpoint, CheckpointDecode
         ));
     }
     check_stamp(bytes, stamp)?;
-    let (checkpoint, used) = bincode::serde::decode_from_slice::<Checkpoint, _>(payload, config())
+    let (checkpoint, used) = bincode::serde::decode_from_slice::<Checkpoint, _>(payload, decode_config())
         .map_err(|e| CheckpointDecodeError::Payload(e.to_string()))?;
     if used != payload.len() {
         return Err(CheckpointDecodeError::Payload(format!(
@@ -303,20 +331,47 @@ pub fn write(path: &Path, stamp: Stamp, checkpoint: &Checkpoint) -> Result<(), C
 }
 
 /// The checkpoint at `path` if there is a file, checked against `stamp`; `None` without one.
+/// Only a regular file (or a link to one) of at most [`MAX_CHECKPOINT_BYTES`] is read: a FIFO
+/// would block the reader, a device such as /dev/zero never end.
 pub fn read(path: &Path, stamp: Stamp) -> Result<Option<Checkpoint>, CheckpointReadError> {
     let path_buf = || path.to_path_buf();
-    match std::fs::read(path) {
-        Ok(bytes) => decode(&bytes, stamp)
-            .map(Some)
-            .map_err(|source| CheckpointReadError::Decode {
-                path: path_buf(),
-                source,
-            }),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(source) => Err(CheckpointReadError::Io {
-            path: path_buf(),
-            source,
-        }),
+    let io = |source| CheckpointReadError::Io {
+        path: path_buf(),
+        source,
+    };
+    let decoded = |source| CheckpointReadError::Decode {
+        path: path_buf(),
+        source,
+    };
+    let metadata = match std::fs::metadata(path) {
+        Ok(metadata) => metadata,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => return Err(io(source)),
+    };
+    if !metadata.is_file() {
+        return Err(decoded(CheckpointDecodeError::NotAFile(file_kind(&metadata))));
+    }
+    if metadata.len() > HEADER_LEN as u64 + MAX_CHECKPOINT_BYTES {
+        return Err(decoded(CheckpointDecodeError::TooLarge { len: metadata.len() }));
+    }
+    let bytes = std::fs::read(path).map_err(io)?;
+    decode(&bytes, stamp).map(Some).map_err(decoded)
+}
+
+/// What a file that is not a regular one is, in words.
+fn file_kind(metadata: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    let kind = metadata.file_type();
+    if kind.is_dir() {
+        "a directory"
+    } else if kind.is_fifo() {
+        "a FIFO"
+    } else if kind.is_char_device() || kind.is_block_device() {
+        "a device"
+    } else if kind.is_socket() {
+        "a socket"
+    } else {
+        "of another kind"
     }
 }
 

@@ -197,10 +197,13 @@ fn every_flipped_byte_is_detected() {
             let expected = match at {
                 0..8 => matches!(kind, CheckpointDecodeError::NotACheckpoint),
                 8..12 => matches!(kind, CheckpointDecodeError::Version { .. }),
-                // The length: too long a file reads as corrupt, too short as truncated.
+                // The length: too long a file reads as corrupt, too short as truncated, and
+                // beyond any checkpoint as too large.
                 32..40 => matches!(
                     kind,
-                    CheckpointDecodeError::Truncated { .. } | CheckpointDecodeError::Corrupt(_)
+                    CheckpointDecodeError::Truncated { .. }
+                        | CheckpointDecodeError::Corrupt(_)
+                        | CheckpointDecodeError::TooLarge { .. }
                 ),
                 _ => matches!(kind, CheckpointDecodeError::Corrupt(_)),
             };
@@ -508,6 +511,62 @@ mod journal_files {
             matches!(kind, CheckpointDecodeError::WrongJob { found: 3, expected: 9 }),
             "{kind}"
         );
+        // A FIFO in its place would block both readers; it is refused, by name.
+        std::fs::remove_file(&path).unwrap();
+        assert!(
+            std::process::Command::new("mkfifo")
+                .arg(&path)
+                .status()
+                .unwrap()
+                .success()
+        );
+        for error in [
+            journal::read(&path, STAMP, &mark).unwrap_err(),
+            JournalWriter::resume(&path, STAMP, &mark).err().unwrap(),
+        ] {
+            assert_eq!(decode_error(error, &path), CheckpointDecodeError::NotAFile("a FIFO"));
+        }
         let _ = std::fs::remove_dir_all(dir);
     }
+}
+
+#[test]
+fn fifos_devices_directories_and_forged_lengths_are_refused_without_blocking_or_allocating() {
+    let dir = temp_dir("not-files");
+    let kind = |path: &Path| match read(path, STAMP) {
+        Err(CheckpointReadError::Decode {
+            source: CheckpointDecodeError::NotAFile(kind),
+            ..
+        }) => kind,
+        other => panic!("{}: {other:?}", path.display()),
+    };
+    // A FIFO would block the reader until a writer came; a link to /dev/zero never end.
+    let fifo = dir.join("fifo.ckpt");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    assert_eq!(kind(&fifo), "a FIFO");
+    let zero = dir.join("zero.ckpt");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    assert_eq!(kind(&zero), "a device");
+    assert_eq!(kind(&dir), "a directory");
+    // A link to a checkpoint is read as the checkpoint.
+    let real = dir.join("real.ckpt");
+    write(&real, STAMP, &half_way()).unwrap();
+    let link = dir.join("link.ckpt");
+    std::os::unix::fs::symlink(&real, &link).unwrap();
+    assert!(read(&link, STAMP).unwrap().is_some());
+    // A header that announces more payload than any checkpoint has.
+    let mut bytes = encode(STAMP, &half_way());
+    bytes[32..40].copy_from_slice(&(1u64 << 62).to_le_bytes());
+    let (error, message) = refused(&dir, &bytes, STAMP);
+    assert_eq!(error, CheckpointDecodeError::TooLarge { len: 1 << 62 });
+    assert!(
+        message.contains("more than the 1073741824 a checkpoint may have"),
+        "{message}"
+    );
+    // A length inside the payload that claims 2^62 bytes is an error, not an allocation.
+    let claim = [253, 0, 0, 0, 0, 0, 0, 0, 0x40];
+    assert!(bincode::serde::decode_from_slice::<Vec<u8>, _>(&claim, decode_config()).is_err());
+    assert!(bincode::serde::decode_from_slice::<String, _>(&claim, decode_config()).is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
 }
