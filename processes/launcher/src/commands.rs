@@ -24,6 +24,22 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+/// `error` and its causes, `: `-separated as `{error:#}` prints them, but without a cause whose
+/// words the message before it already ends with (an error that shows its source's text and
+/// also gives it as its source would otherwise say its reason twice).
+pub(crate) fn described(error: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in error.chain() {
+        let cause = cause.to_string();
+        if text.is_empty() {
+            text = cause;
+        } else if !text.ends_with(&cause) {
+            text = format!("{text}: {cause}");
+        }
+    }
+    text
+}
+
 /// How a run that wrote checkpoints ended early: stopped by Ctrl-C, or failed. Its message
 /// carries the exact command that continues the run, when its checkpoints allow it.
 #[derive(Debug, thiserror::Error)]
@@ -49,7 +65,7 @@ pub enum Stopped {
     )]
     RelayInterrupted,
     /// Any other error, after which the checkpoints written so far continue the run.
-    #[error("{error:#}\n{}", continue_hint(Some(resume)))]
+    #[error("{}\n{}", described(error), continue_hint(Some(resume)))]
     Failed {
         /// What went wrong.
         error: anyhow::Error,
@@ -654,6 +670,27 @@ pub(crate) fn run(command: Command) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_error_that_shows_its_source_says_its_reason_once() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("checkpoint x.ckpt: {source}")]
+        struct Shows {
+            source: std::io::Error,
+        }
+        let error = anyhow::Error::new(Shows {
+            source: std::io::Error::other("not a regular file but a FIFO"),
+        })
+        .context("experiment bowl");
+        assert_eq!(format!("{error:#}").matches("FIFO").count(), 2);
+        assert_eq!(
+            described(&error),
+            "experiment bowl: checkpoint x.ckpt: not a regular file but a FIFO"
+        );
+        // Causes the message does not show yet are kept.
+        let error = anyhow::anyhow!("gone").context("reading x").context("experiment bowl");
+        assert_eq!(described(&error), "experiment bowl: reading x: gone");
+    }
 
     #[test]
     fn the_continuing_command_is_the_started_one_with_resume_in_place() {

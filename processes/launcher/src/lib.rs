@@ -84,7 +84,7 @@ where
                 130
             }
             _ => {
-                eprintln!("error: {error:#}");
+                eprintln!("error: {}", commands::described(&error));
                 2
             }
         },
