@@ -35,8 +35,17 @@ fn init_logging(verbose: u8) {
     ]
     .map(|target| format!(",{target}=error"))
     .concat();
-    let filter = tracing_subscriber::EnvFilter::try_from_env("ACPS_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{level}{zenoh}")));
+    let default = || tracing_subscriber::EnvFilter::new(format!("{level}{zenoh}"));
+    let filter = match std::env::var("ACPS_LOG") {
+        Ok(directives) => tracing_subscriber::EnvFilter::try_new(&directives).unwrap_or_else(|error| {
+            // Ignoring it silently would leave the user wondering why nothing more is logged.
+            eprintln!(
+                "warning: ACPS_LOG={directives:?} is not a log filter ({error}); logging at level {level} (for example ACPS_LOG=debug or ACPS_LOG=acps_fleet=trace)"
+            );
+            default()
+        }),
+        Err(_) => default(),
+    };
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)

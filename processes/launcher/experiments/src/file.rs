@@ -42,7 +42,16 @@ impl LoadedFile {
                 message: format!("{}:{line} {message}", path.display()),
             }
         };
-        let document = toml::de::DeTable::parse(&text).map_err(|e| at(e.span(), e.message()))?;
+        let document = toml::de::DeTable::parse(&text).map_err(|e| {
+            // toml says "duplicate key" and points at it: name it.
+            let key = e.span().and_then(|span| text.get(span)).map(str::trim);
+            match key {
+                Some(key) if e.message() == "duplicate key" && !key.is_empty() => {
+                    at(e.span(), &format!("duplicate key `{key}`: each key may be set once"))
+                }
+                _ => at(e.span(), e.message()),
+            }
+        })?;
         let mut positions = BTreeMap::new();
         collect_positions(document.get_ref(), "", &text, &mut positions);
         let values = match toml::from_str::<ExperimentFile>(&text) {

@@ -25,6 +25,10 @@ fn file_errors_name_line_key_and_range() {
     let cases = [
         ("experiment = \"toy\"\nrunz = 3\n", "e.toml:2: unknown field `runz`"),
         (
+            "experiment = \"toy\"\nruns = 2\nruns = 3\n",
+            "e.toml:3: duplicate key `runs`: each key may be set once",
+        ),
+        (
             "experiment = \"toy\"\n\nruns = \"3\"\n",
             "e.toml:3: runs must be an integer in 1..=1000 (repetitions with seeds seed ..= seed + runs - 1, all in memory at once), got \"3\"",
         ),

@@ -123,6 +123,22 @@ fn toy_without_panel_writes_all_four_and_function_runs_one_method() {
 }
 
 #[test]
+fn an_invalid_acps_log_filter_is_named_not_ignored() {
+    let out = Command::new(env!("CARGO_BIN_EXE_acps"))
+        .arg("protocol")
+        .env("ACPS_LOG", "acps=bogus[")
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("warning: ACPS_LOG=\"acps=bogus[\" is not a log filter")
+            && stderr.contains("logging at level warn"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn bad_options_are_refused_naming_the_option() {
     let cases: [(&[&str], &str); 10] = [
         (&["worker"], "--run is missing: name the run to join"),
