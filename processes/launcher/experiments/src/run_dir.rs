@@ -76,6 +76,15 @@ pub enum RunDirError {
         /// The path.
         dir: PathBuf,
     },
+    /// The output path is a symbolic link to nothing: a loop, or a target that does not exist
+    /// (creating the directory would only say "File exists").
+    #[error("output directory {} is a symbolic link that leads nowhere ({reason}): fix the link or choose another --out", dir.display())]
+    DanglingLink {
+        /// The path.
+        dir: PathBuf,
+        /// Why following it fails.
+        reason: String,
+    },
     /// The output directory cannot be made or written into, or a file in it written.
     #[error("output directory {}: cannot {action}", dir.display())]
     Output {
@@ -300,6 +309,14 @@ pub const DEFAULT_CHECKPOINT_EVERY: u64 = 10;
 
 /// Create the output directory `dir` and make sure files can be written into it.
 pub fn output_dir(dir: &Path) -> Result<(), RunDirError> {
+    if std::fs::symlink_metadata(dir).is_ok_and(|link| link.file_type().is_symlink())
+        && let Err(error) = std::fs::metadata(dir)
+    {
+        return Err(RunDirError::DanglingLink {
+            dir: dir.to_path_buf(),
+            reason: error.to_string(),
+        });
+    }
     if dir.exists() && !dir.is_dir() {
         return Err(RunDirError::NotADirectory { dir: dir.to_path_buf() });
     }
