@@ -328,13 +328,19 @@ pub fn serve(
     let mut slots: Vec<Option<(PendingTasks, usize)>> = (0..=asking).map(|_| None).collect();
     // Tasks answered by the learner and not yet simulated.
     let mut queue: VecDeque<WireTask> = VecDeque::new();
-    // Outcomes not yet sent.
-    let fresh_outbox = |identity| {
-        let message = WorkerMessage::request(identity, 1, serves);
+    // Outcomes not yet sent. Each request starts from one made once: making it looks up the
+    // environment's settings text, which is no work for every request.
+    let template = {
+        let message = WorkerMessage::request(0, 1, serves);
         match options.sizes {
             Some(sizes) => message.declaring(sizes),
             None => message,
         }
+    };
+    let fresh_outbox = |identity| {
+        let mut message = template;
+        message.run = identity;
+        message
     };
     let mut outbox = fresh_outbox(identity);
     let mut batching = Batching::new(options.queue_depth);

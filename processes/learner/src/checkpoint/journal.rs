@@ -265,12 +265,10 @@ fn scan(
 /// a FIFO would block its reader, a device such as /dev/zero never end.
 fn open_file(path: &Path, options: &std::fs::OpenOptions) -> Result<File, JournalError> {
     let metadata = std::fs::metadata(path).map_err(io(path))?;
-    if !metadata.is_file() {
-        return Err(JournalError::Decode {
-            path: path.to_path_buf(),
-            source: CheckpointDecodeError::NotAFile(super::file_kind(&metadata)),
-        });
-    }
+    super::regular(&metadata).map_err(|source| JournalError::Decode {
+        path: path.to_path_buf(),
+        source,
+    })?;
     options.open(path).map_err(io(path))
 }
 

@@ -348,9 +348,7 @@ pub fn read(path: &Path, stamp: Stamp) -> Result<Option<Checkpoint>, CheckpointR
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(source) => return Err(io(source)),
     };
-    if !metadata.is_file() {
-        return Err(decoded(CheckpointDecodeError::NotAFile(file_kind(&metadata))));
-    }
+    regular(&metadata).map_err(decoded)?;
     if metadata.len() > HEADER_LEN as u64 + MAX_CHECKPOINT_BYTES {
         return Err(decoded(CheckpointDecodeError::TooLarge { len: metadata.len() }));
     }
@@ -358,11 +356,15 @@ pub fn read(path: &Path, stamp: Stamp) -> Result<Option<Checkpoint>, CheckpointR
     decode(&bytes, stamp).map(Some).map_err(decoded)
 }
 
-/// What a file that is not a regular one is, in words.
-fn file_kind(metadata: &std::fs::Metadata) -> &'static str {
+/// Whether a checkpoint or record file is a regular file (or a link to one), which reading
+/// neither blocks on (a FIFO) nor never finishes (a device such as /dev/zero).
+fn regular(metadata: &std::fs::Metadata) -> Result<(), CheckpointDecodeError> {
     use std::os::unix::fs::FileTypeExt;
     let kind = metadata.file_type();
-    if kind.is_dir() {
+    if kind.is_file() {
+        return Ok(());
+    }
+    Err(CheckpointDecodeError::NotAFile(if kind.is_dir() {
         "a directory"
     } else if kind.is_fifo() {
         "a FIFO"
@@ -372,7 +374,7 @@ fn file_kind(metadata: &std::fs::Metadata) -> &'static str {
         "a socket"
     } else {
         "of another kind"
-    }
+    }))
 }
 
 #[cfg(test)]

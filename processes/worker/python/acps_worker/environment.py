@@ -112,11 +112,9 @@ class Environment:
         return wire
 
     def shown(self) -> str:
-        """As :meth:`__str__`, followed by the settings text when it is known."""
-        if self.text is None or self.is_unnamed():
-            return str(self)
-        raw = self.text.encode("utf-8")
-        return f"{self}{shown_settings_text(len(raw), raw[: _wire.MAX_SETTINGS_TEXT])}"
+        """As :meth:`__str__`, followed by the settings text when it is known, as a message
+        carries it (Rust: ``serves_shown``)."""
+        return f"{self}{shown_settings_text(*self.settings_text_to_wire())}"
 
     def settings_text_to_wire(self) -> tuple[int, bytes]:
         """The settings text as a message carries it: its length in bytes and its first

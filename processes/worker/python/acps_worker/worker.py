@@ -685,11 +685,12 @@ class _Session:
                             )
                         if n:
                             tasks = _copy(_wire.WireTask * n, payload.as_ptr())
-                            foreign = (
-                                _first_foreign(tasks, served_bytes)
-                                if batches is None
-                                else queue.extend(tasks, served_array)
-                            )
+                            if batches is None:
+                                foreign = _first_foreign(tasks, served_bytes)
+                                if foreign is None:
+                                    queue.extend(tasks)
+                            else:
+                                foreign = queue.extend(tasks, served_array)
                             if foreign is not None:
                                 wire = tasks[foreign]
                                 raise ProtocolError(
@@ -697,8 +698,6 @@ class _Session:
                                     f"{Environment.from_wire(wire.environment)}, this worker "
                                     f"serves {self.environment}"
                                 )
-                            if batches is None:
-                                queue.extend(tasks)
                     elif code == _wire.RESPONSE_STOP:
                         _delete(response)
                         return self.report(Exit.FINISHED)
