@@ -140,7 +140,7 @@ fn an_invalid_acps_log_filter_is_named_not_ignored() {
 
 #[test]
 fn bad_options_are_refused_naming_the_option() {
-    let cases: [(&[&str], &str); 10] = [
+    let cases: [(&[&str], &str); 11] = [
         (&["worker"], "--run is missing: name the run to join"),
         (
             &["run", "grid", "--run", "a_b"],
@@ -187,6 +187,10 @@ fn bad_options_are_refused_naming_the_option() {
         (
             &["run", "function", "--listen", "tcp/127.0.0.1:0", "--workers", "0"],
             "port 0 is no port relays could reach",
+        ),
+        (
+            &["run", "function", "--worker-startup-timeout", "0"],
+            "a number of seconds in 1..=86400",
         ),
     ];
     for (args, expected) in cases {
