@@ -205,8 +205,11 @@ class RunTest(unittest.TestCase):
         """SIGINT to a process inside acps.run: KeyboardInterrupt, after the checkpoints."""
         with tempfile.TemporaryDirectory() as d:
             started, out = Path(d) / "started", Path(d) / "long"
+            # A process started in the background by a non-interactive shell inherits SIGINT
+            # ignored, and Python then installs no handler: restore it, as a terminal has it.
             script = (
-                "import sys, pathlib, tomllib, acps\n"
+                "import signal, sys, pathlib, tomllib, acps\n"
+                "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
                 "sys.path.insert(0, sys.argv[1])\n"
                 "from test_run import batch_bowl\n"
                 "settings = tomllib.load(open(sys.argv[2], 'rb'))\n"
