@@ -476,6 +476,8 @@ pub struct FleetProgress {
     pub reissued: u64,
     /// Outcomes dropped as duplicates (a re-issued task answered twice).
     pub duplicates: u64,
+    /// Outcomes dropped because they came from a worker that never held their task.
+    pub foreign: u64,
     /// Requests refused (another build, run or environment).
     pub refused: u64,
     /// Requests that only delivered outcomes, because the worker's asking requests all waited.
@@ -665,6 +667,86 @@ enum Client {
     Remote(PeerId),
 }
 
+/// Who holds each handed-out task, and who held it before it was re-issued. An outcome is
+/// taken only from those: any process of the run's user can open its services, and the first
+/// outcome of a task wins, so a stranger's made-up outcome for another worker's task would be
+/// learnt from. A late outcome of a re-issued task from its former holder stays valid.
+#[derive(Default)]
+struct Holders {
+    current: HashMap<(u32, u64), Client>,
+    /// Kept for the whole run: re-issues are rare (a worker died or hung), and the former
+    /// holder's late outcome may come after the new holder's.
+    former: HashMap<(u32, u64), Vec<Client>>,
+    /// Clients whose outcomes were dropped, each warned of once.
+    strangers: HashSet<Client>,
+}
+
+impl Holders {
+    fn give(&mut self, job: u32, task_id: u64, client: Client) {
+        self.current.insert((job, task_id), client);
+    }
+
+    /// Whether an outcome of task `task_id` of `job` from `client` may be taken: it holds the
+    /// task, or held it before the task was re-issued.
+    fn answered(&mut self, job: u32, task_id: u64, client: Client) -> bool {
+        let key = (job, task_id);
+        if self.current.get(&key) == Some(&client) {
+            self.current.remove(&key);
+            return true;
+        }
+        self.former.get(&key).is_some_and(|former| former.contains(&client))
+    }
+
+    /// Re-issue every task held by a client for which `gone` says so. Returns how many tasks
+    /// went back to `source`.
+    fn reissue_where(&mut self, source: &mut dyn TaskSource, mut gone: impl FnMut(&Client) -> bool) -> u64 {
+        let Self { current, former, .. } = self;
+        let mut reissued = 0;
+        current.retain(|&(job, task_id), client| {
+            if !gone(client) {
+                return true;
+            }
+            reissued += u64::from(source.reissue(job as usize, task_id));
+            former.entry((job, task_id)).or_default().push(*client);
+            false
+        });
+        reissued
+    }
+
+    fn clients(&self) -> impl Iterator<Item = &Client> {
+        self.current.values()
+    }
+}
+
+/// Queue the outcomes `client` delivered that it may give ([`Holders::answered`]); the others
+/// are dropped, counted in `progress.foreign` and warned of once per client.
+fn take_outcomes(
+    run: &RunName,
+    client: Client,
+    delivered: impl IntoIterator<Item = (u32, Outcome)>,
+    holders: &mut Holders,
+    outcomes: &mut VecDeque<(u32, Outcome)>,
+    progress: &mut FleetProgress,
+) {
+    for (job, outcome) in delivered {
+        if holders.answered(job, outcome.task_id, client) {
+            outcomes.push_back((job, outcome));
+            continue;
+        }
+        progress.foreign += 1;
+        if holders.strangers.insert(client) {
+            let who = match client {
+                Client::Local(_) => "a local worker".to_string(),
+                Client::Remote(peer) => format!("remote peer {peer}"),
+            };
+            tracing::warn!(
+                "run '{run}': dropped an outcome of task {} of job {job} from {who}, which was never handed that task: outcomes are taken only from the worker that holds the task (is another program speaking to this run?)",
+                outcome.task_id
+            );
+        }
+    }
+}
+
 /// Where a parked request came from, to answer it.
 enum Requester {
     Local(TaskRequest),
@@ -721,7 +803,7 @@ pub(crate) fn serve<'r>(
     let identity = options.identity;
     let mut progress = FleetProgress::default();
     let mut parked: VecDeque<Parked> = VecDeque::new();
-    let mut holders: HashMap<(u32, u64), Client> = HashMap::new();
+    let mut holders = Holders::default();
     let mut next_job = 0;
     let mut last_tick = Instant::now();
     let mut refused_clients = HashSet::new();
@@ -798,10 +880,7 @@ pub(crate) fn serve<'r>(
                     source.sizes(*job as usize)
                 );
             }
-            for (job, outcome) in delivered {
-                holders.remove(&(job, outcome.task_id));
-                outcomes.push_back((job, outcome));
-            }
+            take_outcomes(run, client, delivered, &mut holders, &mut outcomes, &mut progress);
             match message.wanted() {
                 // Outcomes only: the worker's last free slot, so it is answered at once rather
                 // than parked behind tasks that may need these very outcomes.
@@ -837,10 +916,7 @@ pub(crate) fn serve<'r>(
                         last_heard.insert(client, Instant::now());
                         peers.insert(peer, workers);
                         slowest_rollout = slowest_rollout.max(slowest);
-                        for (job, outcome) in delivered {
-                            holders.remove(&(job, outcome.task_id));
-                            outcomes.push_back((job, outcome));
-                        }
+                        take_outcomes(run, client, delivered, &mut holders, &mut outcomes, &mut progress);
                         if serving_since.is_none() {
                             waiting_for.insert(client);
                             if waiting_for.len() >= options.start_with {
@@ -1081,19 +1157,12 @@ fn wait(listener: &Listener<iceoryx2::prelude::ipc::Service>, timeout: Duration)
 fn forget_peer(
     source: &mut dyn TaskSource,
     peer: PeerId,
-    holders: &mut HashMap<(u32, u64), Client>,
+    holders: &mut Holders,
     parked: &mut VecDeque<Parked>,
     peers: &mut HashMap<PeerId, usize>,
 ) -> u64 {
     let gone = Client::Remote(peer);
-    let mut reissued = 0;
-    holders.retain(|&(job, task_id), client| {
-        if *client != gone {
-            return true;
-        }
-        reissued += u64::from(source.reissue(job as usize, task_id));
-        false
-    });
+    let reissued = holders.reissue_where(source, |client| *client == gone);
     parked.retain(|request| request.client() != gone);
     peers.remove(&peer);
     reissued
@@ -1108,9 +1177,9 @@ fn forget_peer(
 /// once it is answered. With more workers than ready tasks most of them hold none and send
 /// nothing: looking for every silent one took 2/3 of the learner's CPU time at W = 128
 /// (docs/FLEET.md#oversubscription).
-fn look_is_due(holders: &HashMap<(u32, u64), Client>, heard: &HashSet<Client>, connected: &HashSet<Client>) -> bool {
+fn look_is_due(holders: &Holders, heard: &HashSet<Client>, connected: &HashSet<Client>) -> bool {
     holders
-        .values()
+        .clients()
         .any(|client| matches!(client, Client::Local(_)) && (!heard.contains(client) || !connected.contains(client)))
 }
 
@@ -1121,7 +1190,7 @@ fn reissue_tasks_of_dead_workers(
     run: &RunName,
     tasks: &TaskService,
     source: &mut dyn TaskSource,
-    holders: &mut HashMap<(u32, u64), Client>,
+    holders: &mut Holders,
     reissued: &mut u64,
 ) -> Option<usize> {
     tasks.try_cleanup_dead_nodes();
@@ -1133,20 +1202,13 @@ fn reissue_tasks_of_dead_workers(
         }
         CallbackProgression::Continue
     });
-    let before = *reissued;
-    holders.retain(|&(job, task_id), client| {
-        // Remote peers are looked after by their remote.
-        let alive = matches!(client, Client::Remote(_)) || live.contains(client);
-        if !alive && source.reissue(job as usize, task_id) {
-            *reissued += 1;
-        }
-        alive
+    // Remote peers are looked after by their remote.
+    let gone = holders.reissue_where(source, |client| {
+        matches!(client, Client::Local(_)) && !live.contains(client)
     });
-    if *reissued > before {
-        tracing::info!(
-            "run '{run}': a worker is gone; re-issued its {} tasks",
-            *reissued - before
-        );
+    *reissued += gone;
+    if gone > 0 {
+        tracing::info!("run '{run}': a worker is gone; re-issued its {gone} tasks");
     }
     Some(live.len())
 }
@@ -1164,7 +1226,7 @@ struct Silent {
 fn reissue_tasks_of_silent_workers(
     run: &RunName,
     source: &mut dyn TaskSource,
-    holders: &mut HashMap<(u32, u64), Client>,
+    holders: &mut Holders,
     last_heard: &HashMap<Client, Instant>,
     hung: &mut HashSet<Client>,
     deadline: Duration,
@@ -1174,9 +1236,9 @@ fn reissue_tasks_of_silent_workers(
         reissued: 0,
         peers: Vec::new(),
     };
-    holders.retain(|&(job, task_id), client| {
+    found.reissued = holders.reissue_where(source, |client| {
         if !silent(client) {
-            return true;
+            return false;
         }
         if hung.insert(*client) {
             match client {
@@ -1191,8 +1253,7 @@ fn reissue_tasks_of_silent_workers(
                 }
             }
         }
-        found.reissued += u64::from(source.reissue(job as usize, task_id));
-        false
+        true
     });
     found
 }
@@ -1294,7 +1355,7 @@ fn answer<'r>(
     source: &mut Source<'_>,
     parked: &mut VecDeque<Parked>,
     hung: &HashSet<Client>,
-    holders: &mut HashMap<(u32, u64), Client>,
+    holders: &mut Holders,
     next_job: &mut usize,
     identity: u64,
     more_coming: bool,
@@ -1337,7 +1398,7 @@ fn answer<'r>(
             let Some((job, task)) = next_task(source, next_job, &serves) else {
                 break;
             };
-            holders.insert((job as u32, task.id), client);
+            holders.give(job as u32, task.id, client);
             ready.push((job as u32, task));
         }
         asking += started.elapsed();

@@ -368,6 +368,8 @@ pub struct RunReport {
     pub duplicates: Option<u64>,
     /// Fleet only: requests refused (another build, run or environment).
     pub refused: Option<u64>,
+    /// Fleet only: outcomes dropped because they came from a worker that never held their task.
+    pub foreign: Option<u64>,
 }
 
 impl RunReport {
@@ -398,6 +400,7 @@ impl RunReport {
             reissued: fleet.map(|f| f.reissued),
             duplicates: fleet.map(|f| f.duplicates),
             refused: fleet.map(|f| f.refused),
+            foreign: fleet.map(|f| f.foreign),
         }
     }
 
@@ -427,6 +430,9 @@ impl RunReport {
         );
         if let (Some(reissued), Some(duplicates), Some(refused)) = (self.reissued, self.duplicates, self.refused) {
             line += &format!(", {reissued} re-issued, {duplicates} duplicates dropped, {refused} refused");
+        }
+        if let Some(foreign) = self.foreign.filter(|&n| n > 0) {
+            line += &format!(", {foreign} outcomes from workers without their task dropped");
         }
         line += &format!(
             ", {} failed ({} training, {} evaluation)",

@@ -1683,3 +1683,90 @@ fn bad_worker_and_run_names_are_refused_naming_the_flag_and_what_names_may_be() 
     assert_eq!(error, format!("worker option name {names} \"\""));
     assert_clean(&run);
 }
+
+#[test]
+fn outcomes_from_a_process_that_holds_no_task_are_dropped_and_change_nothing() {
+    // Short grid jobs with P = 4 served by one worker whose rollouts take a millisecond, so
+    // tasks are held for a while; beside it a process of the same user speaks the wire and
+    // reports a reward of 1e300 for every task id of both jobs, over and over. Taken, the first
+    // of those for a held task would replace the worker's outcome.
+    let (experiment, mut jobs, reference) = short_grid(4);
+    let run = run_name("stranger");
+    let environment = Sleepy(experiment.jobs().unwrap().remove(0).environment.unwrap());
+    let done = AtomicBool::new(false);
+    let served = std::thread::scope(|scope| {
+        let worker = scope.spawn(|| {
+            let options = WorkerOptions {
+                name: "honest".into(),
+                ..WorkerOptions::default()
+            };
+            acps_worker::serve(&run, &options, &mut Single(environment), &AtomicBool::new(false))
+        });
+        let stranger = scope.spawn(|| {
+            let node = ipc::node(&run, "stranger").unwrap();
+            let services = ipc::open_services(&node).unwrap();
+            let client = services.tasks.client_builder().create().unwrap();
+            let notifier = services.to_learner.notifier_builder().create().unwrap();
+            let mut sent = 0u64;
+            let mut task_id = 0;
+            while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                // Test fleets have identity 7 (`test_fleet`); a stranger learns it from any refusal.
+                let mut message = WorkerMessage::request(7, 0, Serves::Any);
+                for job in 0..2 {
+                    for id in task_id..task_id + 32 {
+                        message
+                            .push(wire::WireOutcome::new(job, &Outcome::new(id, 1e300, 0.0)).unwrap())
+                            .unwrap();
+                    }
+                }
+                task_id = (task_id + 32) % 256;
+                let pending = client.send_copy(message).unwrap();
+                notifier.notify().unwrap();
+                sent += 64;
+                // Each request is answered (with nothing) before the next goes out.
+                while pending.receive().unwrap().is_none() && !done.load(std::sync::atomic::Ordering::Relaxed) {
+                    std::thread::sleep(Duration::from_micros(200));
+                }
+            }
+            sent
+        });
+        let mut fleet = test_fleet(&run, 0);
+        // The run's shared memory is its user's alone, iceoryx2's node counter included, which
+        // iceoryx2 makes writable by everyone.
+        let shared: Vec<_> = ipc::leftover_files(&run)
+            .into_iter()
+            .filter(|path| path.starts_with("/dev/shm"))
+            .collect();
+        assert!(
+            shared
+                .iter()
+                .any(|path| path.to_string_lossy().ends_with(".global_mgmt")),
+            "{shared:?}"
+        );
+        for path in &shared {
+            let mode = std::os::unix::fs::PermissionsExt::mode(&std::fs::metadata(path).unwrap().permissions());
+            assert_eq!(mode & 0o077, 0, "{} has mode {mode:o}", path.display());
+        }
+        let stop = fleet.stop_flag();
+        let started = Instant::now();
+        let progress = fleet
+            .serve(&mut jobs, &mut |_: &FleetProgress| {
+                if started.elapsed() > Duration::from_secs(60) {
+                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            })
+            .expect("the run finishes within a minute");
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        (progress, stranger.join().unwrap(), worker.join().unwrap())
+    });
+    let (progress, sent, worker) = served;
+    assert_eq!(episodes(&jobs), reference);
+    assert_eq!(worker.unwrap().exit, WorkerExit::Finished);
+    assert!(
+        progress.foreign > 0 && progress.foreign <= sent,
+        "{progress:?}, {sent} sent"
+    );
+    assert_eq!(progress.refused, 0, "{progress:?}");
+    ipc::remove_run_files(&run).unwrap();
+    assert_clean(&run);
+}
