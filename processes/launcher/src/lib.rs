@@ -82,6 +82,11 @@ where
     // Python package's `acps` runs inside an interpreter, whose own arguments differ).
     let _ = COMMAND_LINE.set(args.iter().map(|a| a.to_string_lossy().into_owned()).collect());
     let cli = Cli::parse_from(args);
+    // Every file a command creates (the run directory, checkpoints, iceoryx2's shared memory
+    // and its management files, some of which iceoryx2 makes 0666) is its user's alone: no
+    // other user can read a run's data or write into its services. Started workers inherit it.
+    // SAFETY: umask only swaps the process's file-creation mask.
+    unsafe { libc::umask(0o077) };
     init_logging(cli.verbosity());
     match commands::run(cli.command) {
         Ok(()) => 0,

@@ -58,6 +58,16 @@ pub enum IpcError {
         /// The name as the message shows it: quoted, or its length when it is too long to show.
         got: String,
     },
+    /// A file of the run could not be made its owner's alone (another user created it?).
+    #[error("making {path} of run '{run}' accessible to its owner only: {reason} (did another user create it?)")]
+    Restrict {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The run.
+        run: RunName,
+        /// The system's reason.
+        reason: String,
+    },
     /// iceoryx2 could not create the process's node of the run (permissions, resources).
     #[error("creating node '{node}' of run '{run}'")]
     NodeCreate {
@@ -358,7 +368,47 @@ pub fn quiet_iceoryx2_log() {
 /// A node of `run` named `name`. Signal handling stays with the host program (library code must
 /// not swallow SIGINT/SIGTERM).
 pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
-    node_with(run, name, &run.config())
+    let node = node_with(run, name, &run.config())?;
+    owner_only(run)?;
+    Ok(node)
+}
+
+/// Take every access but the owner's from the run's files in /dev/shm. iceoryx2 makes the
+/// segment that numbers a run's nodes (`..._node.0_10_0.global_mgmt`) writable by every user,
+/// whatever the umask: another user who wrote into it would make every new worker of the run
+/// fail. A file of the run that this user cannot restrict (another user made it) is an error.
+fn owner_only(run: &RunName) -> Result<(), IpcError> {
+    use std::os::unix::fs::PermissionsExt;
+    let prefix = run.prefix();
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+        return Ok(());
+    };
+    for entry in entries.flatten() {
+        if !entry.file_name().to_string_lossy().starts_with(&prefix) {
+            continue;
+        }
+        let path = entry.path();
+        let restrict = |path: &std::path::Path| -> std::io::Result<()> {
+            let mode = std::fs::metadata(path)?.permissions().mode();
+            if mode & 0o077 != 0 {
+                std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode & 0o700))?;
+            }
+            Ok(())
+        };
+        match restrict(&path) {
+            Ok(()) => {}
+            // Removed since it was listed: a node or port that went away.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(error) => {
+                return Err(IpcError::Restrict {
+                    path,
+                    run: run.clone(),
+                    reason: error.to_string(),
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A worker's node of `run`, like [`node`], that leaves looking for dead nodes to the learner.

@@ -111,3 +111,45 @@ fn the_final_lines_give_the_summarys_scores_with_unit_and_sem() {
         );
     }
 }
+
+#[test]
+fn a_run_directory_is_its_users_alone() {
+    // Under the most permissive umask, every file and folder acps writes is still 0600 / 0700.
+    let dir = temp_dir("modes");
+    let out = dir.join("run");
+    let mut command = watched();
+    command
+        .args([
+            "experiment",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "60",
+            "-q",
+            "--out",
+        ])
+        .arg(&out);
+    // SAFETY: umask only sets the child's file-creation mask, between fork and exec.
+    unsafe {
+        std::os::unix::process::CommandExt::pre_exec(&mut command, || {
+            libc::umask(0);
+            Ok(())
+        });
+    }
+    crate::succeeded(&command.output().unwrap());
+    let mut seen = 0;
+    let mut stack = vec![out];
+    while let Some(path) = stack.pop() {
+        let metadata = std::fs::metadata(&path).unwrap();
+        let mode = std::os::unix::fs::PermissionsExt::mode(&metadata.permissions()) & 0o777;
+        if metadata.is_dir() {
+            assert_eq!(mode, 0o700, "{}", path.display());
+            stack.extend(std::fs::read_dir(&path).unwrap().map(|entry| entry.unwrap().path()));
+        } else {
+            assert_eq!(mode, 0o600, "{}", path.display());
+        }
+        seen += 1;
+    }
+    assert!(seen > 10, "{seen} files and folders");
+}
