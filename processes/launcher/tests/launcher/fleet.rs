@@ -1705,6 +1705,13 @@ fn outcomes_from_a_process_that_holds_no_task_are_dropped_and_change_nothing() {
         let stranger = scope.spawn(|| {
             let node = ipc::node(&run, "stranger").unwrap();
             let services = ipc::open_services(&node).unwrap();
+            // A request sent before the learner's server exists is lost.
+            while services.tasks.dynamic_config().number_of_servers() == 0 {
+                if done.load(std::sync::atomic::Ordering::Relaxed) {
+                    return 0;
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
             let client = services.tasks.client_builder().create().unwrap();
             let notifier = services.to_learner.notifier_builder().create().unwrap();
             let mut sent = 0u64;
@@ -1723,14 +1730,20 @@ fn outcomes_from_a_process_that_holds_no_task_are_dropped_and_change_nothing() {
                 let pending = client.send_copy(message).unwrap();
                 notifier.notify().unwrap();
                 sent += 64;
-                // Each request is answered (with nothing) before the next goes out.
-                while pending.receive().unwrap().is_none() && !done.load(std::sync::atomic::Ordering::Relaxed) {
+                // Each request is answered (with nothing) before the next goes out, or given up
+                // on after a second.
+                let asked = Instant::now();
+                while pending.receive().unwrap().is_none()
+                    && !done.load(std::sync::atomic::Ordering::Relaxed)
+                    && asked.elapsed() < Duration::from_secs(1)
+                {
                     std::thread::sleep(Duration::from_micros(200));
                 }
             }
             sent
         });
-        let mut fleet = test_fleet(&run, 0);
+        // Serving starts once both have asked, so the stranger's first outcomes are seen.
+        let mut fleet = test_fleet(&run, 2);
         // The run's shared memory is its user's alone, iceoryx2's node counter included, which
         // iceoryx2 makes writable by everyone.
         let shared: Vec<_> = ipc::leftover_files(&run)
