@@ -873,6 +873,20 @@ fn started_workers_run_at_the_chosen_niceness_and_the_learner_at_its_own() {
     assert_clean(&run);
 }
 
+/// Serve `jobs` to their end, or fail the test once `limit` has passed (a deadlock fails it
+/// instead of hanging it).
+fn serve_within(fleet: &mut Fleet, jobs: &mut [FleetJob], limit: Duration) -> FleetProgress {
+    let stop = fleet.stop_flag();
+    let started = Instant::now();
+    fleet
+        .serve(jobs, &mut |_: &FleetProgress| {
+            if started.elapsed() > limit {
+                stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+        })
+        .unwrap_or_else(|e| panic!("the run did not finish within {limit:?}: {e}"))
+}
+
 /// How the tests serve in-process jobs: no polling, a fixed run identity.
 fn test_fleet(run: &RunName, start_with: usize) -> Fleet {
     Fleet::builder(run.clone())
@@ -971,15 +985,7 @@ fn outcomes_go_out_alone_while_every_asking_request_waits() {
         });
         // A deadlock fails the test instead of hanging it.
         let mut fleet = test_fleet(&run, 0);
-        let stop = fleet.stop_flag();
-        let started = Instant::now();
-        let progress = fleet
-            .serve(&mut jobs, &mut |_: &FleetProgress| {
-                if started.elapsed() > Duration::from_secs(60) {
-                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
-                }
-            })
-            .expect("the run finishes within a minute");
+        let progress = serve_within(&mut fleet, &mut jobs, Duration::from_secs(60));
         assert_eq!(worker.join().unwrap().unwrap().exit, WorkerExit::Finished);
         progress
     });
@@ -1373,15 +1379,7 @@ fn workers_of_other_environments_are_refused_and_the_result_stays_the_in_process
             (refused, liar, zero.join().unwrap(), one)
         });
         let mut fleet = test_fleet(&run, 0);
-        let stop = fleet.stop_flag();
-        let started = Instant::now();
-        let progress = fleet
-            .serve(&mut jobs, &mut |_: &FleetProgress| {
-                if started.elapsed() > Duration::from_secs(120) {
-                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
-                }
-            })
-            .expect("the run finishes within two minutes");
+        let progress = serve_within(&mut fleet, &mut jobs, Duration::from_secs(120));
         (progress, workers.join().unwrap())
     });
     let [seed0, seed1, seed7] = [0, 1, 7].map(|seed| function(seed).spec());
@@ -1760,15 +1758,7 @@ fn outcomes_from_a_process_that_holds_no_task_are_dropped_and_change_nothing() {
             let mode = std::os::unix::fs::PermissionsExt::mode(&std::fs::metadata(path).unwrap().permissions());
             assert_eq!(mode & 0o077, 0, "{} has mode {mode:o}", path.display());
         }
-        let stop = fleet.stop_flag();
-        let started = Instant::now();
-        let progress = fleet
-            .serve(&mut jobs, &mut |_: &FleetProgress| {
-                if started.elapsed() > Duration::from_secs(60) {
-                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
-                }
-            })
-            .expect("the run finishes within a minute");
+        let progress = serve_within(&mut fleet, &mut jobs, Duration::from_secs(60));
         done.store(true, std::sync::atomic::Ordering::Relaxed);
         (progress, stranger.join().unwrap(), worker.join().unwrap())
     });
