@@ -8,6 +8,55 @@ use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+/// The largest experiment or problem file read: 100,000 points (a grid's limit,
+/// [`MAX_GRID_POINTS`](crate::problem_file::MAX_GRID_POINTS)) of 8 coordinates written in
+/// full take about 16 MB of TOML. Parsing holds about 75 bytes per byte of a list of numbers,
+/// so a file of 100 MB had taken gigabytes before any limit was checked.
+pub const MAX_FILE_BYTES: u64 = 16 << 20;
+
+/// The text of the regular file at `path`, of at most [`MAX_FILE_BYTES`]: a FIFO or a device
+/// would block or never end.
+fn read_text(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let not_regular = || std::io::Error::other("not a regular file (a folder, a FIFO or a device)");
+    // Before opening: opening a FIFO blocks until something writes to it.
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(not_regular());
+    }
+    let file = std::fs::File::open(path)?;
+    let metadata = file.metadata()?;
+    if !metadata.is_file() {
+        return Err(not_regular());
+    }
+    let too_large = |bytes: u64| {
+        std::io::Error::other(format!(
+            "{bytes} bytes, more than the {} MiB an experiment or problem file may have (100,000 \
+             points of 8 coordinates): use a context grid (training_grid, test_grid) for more",
+            MAX_FILE_BYTES >> 20
+        ))
+    };
+    if metadata.len() > MAX_FILE_BYTES {
+        return Err(too_large(metadata.len()));
+    }
+    let mut text = String::new();
+    // A file that grows while read is cut at the limit and refused.
+    file.take(MAX_FILE_BYTES + 1).read_to_string(&mut text)?;
+    if text.len() as u64 > MAX_FILE_BYTES {
+        return Err(too_large(text.len() as u64));
+    }
+    Ok(text)
+}
+
+/// A value as written in a file, for an error: its start and its length when it is long (a list
+/// of a million points is not echoed whole).
+fn shown_value(text: &str) -> String {
+    const SHOWN: usize = 120;
+    match text.char_indices().nth(SHOWN) {
+        None => text.to_string(),
+        Some((end, _)) => format!("{} ... ({} characters)", &text[..end], text.chars().count()),
+    }
+}
+
 /// An experiment file as read: its values and where each top-level key stands.
 pub struct LoadedFile {
     path: PathBuf,
@@ -27,7 +76,7 @@ impl LoadedFile {
     /// Read and parse an experiment file. Unknown keys, wrong types and malformed TOML are refused
     /// with the file and line; ranges are checked by [`crate::plan::Plan::new`].
     pub fn read(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = read_text(path).map_err(|source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
         })?;
@@ -194,7 +243,7 @@ pub(crate) fn describe(invalid: Invalid, file: Option<&LoadedFile>, cli: &Experi
         (true, ..) => (key.flag(), None),
         (false, Some((f, p)), ..) => (
             format!("{}:{}: {}", f.path.display(), p.line, key.name),
-            Some(f.text[p.value.clone()].to_string()),
+            Some(shown_value(&f.text[p.value.clone()])),
         ),
         (false, None, Some((f, line)), _) => (format!("{}:{line}: {}", f.path.display(), key.name), None),
         (false, None, None, Some(f)) => (format!("{}: {}", f.path.display(), key.name), None),

@@ -26,7 +26,7 @@ fn bounded(values: &[f64]) -> bool {
 }
 
 /// What a list of contexts accepts.
-const CONTEXTS: &str = "a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box";
+const CONTEXTS: &str = "a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box";
 /// What a context grid accepts.
 const GRID: &str = "a table { low = [..], high = [..], points = [..] } of 1 to 8 dimensions: low <= high in -1e6..=1e6, points >= 1 per dimension and at most 100000 in all, inside the context box";
 
@@ -415,6 +415,9 @@ fn contexts(
         (Some(points), None) => {
             if points.is_empty() {
                 return Err(out_of_range(list_key, "[]"));
+            }
+            if points.len() as u64 > MAX_GRID_POINTS {
+                return Err(Invalid::element(list_key, format!("{} points", points.len())));
             }
             if let Some((i, point)) = points.iter().enumerate().find(|(_, p)| p.is_empty() || !bounded(p)) {
                 return Err(Invalid::element(list_key, format!("point {i} {point:?}")));

@@ -169,11 +169,11 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
         ),
         (
             contexts("[]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points",
+            "e.toml:3: problem.training_contexts must be a non-empty list of at most 100,000 points",
         ),
         (
             contexts("[[0.0, 0.0], [1.0, 1e7]]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0, 10000000.0]",
+            "e.toml:3: problem.training_contexts must be a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0, 10000000.0]",
         ),
         (
             with("test_grid = { low = [-1e300, 0.0], high = [1e300, 1.0], points = [2, 2] }"),
@@ -192,24 +192,28 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
             "e.toml:5: problem.training_grid and problem.training_contexts exclude each other",
         ),
         (
+            with(&format!("test_contexts = {:?}", vec![[0.5, 0.5]; 100_001])),
+            "e.toml:5: problem.test_contexts must be a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got 100001 points",
+        ),
+        (
             contexts("[[0.0, 0.0], [1.0]]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0] of 1 coordinates, not 2",
+            "e.toml:3: problem.training_contexts must be a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0] of 1 coordinates, not 2",
         ),
         (
             contexts("[[0.0, inf]]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 0 [0.0, inf]",
+            "e.toml:3: problem.training_contexts must be a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 0 [0.0, inf]",
         ),
         (
             contexts(&format!("[{:?}, {:?}]", vec![0.0; 9], vec![1.0; 9])),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got 9-D contexts",
+            "e.toml:3: problem.training_contexts must be a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got 9-D contexts",
         ),
         (
             with("context_low = [0.0, 0.0]\ncontext_high = [0.5, 2.0]"),
-            "e.toml:3: problem.training_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0, 1.0], outside the context box [0.0, 0.0] .. [0.5, 2.0]",
+            "e.toml:3: problem.training_contexts must be a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [1.0, 1.0], outside the context box [0.0, 0.0] .. [0.5, 2.0]",
         ),
         (
             with("context_low = [0.0, 0.0]\ncontext_high = [1.0, 1.0]\ntest_contexts = [[0.5, 0.5], [0.5, -0.5]]"),
-            "e.toml:7: problem.test_contexts must be a non-empty list of points, each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [0.5, -0.5], outside the context box [0.0, 0.0] .. [1.0, 1.0]",
+            "e.toml:7: problem.test_contexts must be a non-empty list of at most 100,000 points (a grid's limit), each of 1 to 8 coordinates in -1e6..=1e6 (as many as context_low's), inside the context box, got point 1 [0.5, -0.5], outside the context box [0.0, 0.0] .. [1.0, 1.0]",
         ),
         (
             with("test_grid = { low = [0.0, 0.0], high = [1.0, 1.0], points = [0, 2] }"),
@@ -285,6 +289,13 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
         let message = refusal(&text);
         assert!(message.starts_with(expected), "{text}\n{message}\nexpected: {expected}");
     }
+    // A long value is shown by its start and length, not echoed whole.
+    let long = format!("{:?}", vec![0.0; 65]);
+    let message = refusal(&valid.replace("theta0 = [0.0, 0.0]", &format!("theta0 = {long}")));
+    assert!(
+        message.ends_with(&format!("got {} ... ({} characters)", &long[..120], long.len())),
+        "{message}"
+    );
     // The default name is the file's stem, which must be a valid name too.
     let file = LoadedFile::parse(Path::new("my bowl.toml"), valid.into()).unwrap();
     let message = Plan::new(Some(&file), &ExperimentFile::default())
@@ -296,6 +307,38 @@ fn bad_problem_files_are_refused_naming_file_line_key_and_range() {
             && message.ends_with("got \"my bowl\" (the file's name: set problem.name)"),
         "{message}"
     );
+}
+
+#[test]
+fn files_too_large_or_not_regular_are_refused_without_reading_them() {
+    let dir = temp_dir("file-limits");
+    std::fs::create_dir_all(&*dir).unwrap();
+    let large = dir.join("large.toml");
+    // A valid start, then comments beyond the limit: refused by its size, before parsing.
+    let mut text = String::from("runs = 1\n");
+    while text.len() as u64 <= acps_experiments::file::MAX_FILE_BYTES {
+        text += "# padding padding padding padding padding padding padding padding padding\n";
+    }
+    std::fs::write(&large, &text).unwrap();
+    let fifo = dir.join("fifo.toml");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    for (file, reason) in [
+        (&large, format!("{} bytes, more than the 16 MiB", text.len())),
+        (&fifo, "not a regular file".to_string()),
+    ] {
+        // Under the watchdog: reading the FIFO would block for ever.
+        let output = watched()
+            .args(["run", "--config", file.to_str().unwrap(), "--workers", "0"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(&format!("{}: cannot read", file.display())) && stderr.contains(&reason),
+            "{stderr}"
+        );
+    }
 }
 
 #[test]
