@@ -81,7 +81,7 @@ pub(crate) fn out(text: &str) -> anyhow::Result<()> {
     let mut stdout = std::io::stdout().lock();
     match stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush()) {
         Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Err(Stopped::Closed.into()),
-        written => Ok(written?),
+        written => Ok(written.context("writing to standard output")?),
     }
 }
 

@@ -1,7 +1,7 @@
 //! The `acps experiment` command-line contract: files written, summary.json fields, and errors
 //! that name the bad option.
 
-use crate::{acps, assert_clean, succeeded, temp_dir};
+use crate::{acps, assert_clean, succeeded, temp_dir, watched};
 use acps_wire::ipc::RunName;
 use std::path::Path;
 use std::process::Command;
@@ -1187,4 +1187,16 @@ fn a_closed_output_ends_a_command_quietly() {
         assert!(output.status.success(), "acps {args:?}: {} {stderr}", output.status);
     }
     assert!(out.join("summary.json").is_file(), "the run's record is whole");
+}
+
+#[test]
+fn a_full_output_is_an_error_naming_standard_output() {
+    let full = std::fs::File::options().write(true).open("/dev/full").unwrap();
+    let output = watched().arg("protocol").stdout(full).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.starts_with("error: writing to standard output: No space left on device"),
+        "{stderr}"
+    );
 }
