@@ -195,6 +195,16 @@ pub enum CCmaesRestoreError {
         /// This learner's.
         expected: String,
     },
+    /// A part of the state holds what no live learner does (a number that is not finite or
+    /// out of its range, a covariance its sampling factor does not give): a forged or damaged
+    /// checkpoint.
+    #[error(
+        "C-CMA-ES state: {what} holds values no learner could have saved (not finite, out of range, or not consistent)"
+    )]
+    Values {
+        /// Which part.
+        what: &'static str,
+    },
 }
 
 /// The constants of the strategy for one problem's dimensions.
@@ -525,8 +535,30 @@ impl CCmaes {
                 expected,
             );
         }
+        let finite = |values: &[f64]| values.iter().all(|x| x.is_finite());
+        let values = |what| Err(CCmaesRestoreError::Values { what });
+        if !(state.sigma.is_finite() && state.sigma > 0.0) {
+            return values("sigma");
+        }
+        if !(finite(state.p_sigma.as_slice()) && finite(state.p_c.as_slice())) {
+            return values("an evolution path");
+        }
+        if !state.feature_scale.iter().all(|s| s.is_finite() && *s >= 0.0) {
+            return values("the feature scales");
+        }
+        if !state
+            .rollouts
+            .iter()
+            .all(|r| finite(&r.features) && finite(&r.baseline) && finite(&r.theta) && r.reward.is_finite())
+        {
+            return values("a rollout of the generation");
+        }
+        if !finite(state.shape.as_slice()) {
+            return values("C");
+        }
         let covariance = &state.shape * (state.sigma * state.sigma);
-        self.policy = LinearGaussianPolicy::from_parts(state.weights, covariance, state.sampling_factor);
+        self.policy = LinearGaussianPolicy::from_saved(state.weights, covariance, state.sampling_factor)
+            .map_err(|what| CCmaesRestoreError::Values { what })?;
         self.generation = Generation {
             sigma: state.sigma,
             shape: state.shape,

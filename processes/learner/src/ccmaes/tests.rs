@@ -323,3 +323,42 @@ fn a_generation_in_one_context_keeps_what_it_cannot_see_of_the_others() {
         "{before:?} -> {after:?}"
     );
 }
+
+#[test]
+fn a_state_holding_what_no_learner_saves_is_refused_by_name() {
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let sphere = Sphere::new(4, 1, &mut rng);
+    let mut learner = CCmaes::new(CCmaesConfig::default(), 1, &[0.0; 4]).unwrap();
+    for _ in 0..40 {
+        let s = [rng.random_range(1.0..2.0)];
+        let theta = learner.sample(&s, &mut rng);
+        learner.record(&s, &theta, sphere.reward(&theta, &s));
+    }
+    let saved = learner.state();
+    // Each forgery is what a checkpoint with its checksum recomputed could carry.
+    let forgeries: [(&str, fn(&mut CCmaesState)); 6] = [
+        ("sigma", |s| s.sigma = f64::NAN),
+        ("sigma", |s| s.sigma = -1.0),
+        ("an evolution path", |s| s.p_c[0] = f64::INFINITY),
+        ("a rollout of the generation", |s| s.rollouts[0].reward = f64::NAN),
+        ("C", |s| s.shape[(1, 1)] = f64::NAN),
+        ("the covariance and its sampling factor", |s| s.shape[(1, 1)] = 1e300),
+    ];
+    for (what, forge) in forgeries {
+        let mut state = saved.clone();
+        forge(&mut state);
+        let mut fresh = CCmaes::new(CCmaesConfig::default(), 1, &[0.0; 4]).unwrap();
+        let before = fresh.state();
+        let error = fresh.restore(state).unwrap_err().to_string();
+        assert_eq!(
+            error,
+            format!(
+                "C-CMA-ES state: {what} holds values no learner could have saved (not finite, out of range, or not consistent)"
+            )
+        );
+        assert_eq!(fresh.state(), before, "{what}");
+    }
+    let mut fresh = CCmaes::new(CCmaesConfig::default(), 1, &[0.0; 4]).unwrap();
+    fresh.restore(saved.clone()).unwrap();
+    assert_eq!(fresh.state(), saved);
+}

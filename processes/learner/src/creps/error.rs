@@ -98,6 +98,13 @@ pub enum CRepsRestoreError {
         /// This policy's Sigma shape, (n_theta, n_theta).
         expected_covariance: (usize, usize),
     },
+    /// A part of the state holds what no live learner does (a number that is not finite, a
+    /// covariance its sampling factor does not give): a forged or damaged checkpoint.
+    #[error("C-REPS state: {what} holds values no learner could have saved (not finite, or not consistent)")]
+    Values {
+        /// Which part.
+        what: &'static str,
+    },
     /// The saved sample memory is of another kind or size, or holds samples of other widths;
     /// says which.
     #[error("C-REPS state: the saved memory is {0}")]

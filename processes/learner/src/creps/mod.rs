@@ -436,7 +436,19 @@ impl CReps {
                 update_every: self.config.update_every,
             });
         }
-        self.policy = LinearGaussianPolicy::from_parts(state.weights, state.covariance, state.sampling_factor);
+        let finite = |values: &[f64]| values.iter().all(|x| x.is_finite());
+        if !state.memory.samples().all(|sample| {
+            finite(&sample.context)
+                && finite(sample.features.as_slice())
+                && finite(sample.theta.as_slice())
+                && sample.reward.is_finite()
+        }) {
+            return Err(CRepsRestoreError::Values {
+                what: "a remembered rollout",
+            });
+        }
+        self.policy = LinearGaussianPolicy::from_saved(state.weights, state.covariance, state.sampling_factor)
+            .map_err(|what| CRepsRestoreError::Values { what })?;
         self.memory = state.memory;
         self.since_update = state.since_update;
         self.dropped = state.dropped;

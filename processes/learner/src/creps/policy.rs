@@ -68,13 +68,34 @@ impl LinearGaussianPolicy {
         })
     }
 
-    /// A policy from saved parts, unchecked (restoring a checkpoint).
-    pub(crate) fn from_parts(weights: DMatrix<f64>, covariance: DMatrix<f64>, sampling_factor: DMatrix<f64>) -> Self {
-        Self {
+    /// A policy from saved parts (restoring a checkpoint), kept bit for bit, when they are what a
+    /// live learner holds: every number finite and the sampling factor's `F F^T` the covariance
+    /// (to 1e-6 of its largest entry; rounding leaves 1e-12). Else names the part that is not: a
+    /// NaN had made a resumed run loop for ever, a 1e300 run on to another result.
+    pub(crate) fn from_saved(
+        weights: DMatrix<f64>,
+        covariance: DMatrix<f64>,
+        sampling_factor: DMatrix<f64>,
+    ) -> Result<Self, &'static str> {
+        for (what, matrix) in [
+            ("W", &weights),
+            ("the covariance", &covariance),
+            ("the sampling factor", &sampling_factor),
+        ] {
+            if !matrix.iter().all(|x| x.is_finite()) {
+                return Err(what);
+            }
+        }
+        let product = &sampling_factor * sampling_factor.transpose();
+        let largest = covariance.amax();
+        if !(&product - &covariance).amax().le(&(1e-6 * largest)) || !product.iter().all(|x| x.is_finite()) {
+            return Err("the covariance and its sampling factor");
+        }
+        Ok(Self {
             weights,
             covariance,
             sampling_factor,
-        }
+        })
     }
 
     /// W, n_phi x n_theta.

@@ -295,3 +295,45 @@ fn bad_batches_and_settings_are_errors_naming_the_argument() {
     // The same batch with good settings updates.
     assert!(update(&policy, &batch, &UpdateSettings::default()).is_ok());
 }
+
+#[test]
+fn a_state_holding_what_no_learner_saves_is_refused_by_name() {
+    let config = CRepsConfig {
+        update_every: 10,
+        ..CRepsConfig::default()
+    };
+    let mut creps = CReps::new(config.clone(), 1, &[0.1, 0.2], 1).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for i in 0..25 {
+        let context = [i as f64 / 25.0];
+        let theta = creps.sample(&context, &mut rng);
+        creps.record(0, &context, &theta, -(theta[0] - context[0]).powi(2));
+    }
+    let saved = creps.state();
+    let forgeries: [(&str, fn(&mut CRepsState)); 4] = [
+        ("W", |s| s.weights[(0, 1)] = f64::NAN),
+        ("the covariance", |s| s.covariance[(0, 0)] = f64::NEG_INFINITY),
+        ("the covariance and its sampling factor", |s| {
+            s.covariance[(1, 1)] = 1e300
+        }),
+        ("a remembered rollout", |s| match &mut s.memory {
+            Memory::Window { samples, .. } => samples[0].reward = f64::NAN,
+            Memory::PerTask { .. } => unreachable!("the default memory is a window"),
+        }),
+    ];
+    for (what, forge) in forgeries {
+        let mut state = saved.clone();
+        forge(&mut state);
+        let mut fresh = CReps::new(config.clone(), 1, &[0.1, 0.2], 1).unwrap();
+        let before = fresh.state();
+        let error = fresh.restore(state).unwrap_err().to_string();
+        assert_eq!(
+            error,
+            format!("C-REPS state: {what} holds values no learner could have saved (not finite, or not consistent)")
+        );
+        assert_eq!(fresh.state(), before, "{what}");
+    }
+    let mut fresh = CReps::new(config, 1, &[0.1, 0.2], 1).unwrap();
+    fresh.restore(saved.clone()).unwrap();
+    assert_eq!(fresh.state(), saved);
+}
