@@ -324,6 +324,9 @@ fn a_generation_in_one_context_keeps_what_it_cannot_see_of_the_others() {
     );
 }
 
+/// What a forged state says is wrong, and how it was forged.
+type Forgery = (&'static str, fn(&mut CCmaesState));
+
 #[test]
 fn a_state_holding_what_no_learner_saves_is_refused_by_name() {
     let mut rng = ChaCha8Rng::seed_from_u64(6);
@@ -336,7 +339,7 @@ fn a_state_holding_what_no_learner_saves_is_refused_by_name() {
     }
     let saved = learner.state();
     // Each forgery is what a checkpoint with its checksum recomputed could carry.
-    let forgeries: [(&str, fn(&mut CCmaesState)); 6] = [
+    let forgeries: [Forgery; 6] = [
         ("sigma", |s| s.sigma = f64::NAN),
         ("sigma", |s| s.sigma = -1.0),
         ("an evolution path", |s| s.p_c[0] = f64::INFINITY),

@@ -296,6 +296,9 @@ fn bad_batches_and_settings_are_errors_naming_the_argument() {
     assert!(update(&policy, &batch, &UpdateSettings::default()).is_ok());
 }
 
+/// What a forged state says is wrong, and how it was forged.
+type Forgery = (&'static str, fn(&mut CRepsState));
+
 #[test]
 fn a_state_holding_what_no_learner_saves_is_refused_by_name() {
     let config = CRepsConfig {
@@ -310,7 +313,7 @@ fn a_state_holding_what_no_learner_saves_is_refused_by_name() {
         creps.record(0, &context, &theta, -(theta[0] - context[0]).powi(2));
     }
     let saved = creps.state();
-    let forgeries: [(&str, fn(&mut CRepsState)); 4] = [
+    let forgeries: [Forgery; 4] = [
         ("W", |s| s.weights[(0, 1)] = f64::NAN),
         ("the covariance", |s| s.covariance[(0, 0)] = f64::NEG_INFINITY),
         ("the covariance and its sampling factor", |s| {
