@@ -264,11 +264,31 @@ pub enum NetError {
 
 impl NetError {
     pub(crate) fn zenoh(what: impl Into<String>, reason: impl std::fmt::Display) -> Self {
+        let mut reason = without_sources(&reason.to_string());
+        if reason.contains("Address already in use") {
+            reason += ": another program listens there (another acps run?); stop it or choose another port";
+        }
         Self::Zenoh {
             what: what.into(),
-            reason: reason.to_string(),
+            reason,
         }
     }
+}
+
+/// Zenoh's message without the places in Zenoh's sources it adds (" at /root/.cargo/...rs:61."),
+/// which tell a user nothing.
+fn without_sources(text: &str) -> String {
+    let mut shown = String::new();
+    let mut rest = text;
+    while let Some(at) = rest.find(" at ") {
+        let after = &rest[at + 4..];
+        let end = after.find([' ', ']']).unwrap_or(after.len());
+        let source = after[..end].contains(".rs:");
+        shown.push_str(&rest[..if source { at } else { at + 4 }]);
+        rest = if source { &after[end..] } else { after };
+    }
+    shown.push_str(rest);
+    shown
 }
 
 /// Why `tls/` endpoints are refused, and what to use instead.
@@ -395,6 +415,18 @@ pub(crate) fn host_name() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zenoh_s_reasons_lose_its_source_places_and_an_address_in_use_says_what_to_do() {
+        // As Zenoh 1.10 reported a second learner listening on a taken port.
+        let reason = "Can not create a new TCP listener bound to tcp/127.0.0.1:17931: [127.0.0.1:17931: Address already in use (os error 98) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-tcp-1.10.2/src/unicast.rs:338.";
+        assert_eq!(
+            NetError::zenoh("opening the network session on tcp/127.0.0.1:17931", reason).to_string(),
+            "opening the network session on tcp/127.0.0.1:17931: Can not create a new TCP listener bound to tcp/127.0.0.1:17931: [127.0.0.1:17931: Address already in use (os error 98)]: another program listens there (another acps run?); stop it or choose another port"
+        );
+        // " at " in words stays.
+        assert_eq!(without_sources("look at me at home"), "look at me at home");
+    }
 
     #[test]
     fn endpoints_are_checked_naming_what_is_wrong() {
