@@ -275,7 +275,7 @@ impl NetError {
     }
 }
 
-/// Zenoh's message without the places in Zenoh's sources it adds (" at /root/.cargo/...rs:61."),
+/// Zenoh's message without the places in Zenoh's sources it adds (" at $CARGO_HOME/...rs:61."),
 /// which tell a user nothing.
 fn without_sources(text: &str) -> String {
     let mut shown = String::new();
@@ -419,7 +419,7 @@ mod tests {
     #[test]
     fn zenoh_s_reasons_lose_its_source_places_and_an_address_in_use_says_what_to_do() {
         // As Zenoh 1.10 reported a second learner listening on a taken port.
-        let reason = "Can not create a new TCP listener bound to tcp/127.0.0.1:17931: [127.0.0.1:17931: Address already in use (os error 98) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-tcp-1.10.2/src/unicast.rs:338.";
+        let reason = "Can not create a new TCP listener bound to tcp/127.0.0.1:17931: [127.0.0.1:17931: Address already in use (os error 98) at $CARGO_HOME/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at $CARGO_HOME/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-tcp-1.10.2/src/unicast.rs:338.";
         assert_eq!(
             NetError::zenoh("opening the network session on tcp/127.0.0.1:17931", reason).to_string(),
             "opening the network session on tcp/127.0.0.1:17931: Can not create a new TCP listener bound to tcp/127.0.0.1:17931: [127.0.0.1:17931: Address already in use (os error 98)]: another program listens there (another acps run?); stop it or choose another port"
