@@ -690,9 +690,13 @@ impl Holders {
     /// task, or held it before the task was re-issued.
     fn answered(&mut self, job: u32, task_id: u64, client: Client) -> bool {
         let key = (job, task_id);
-        if self.current.get(&key) == Some(&client) {
-            self.current.remove(&key);
-            return true;
+        // One lookup for the usual answer, from the holder; a stranger's costs a second.
+        match self.current.remove(&key) {
+            Some(holder) if holder == client => return true,
+            Some(holder) => {
+                self.current.insert(key, holder);
+            }
+            None => {}
         }
         self.former.get(&key).is_some_and(|former| former.contains(&client))
     }

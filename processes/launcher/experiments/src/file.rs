@@ -3,6 +3,7 @@
 //! resolved file of a run (`config.toml`), which re-runs it bit for bit.
 
 use crate::keys::{ConfigError, Invalid, Problem};
+use crate::regular::{Unread, read_regular};
 use crate::settings::{ExperimentFile, key, keys};
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -14,37 +15,17 @@ use std::path::{Path, PathBuf};
 /// so a file of 100 MB had taken gigabytes before any limit was checked.
 pub const MAX_FILE_BYTES: u64 = 16 << 20;
 
-/// The text of the regular file at `path`, of at most [`MAX_FILE_BYTES`]: a FIFO or a device
-/// would block or never end.
+/// The text of the regular file at `path`, of at most [`MAX_FILE_BYTES`].
 fn read_text(path: &Path) -> std::io::Result<String> {
-    use std::io::Read;
-    let not_regular = || std::io::Error::other("not a regular file (a folder, a FIFO or a device)");
-    // Before opening: opening a FIFO blocks until something writes to it.
-    if !std::fs::metadata(path)?.is_file() {
-        return Err(not_regular());
-    }
-    let file = std::fs::File::open(path)?;
-    let metadata = file.metadata()?;
-    if !metadata.is_file() {
-        return Err(not_regular());
-    }
-    let too_large = |bytes: u64| {
-        std::io::Error::other(format!(
+    read_regular(path, MAX_FILE_BYTES).map_err(|unread| match unread {
+        Unread::Special(kind) => std::io::Error::other(format!("not a regular file but a {kind}")),
+        Unread::TooLarge(bytes) => std::io::Error::other(format!(
             "{bytes} bytes, more than the {} MiB an experiment or problem file may have (100,000 \
              points of 8 coordinates): use a context grid (training_grid, test_grid) for more",
             MAX_FILE_BYTES >> 20
-        ))
-    };
-    if metadata.len() > MAX_FILE_BYTES {
-        return Err(too_large(metadata.len()));
-    }
-    let mut text = String::new();
-    // A file that grows while read is cut at the limit and refused.
-    file.take(MAX_FILE_BYTES + 1).read_to_string(&mut text)?;
-    if text.len() as u64 > MAX_FILE_BYTES {
-        return Err(too_large(text.len() as u64));
-    }
-    Ok(text)
+        )),
+        Unread::Io(error) => error,
+    })
 }
 
 /// A value as written in a file, for an error: its start and its length when it is long (a list

@@ -21,6 +21,7 @@ pub mod plan;
 pub mod problem_file;
 pub mod progress;
 pub mod records;
+mod regular;
 pub mod run_dir;
 pub mod settings;
 pub mod summary;

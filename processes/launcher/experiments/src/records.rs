@@ -17,6 +17,7 @@
 //!
 //! Empty CSV fields mean "no value" (an evaluation whose rollouts all failed).
 
+use crate::regular::{self, Unread};
 use crate::settings::LearnerName;
 use crate::summary::{RunResult, Summary, UserProblem};
 use acps_learner::SearchReport;
@@ -331,59 +332,20 @@ fn check_problem(problem: &Problem) -> Result<(), (&'static str, String)> {
 /// hundred thousand contexts); a larger file is refused before it is read into memory.
 const MAX_POLICY_BYTES: u64 = 256 << 20;
 
-/// What a file that is neither a directory nor a regular file is, for messages.
-fn special_kind(file_type: &std::fs::FileType) -> &'static str {
-    use std::os::unix::fs::FileTypeExt;
-    if file_type.is_fifo() {
-        "named pipe (FIFO)"
-    } else if file_type.is_char_device() {
-        "character device"
-    } else if file_type.is_block_device() {
-        "block device"
-    } else if file_type.is_socket() {
-        "socket"
-    } else if file_type.is_dir() {
-        "directory"
-    } else {
-        "special file"
-    }
-}
-
-/// The text of the regular file `path`, refusing anything else without blocking or reading it:
-/// a FIFO would block a plain open until a writer comes, a device could stream forever.
+/// The text of the policy file `path` ([`regular::read_regular`]).
 fn read_regular(path: &Path) -> Result<String, RecordsError> {
-    use std::io::Read as _;
-    use std::os::unix::fs::OpenOptionsExt;
-    let check = |metadata: std::fs::Metadata| {
-        if !metadata.is_file() {
-            return Err(RecordsError::Special {
-                path: path.to_path_buf(),
-                kind: special_kind(&metadata.file_type()),
-                expected: "policy file",
-            });
-        }
-        if metadata.len() > MAX_POLICY_BYTES {
-            return Err(RecordsError::TooLarge {
-                path: path.to_path_buf(),
-                len: metadata.len(),
-            });
-        }
-        Ok(())
-    };
-    // Look before opening (opening a socket fails, opening a device may act on it), then check
-    // what was opened, in case the path was replaced in between.
-    check(std::fs::metadata(path).map_err(io("reading", path))?)?;
-    let file = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(io("reading", path))?;
-    check(file.metadata().map_err(io("reading", path))?)?;
-    let mut text = String::new();
-    file.take(MAX_POLICY_BYTES)
-        .read_to_string(&mut text)
-        .map_err(io("reading", path))?;
-    Ok(text)
+    regular::read_regular(path, MAX_POLICY_BYTES).map_err(|unread| match unread {
+        Unread::Special(kind) => RecordsError::Special {
+            path: path.to_path_buf(),
+            kind,
+            expected: "policy file",
+        },
+        Unread::TooLarge(len) => RecordsError::TooLarge {
+            path: path.to_path_buf(),
+            len,
+        },
+        Unread::Io(source) => io("reading", path)(source),
+    })
 }
 
 /// Write the CSV tables and the policy files of `summary` into `dir` (which exists).
@@ -581,7 +543,7 @@ pub fn policy_file(dir: &Path, method: Option<&str>, run: Option<usize>) -> Resu
     if !metadata.is_dir() {
         return Err(RecordsError::Special {
             path: dir.to_path_buf(),
-            kind: special_kind(&metadata.file_type()),
+            kind: regular::special_kind(&metadata.file_type()),
             expected: "run directory or a policy file",
         });
     }

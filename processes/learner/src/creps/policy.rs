@@ -87,8 +87,8 @@ impl LinearGaussianPolicy {
             }
         }
         let product = &sampling_factor * sampling_factor.transpose();
-        let largest = covariance.amax();
-        if !(&product - &covariance).amax().le(&(1e-6 * largest)) || !product.iter().all(|x| x.is_finite()) {
+        let gap = (&product - &covariance).amax();
+        if !product.iter().all(|x| x.is_finite()) || gap > 1e-6 * covariance.amax() {
             return Err("the covariance and its sampling factor");
         }
         Ok(Self {
