@@ -22,14 +22,17 @@ use std::time::Duration;
 /// The environment variable that tells a worker process the fleet started which run to join
 /// (read it with [`RunName::from_env`]).
 pub use acps_wire::ipc::RUN_ENV;
+use acps_wire::secret::RunSecret;
+/// The environment variable that gives a worker process the fleet started the run's secret.
+pub use acps_wire::secret::SECRET_ENV;
 
 /// Set by the Ctrl-C handler of [`FleetBuilder::ctrl_c`]; one per process, as the handler is.
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 /// Whether the handler could be installed (once per process).
 static CTRL_C: OnceLock<Result<(), String>> = OnceLock::new();
 
-/// Builds the command of worker process `index` (from 0). The fleet adds [`RUN_ENV`], a null
-/// stdin and the niceness.
+/// Builds the command of worker process `index` (from 0). The fleet adds [`RUN_ENV`],
+/// [`SECRET_ENV`], a null stdin and the niceness.
 type WorkerCommand = Box<dyn Fn(usize) -> Command>;
 
 /// The worker processes a fleet starts for every [`Fleet::serve`].
@@ -59,6 +62,7 @@ struct Spawn {
 #[must_use]
 pub struct FleetBuilder {
     run: RunName,
+    secret: Option<RunSecret>,
     identity: Option<u64>,
     spawn: Option<(usize, WorkerCommand)>,
     nice: Option<u8>,
@@ -101,8 +105,17 @@ impl FleetBuilder {
         self
     }
 
+    /// The run's secret, which every worker's messages must carry. Default: 16 fresh random
+    /// bytes. Set it only to hand workers the fleet does not start a secret made beforehand;
+    /// [`Fleet::secret`] tells any fleet's.
+    pub fn secret(mut self, secret: RunSecret) -> Self {
+        self.secret = Some(secret);
+        self
+    }
+
     /// Start `count` worker processes for every [`Fleet::serve`], each from `command(index)`.
-    /// The fleet tells them the run in the [`RUN_ENV`] environment variable, gives them a null
+    /// The fleet tells them the run and its secret in the [`RUN_ENV`] and [`SECRET_ENV`]
+    /// environment variables, gives them a null
     /// stdin, and lowers their priority (see [`worker_niceness`](Self::worker_niceness)). Without
     /// this the fleet starts none and serves the workers that join (then it waits for them,
     /// unless [`Liveness::no_workers`] is set).
@@ -220,8 +233,12 @@ impl FleetBuilder {
         // Listing nodes can fail while one is being created or removed; the next start looks
         // again.
         let _ = ipc::clean_stale(&run);
+        let secret = match self.secret {
+            Some(secret) => secret,
+            None => RunSecret::generate(&run).map_err(ServerError::from)?,
+        };
         // Before any worker starts: those of a refused fleet would join the other learner.
-        let seat = Seat::take(&run)?;
+        let seat = Seat::take(&run, secret)?;
         let workers = self.spawn.as_ref().map_or(0, |(count, _)| *count);
         let mut liveness = self.liveness.unwrap_or(Liveness {
             no_workers: (workers > 0).then_some(Liveness::default().no_workers).flatten(),
@@ -239,6 +256,7 @@ impl FleetBuilder {
         Ok(Fleet {
             seat: Some(seat),
             run: OwnedRun(run),
+            secret,
             identity: self.identity,
             spin: self.spin.unwrap_or_else(|| processes::spin(workers)),
             spawn: self.spawn.map(|(count, command)| Spawn {
@@ -276,6 +294,7 @@ pub struct Fleet {
     /// Dropped before `run`: the learner's node must be gone before the run's files are removed.
     seat: Option<Seat>,
     run: OwnedRun,
+    secret: RunSecret,
     identity: Option<u64>,
     spawn: Option<Spawn>,
     liveness: Liveness,
@@ -291,6 +310,7 @@ impl Fleet {
     pub fn builder(run: RunName) -> FleetBuilder {
         FleetBuilder {
             run,
+            secret: None,
             identity: None,
             spawn: None,
             nice: None,
@@ -305,6 +325,13 @@ impl Fleet {
     /// The run's name.
     pub fn run(&self) -> &RunName {
         &self.run.0
+    }
+
+    /// The run's secret. Workers the fleet starts get it in [`SECRET_ENV`]; workers started by
+    /// hand read it from [`RunSecret::path`], which the fleet writes while it serves. Give it to
+    /// workers you start by other means in [`SECRET_ENV`].
+    pub fn secret(&self) -> RunSecret {
+        self.secret
     }
 
     /// A flag that stops [`serve`](Self::serve) with [`FleetError::Interrupted`] when set, from
@@ -364,10 +391,10 @@ impl Fleet {
         // The seat taken at start, or, for a fleet that served before, the seat again.
         let seat = match self.seat.take() {
             Some(seat) => seat,
-            None => Seat::take(&self.run.0)?,
+            None => Seat::take(&self.run.0, self.secret)?,
         };
         let mut children = match &self.spawn {
-            Some(spawn) => start_workers(&self.run.0, spawn)?,
+            Some(spawn) => start_workers(&self.run.0, self.secret, spawn)?,
             None => Vec::new(),
         };
         let launched = children.len();
@@ -459,13 +486,16 @@ fn shown(command: Command) -> String {
         .join(" ")
 }
 
-/// Start `spawn`'s worker processes for `run`.
-fn start_workers(run: &RunName, spawn: &Spawn) -> Result<Vec<Child>, FleetError> {
+/// Start `spawn`'s worker processes for `run`, whose secret is `secret`.
+fn start_workers(run: &RunName, secret: RunSecret, spawn: &Spawn) -> Result<Vec<Child>, FleetError> {
     let nice = spawn.nice;
     let mut children = Vec::with_capacity(spawn.count);
     for index in 0..spawn.count {
         let mut command = (spawn.command)(index);
-        command.env(RUN_ENV, run.as_str()).stdin(Stdio::null());
+        command
+            .env(RUN_ENV, run.as_str())
+            .env(SECRET_ENV, secret.to_hex())
+            .stdin(Stdio::null());
         // SAFETY: the closure runs in the child between fork and exec, and only makes a
         // syscall (setpriority is async-signal-safe); its failure leaves the niceness as is.
         unsafe {

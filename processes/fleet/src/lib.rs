@@ -20,7 +20,8 @@ mod wake;
 /// The progress [`TaskSource::learning`] reports.
 pub use acps_learner::LearningProgress;
 pub use acps_wire::ipc::{RunName, RunNameParseError, ServerError};
-pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV};
+pub use acps_wire::secret::{RunSecret, SecretError};
+pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV, SECRET_ENV};
 pub use server::{
     FleetError, FleetJob, FleetJobBuildError, FleetProgress, ForwardError, ForwardingSource, Learners, Liveness,
     ObserveError, Observer, PeerId, Remote, RemoteEvent, RemoteServeError, ServeOptions, TaskSource,

@@ -31,6 +31,7 @@ use crate::wake::Waker;
 use acps_learner::{Learner, LearningProgress};
 use acps_shared::{EnvironmentSpec, Outcome, Serves, SpecBuildError, Task};
 use acps_wire::ipc::{self, IpcError, RunName, ServerError, TICK, TaskRequest, TaskServer, TaskService};
+use acps_wire::secret::RunSecret;
 use acps_wire::wire::{
     Answer, CapacityError, PROTOCOL_VERSION, Refusal, Response, Sizes, WireTask, WorkerMessage, check_task_sizes,
 };
@@ -645,17 +646,24 @@ pub(crate) struct Seat {
     server: TaskServer,
     services: ipc::Services,
     _node: iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>,
+    secret: RunSecret,
 }
 
 impl Seat {
-    /// Take the seat of `run`, refused while another learner holds it.
-    pub(crate) fn take(run: &RunName) -> Result<Self, ServerError> {
+    /// Take the seat of `run`, refused while another learner holds it, and publish the run's
+    /// `secret` for workers started by hand: once the seat is this learner's, so that the secret
+    /// of another learner of the name is never replaced. (Written again by each serve: between
+    /// serves the run has no node, and another fleet's start may remove its files.)
+    pub(crate) fn take(run: &RunName, secret: RunSecret) -> Result<Self, ServerError> {
         let node = ipc::node(run, ipc::LEARNER_NODE)?;
         let services = ipc::open_services(&node)?;
+        let server = ipc::task_server(run, &services.tasks)?;
+        secret.publish(run)?;
         Ok(Self {
-            server: ipc::task_server(run, &services.tasks)?,
+            server,
             services,
             _node: node,
+            secret,
         })
     }
 }
@@ -849,11 +857,11 @@ pub(crate) fn serve<'r>(
             }
             let message = request.payload();
             slowest_rollout = slowest_rollout.max(message.slowest_rollout());
-            let serves = match admit(message, identity, source) {
+            let serves = match admit(message, &seat.secret, identity, source) {
                 Ok(serves) => serves,
                 Err(mismatch) => {
                     progress.refused += 1;
-                    let (answer, reason) = refusal(&mismatch, identity, source);
+                    let (answer, reason) = refusal(&mismatch, run, identity, source);
                     if refused_clients.insert(request.origin()) {
                         tracing::warn!("refused a worker of run '{run}': {reason}");
                         source.refused(&reason);
@@ -1266,6 +1274,8 @@ fn reissue_tasks_of_silent_workers(
 enum Mismatch {
     /// Another protocol version.
     Protocol(u32),
+    /// Not the run's secret: a process that was not given it.
+    Secret,
     /// Another run identity.
     Run(u64),
     /// An environment none of the jobs needs, and how the worker described it (with the
@@ -1284,9 +1294,17 @@ enum Mismatch {
 
 /// What a request's worker serves, if the learner accepts it: this build's protocol, this run
 /// (or any), and an environment some job needs (or any).
-fn admit(message: &WorkerMessage, identity: u64, source: &dyn TaskSource) -> Result<Serves, Mismatch> {
+fn admit(
+    message: &WorkerMessage,
+    secret: &RunSecret,
+    identity: u64,
+    source: &dyn TaskSource,
+) -> Result<Serves, Mismatch> {
     if message.protocol != PROTOCOL_VERSION {
         return Err(Mismatch::Protocol(message.protocol));
+    }
+    if !secret.matches(&message.secret) {
+        return Err(Mismatch::Secret);
     }
     if message.run != 0 && message.run != identity {
         return Err(Mismatch::Run(message.run));
@@ -1313,7 +1331,7 @@ fn admit(message: &WorkerMessage, identity: u64, source: &dyn TaskSource) -> Res
 /// The answer refusing a worker for `mismatch`, and the reason in words, naming the worker's
 /// and the learner's environments. The answer names one environment the jobs need, preferably
 /// one of the worker's environment's name: the closest description of what it should be.
-fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answer, String) {
+fn refusal(mismatch: &Mismatch, run: &RunName, identity: u64, source: &dyn TaskSource) -> (Answer, String) {
     let mut needed: Vec<EnvironmentSpec> = Vec::new();
     for job in 0..source.jobs() {
         let environment = source.environment(job);
@@ -1330,6 +1348,7 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
     let answer = match mismatch {
         Mismatch::Protocol(_) => Answer::refused(Refusal::Protocol, identity, closest, needed.len()),
         Mismatch::Run(_) => Answer::refused(Refusal::Run, identity, closest, needed.len()),
+        Mismatch::Secret => Answer::refused(Refusal::Secret, identity, None, 0),
         Mismatch::Environment(..) | Mismatch::Unreadable(_) => {
             Answer::refused(Refusal::Environment, identity, closest, needed.len())
         }
@@ -1338,6 +1357,10 @@ fn refusal(mismatch: &Mismatch, identity: u64, source: &dyn TaskSource) -> (Answ
     let reason = match mismatch {
         Mismatch::Protocol(protocol) => format!("protocol {protocol} (ours {PROTOCOL_VERSION})"),
         Mismatch::Run(run) => format!("run identity {run:016x} (ours {identity:016x})"),
+        Mismatch::Secret => format!(
+            "its messages do not carry the run's secret (a process the run did not start, or one started by hand that did not read {})",
+            RunSecret::path(run).display()
+        ),
         Mismatch::Environment(_, shown) => format!("it serves environment {shown}; the jobs need {}", answer.needs()),
         Mismatch::Unreadable(error) => format!(
             "its environment cannot be read ({error}); the jobs need {}",

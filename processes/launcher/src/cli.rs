@@ -298,8 +298,9 @@ pub(crate) struct StartedWorkers {
     pub(crate) worker_nice: WorkerNiceArg,
     /// Start the --workers W workers with this shell command instead of `acps worker`: your
     /// own simulator's worker, in any language (a problem file's problem needs it, or
-    /// --workers 0). Each runs as `sh -c "exec CMD"` with ACPS_RUN (the run's name) and
-    /// ACPS_WORKER_INDEX (0..W-1) set; --worker-queue-depth does not apply.
+    /// --workers 0). Each runs as `sh -c "exec CMD"` with ACPS_RUN (the run's name),
+    /// ACPS_RUN_SECRET (its secret) and ACPS_WORKER_INDEX (0..W-1) set; --worker-queue-depth
+    /// does not apply.
     #[arg(long, value_name = "CMD")]
     pub(crate) worker_command: Option<String>,
     /// Seconds the started workers may take to connect (1..=86400): a run whose workers are all

@@ -21,6 +21,8 @@ use acps_wire::ipc::{self, IpcError, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORK
 /// A run's name, which a worker joins by; [`RunName::from_env`] reads the one a fleet gives the
 /// worker processes it starts.
 pub use acps_wire::ipc::{RunName, RunNameParseError};
+/// A run's secret, and where a worker finds it.
+pub use acps_wire::secret::{RunSecret, SECRET_ENV, SecretError, SecretOrigin};
 pub use acps_wire::wire::Sizes;
 use acps_wire::wire::{
     self, Answer, CapacityError, MAX_BATCH, PROTOCOL_VERSION, Refusal, Response, WireEnvironment, WireOutcome,
@@ -166,6 +168,10 @@ pub enum WorkerError {
         /// Why, naming both sides' protocol versions, run identities or environments.
         reason: String,
     },
+    /// The run's secret could not be read: its file is not one this user's learner wrote, or
+    /// [`SECRET_ENV`] holds no secret.
+    #[error(transparent)]
+    Secret(Box<SecretError>),
     /// The environment returned an outcome the wire cannot carry (too many diagnostics).
     #[error("task {task_id} of job {job}: the outcome cannot be sent: {capacity}")]
     OutcomeTooLarge {
@@ -297,6 +303,7 @@ pub fn serve(
         // within a few milliseconds (a benchmark row lasts about a second).
         std::thread::sleep(JOIN_POLL);
     }
+    let (secret, origin) = find_secret(run, options, started, stop)?;
     tracing::info!("worker {} joins run '{run}'", options.name);
     let client = services
         .tasks
@@ -331,7 +338,10 @@ pub fn serve(
     // Outcomes not yet sent. Each request starts from one made once: making it looks up the
     // environment's settings text, which is no work for every request.
     let template = {
-        let message = WorkerMessage::request(0, 1, serves);
+        let mut message = WorkerMessage::request(0, 1, serves);
+        if let Some(secret) = secret {
+            message = message.carrying(secret);
+        }
         match options.sizes {
             Some(sizes) => message.declaring(sizes),
             None => message,
@@ -421,7 +431,7 @@ pub fn serve(
                     Some(Response::Refused) | None => {
                         return Err(WorkerError::Refused {
                             run: run.clone(),
-                            reason: refusal_reason(&answer, identity, &serves, options.sizes),
+                            reason: refusal_reason(&answer, identity, &serves, options.sizes, &origin),
                         });
                     }
                 }
@@ -564,9 +574,37 @@ fn batched_wrongly(tasks: &[Task], outcomes: &[Outcome]) -> Option<String> {
         })
 }
 
+/// The run's secret for this worker ([`RunSecret::for_worker`]), and where it came from. The
+/// learner writes its file just after it starts serving, so a worker started by hand that found
+/// the learner a moment earlier looks again for a little while before it goes on without one
+/// (then the learner refuses it, and the refusal says where it looked).
+fn find_secret(
+    run: &RunName,
+    options: &WorkerOptions,
+    started: Instant,
+    stop: &AtomicBool,
+) -> Result<(Option<RunSecret>, SecretOrigin), WorkerError> {
+    const PUBLISHED_WITHIN: Duration = Duration::from_secs(1);
+    let looking = Instant::now();
+    loop {
+        let found = RunSecret::for_worker(run).map_err(|error| WorkerError::Secret(Box::new(error)))?;
+        let waited_enough = looking.elapsed() >= PUBLISHED_WITHIN || started.elapsed() >= options.startup_timeout;
+        if found.0.is_some() || waited_enough || stop.load(Ordering::Relaxed) {
+            return Ok(found);
+        }
+        std::thread::sleep(JOIN_POLL);
+    }
+}
+
 /// Why the learner's `answer` refused this worker (of run `identity`, 0 before it learnt one,
-/// serving `serves` of `sizes`), naming both sides.
-fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves, sizes: Option<Sizes>) -> String {
+/// serving `serves` of `sizes`, with the secret from `origin`), naming both sides.
+fn refusal_reason(
+    answer: &Answer,
+    identity: u64,
+    serves: &Serves,
+    sizes: Option<Sizes>,
+    origin: &SecretOrigin,
+) -> String {
     if answer.protocol != PROTOCOL_VERSION {
         return format!(
             "protocol version {} here, {} at the learner (another build)",
@@ -574,6 +612,9 @@ fn refusal_reason(answer: &Answer, identity: u64, serves: &Serves, sizes: Option
         );
     }
     match answer.refusal() {
+        Some(Refusal::Secret) => format!(
+            "its messages do not carry the run's secret: {origin}; a worker started by hand reads the file the learner writes, or takes the secret in {SECRET_ENV}"
+        ),
         Some(Refusal::Environment) => {
             format!(
                 "this worker serves {}; the run's jobs need {}",

@@ -590,6 +590,9 @@ pub enum ServerError {
     /// iceoryx2 failed otherwise.
     #[error(transparent)]
     Ipc(#[from] IpcError),
+    /// The run's secret could not be made or written for its workers.
+    #[error(transparent)]
+    Secret(#[from] crate::secret::SecretError),
 }
 
 /// The server of `run`'s task service: its learner, the only one. Answers are sized to their

@@ -5,6 +5,7 @@
 //! drift apart. docs/PROTOCOL.md explains what they mean.
 
 use crate::ipc::{DEFAULT_QUEUE_DEPTH, LIMITS, MAX_ASKING_REQUESTS, MAX_IN_FLIGHT_PER_WORKER, MAX_WORKERS, RUN_ENV};
+use crate::secret::{SECRET_BYTES, SECRET_ENV};
 use crate::wire::{
     Answer, MAX_BATCH, MAX_CONTEXT, MAX_DIAGNOSTICS, MAX_SETTINGS_TEXT, MAX_THETA, PROTOCOL_VERSION, Refusal, Response,
     WireEnvironment, WireOutcome, WireTask, WorkerMessage,
@@ -132,6 +133,7 @@ pub fn describe() -> Value {
             field!(WorkerMessage, protocol, "u32"),
             field!(WorkerMessage, want, "u32"),
             field!(WorkerMessage, run, "u64"),
+            field!(WorkerMessage, secret, "u8", Some(SECRET_BYTES)),
             field!(WorkerMessage, count, "u32"),
             field!(WorkerMessage, slowest_rollout_us, "u32"),
             field!(WorkerMessage, serves_one, "u32"),
@@ -165,12 +167,15 @@ pub fn describe() -> Value {
             },
             "refusal": {
                 "protocol": Refusal::Protocol as u32, "run": Refusal::Run as u32,
-                "environment": Refusal::Environment as u32,
+                "environment": Refusal::Environment as u32, "sizes": Refusal::Sizes as u32,
+                "secret": Refusal::Secret as u32,
             },
         },
         "types": [environment, task, answer, outcome, message],
         "services": {
             "run_env": RUN_ENV,
+            "secret_env": SECRET_ENV,
+            "secret_file": "/dev/shm/acps_{run}_secret",
             "prefix": "acps_{run}_",
             "creation_timeout_ms": limits.creation_timeout.as_millis() as u64,
             "tasks": {
@@ -210,6 +215,16 @@ mod tests {
             assert_eq!(end, ty["size"].as_u64().unwrap(), "{} ends with padding", ty["name"]);
             assert!(ty["type_name"].as_str().unwrap().starts_with("acps::"), "{ty}");
         }
+    }
+
+    #[test]
+    fn the_secret_file_pattern_is_where_the_learner_writes() {
+        let run = crate::ipc::RunName::new("x").unwrap();
+        let pattern = describe()["services"]["secret_file"]
+            .as_str()
+            .unwrap()
+            .replace("{run}", "x");
+        assert_eq!(crate::secret::RunSecret::path(&run).to_str(), Some(pattern.as_str()));
     }
 
     #[test]

@@ -7,8 +7,10 @@
 //!   against (docs/PROTOCOL.md).
 //! - [`ipc`]: run names, the iceoryx2 services every side opens with the same limits, and the
 //!   removal of what dead processes left.
+//! - [`secret`]: the run's secret, which every worker message carries and the learner checks.
 #![warn(missing_docs)]
 
 pub mod ipc;
 pub mod layout;
+pub mod secret;
 pub mod wire;

@@ -10,12 +10,13 @@
 //! per batch instead of once per task. An answer is an [`Answer`] header over a slice of exactly
 //! the tasks it carries, written in place in shared memory.
 
+use crate::secret::{RunSecret, SECRET_BYTES};
 use acps_shared::{EnvironmentSpec, MAX_NAME, Outcome, OutcomeStatus, Serves, SpecBuildError, Task, TaskKind};
 use iceoryx2::prelude::ZeroCopySend;
 use std::time::Duration;
 
 /// Version of this wire format; bump on any change to the payloads or their meaning.
-pub const PROTOCOL_VERSION: u32 = 9;
+pub const PROTOCOL_VERSION: u32 = 10;
 /// Largest context a task can carry (docs/CHOICES.md: why 8).
 pub const MAX_CONTEXT: usize = 8;
 /// Largest parameter vector a task can carry.
@@ -128,6 +129,8 @@ pub enum Refusal {
     Environment = 3,
     /// The worker declared context or parameter lengths other than its jobs'.
     Sizes = 4,
+    /// The worker's messages do not carry the run's secret.
+    Secret = 5,
 }
 
 /// The lengths of a problem's contexts and parameters: what a worker may declare it serves,
@@ -243,6 +246,8 @@ pub struct WorkerMessage {
     pub want: u32,
     /// The run the worker means to join.
     pub run: u64,
+    /// The run's secret ([`crate::secret`]); zeros when the worker has none.
+    pub secret: [u8; SECRET_BYTES],
     /// Number of valid entries of `outcomes`.
     pub count: u32,
     /// The worker's slowest rollout so far, in microseconds (saturating): the learner waits at
@@ -429,6 +434,7 @@ impl Answer {
             2 => Some(Refusal::Run),
             3 => Some(Refusal::Environment),
             4 => Some(Refusal::Sizes),
+            5 => Some(Refusal::Secret),
             _ => None,
         }
     }
@@ -534,6 +540,7 @@ impl WorkerMessage {
             protocol: PROTOCOL_VERSION,
             want: want.min(MAX_BATCH) as u32,
             run,
+            secret: [0; SECRET_BYTES],
             count: 0,
             slowest_rollout_us: 0,
             serves_one: u32::from(spec.is_some()),
@@ -544,6 +551,12 @@ impl WorkerMessage {
             settings_text,
             outcomes: [EMPTY; MAX_BATCH],
         }
+    }
+
+    /// The same request carrying the run's `secret`.
+    pub fn carrying(mut self, secret: RunSecret) -> Self {
+        self.secret = secret.bytes();
+        self
     }
 
     /// The same request declaring that the worker serves `sizes` (contexts and parameters of
@@ -799,7 +812,7 @@ mod tests {
         assert_eq!(size_of::<WireEnvironment>(), 64);
         assert_eq!(size_of::<WireTask>(), 672);
         assert_eq!(size_of::<WireOutcome>(), 168);
-        assert_eq!(size_of::<WorkerMessage>(), 11_112);
+        assert_eq!(size_of::<WorkerMessage>(), 11_128);
         assert_eq!(size_of::<Answer>(), 360);
     }
 }

@@ -12,7 +12,8 @@ use acps_models::robot::Robot;
 use acps_models::throw::{Simulator, SpeedLimits, Targets, ThrowDesign, ThrowPolicy, ThrowingEnvironment};
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::{self, RunName};
-use acps_wire::wire::{self, Answer, Response, Sizes, WorkerMessage};
+use acps_wire::secret::{RunSecret, SecretOrigin};
+use acps_wire::wire::{self, Answer, Refusal, Response, Sizes, WorkerMessage};
 use acps_worker::{EnvironmentFactory, EnvironmentProvideError, Single, WorkerError, WorkerExit, WorkerOptions};
 use iceoryx2::prelude::PortFactory as _;
 use std::os::unix::process::CommandExt;
@@ -629,9 +630,14 @@ fn workers_of_another_build_run_or_environment_are_refused_and_an_embedded_worke
             ..WorkerMessage::request(0, 1, Serves::Any)
         };
         assert_eq!(ask(wrong_protocol).response(), Some(Response::Refused));
-        let wrong_run = WorkerMessage::request(0x1234_5678, 1, Serves::Any);
+        // Without the run's secret: refused as a stranger, before anything else is looked at.
+        let answer = ask(WorkerMessage::request(0, 1, Serves::Any));
+        assert_eq!(answer.refusal(), Some(Refusal::Secret));
+        let (secret, origin) = RunSecret::for_worker(&run).unwrap();
+        assert_eq!(origin, SecretOrigin::File(RunSecret::path(&run)));
+        let wrong_run = WorkerMessage::request(0x1234_5678, 1, Serves::Any).carrying(secret.unwrap());
         let answer = ask(wrong_run);
-        assert_eq!(answer.response(), Some(Response::Refused));
+        assert_eq!(answer.refusal(), Some(Refusal::Run));
         assert_ne!(answer.run, 0x1234_5678, "the refusal carries the learner's identity");
     }
 
@@ -1683,15 +1689,69 @@ fn bad_worker_and_run_names_are_refused_naming_the_flag_and_what_names_may_be() 
 }
 
 #[test]
-fn outcomes_from_a_process_that_holds_no_task_are_dropped_and_change_nothing() {
+fn outcomes_of_processes_without_the_secret_or_without_the_task_are_dropped_and_change_nothing() {
     // Short grid jobs with P = 4 served by one worker whose rollouts take a millisecond, so
-    // tasks are held for a while; beside it a process of the same user speaks the wire and
-    // reports a reward of 1e300 for every task id of both jobs, over and over. Taken, the first
-    // of those for a held task would replace the worker's outcome.
+    // tasks are held for a while. Beside it two processes of the same user speak the wire and
+    // report a reward of 1e300 for every task id of both jobs, over and over: one that knows
+    // only the run's name (refused: no secret), and one that read the run's secret file
+    // (admitted, but it holds no task). Taken, the first of those outcomes for a held task
+    // would replace the worker's.
     let (experiment, mut jobs, reference) = short_grid(4);
     let run = run_name("stranger");
     let environment = Sleepy(experiment.jobs().unwrap().remove(0).environment.unwrap());
     let done = AtomicBool::new(false);
+    let stranger = |reads_secret: bool| {
+        let node = ipc::node(&run, if reads_secret { "insider" } else { "stranger" }).unwrap();
+        let services = ipc::open_services(&node).unwrap();
+        // A request sent before the learner's server exists is lost; the secret file follows it.
+        let mut secret = None;
+        while services.tasks.dynamic_config().number_of_servers() == 0 || (reads_secret && secret.is_none()) {
+            if done.load(std::sync::atomic::Ordering::Relaxed) {
+                return 0;
+            }
+            if services.tasks.dynamic_config().number_of_servers() > 0 {
+                secret = RunSecret::for_worker(&run).unwrap().0;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let client = services.tasks.client_builder().create().unwrap();
+        let notifier = services.to_learner.notifier_builder().create().unwrap();
+        let mut sent = 0u64;
+        let mut task_id = 0;
+        while !done.load(std::sync::atomic::Ordering::Relaxed) {
+            // Test fleets have identity 7 (`test_fleet`); a stranger learns it from any refusal.
+            let mut message = WorkerMessage::request(7, 0, Serves::Any);
+            if let Some(secret) = secret {
+                message = message.carrying(secret);
+            }
+            for job in 0..2 {
+                for id in task_id..task_id + 32 {
+                    message
+                        .push(wire::WireOutcome::new(job, &Outcome::new(id, 1e300, 0.0)).unwrap())
+                        .unwrap();
+                }
+            }
+            task_id = (task_id + 32) % 256;
+            let pending = client.send_copy(message).unwrap();
+            notifier.notify().unwrap();
+            sent += 64;
+            // Each request is answered (with nothing, or a refusal) before the next goes out, or
+            // given up on after a second.
+            let asked = Instant::now();
+            loop {
+                if let Some(answer) = pending.receive().unwrap() {
+                    let refusal = answer.user_header().refusal();
+                    assert_eq!(refusal, (!reads_secret).then_some(Refusal::Secret));
+                    break;
+                }
+                if done.load(std::sync::atomic::Ordering::Relaxed) || asked.elapsed() > Duration::from_secs(1) {
+                    break;
+                }
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        }
+        sent
+    };
     let served = std::thread::scope(|scope| {
         let worker = scope.spawn(|| {
             let options = WorkerOptions {
@@ -1700,76 +1760,47 @@ fn outcomes_from_a_process_that_holds_no_task_are_dropped_and_change_nothing() {
             };
             acps_worker::serve(&run, &options, &mut Single(environment), &AtomicBool::new(false))
         });
-        let stranger = scope.spawn(|| {
-            let node = ipc::node(&run, "stranger").unwrap();
-            let services = ipc::open_services(&node).unwrap();
-            // A request sent before the learner's server exists is lost.
-            while services.tasks.dynamic_config().number_of_servers() == 0 {
-                if done.load(std::sync::atomic::Ordering::Relaxed) {
-                    return 0;
-                }
-                std::thread::sleep(Duration::from_millis(1));
-            }
-            let client = services.tasks.client_builder().create().unwrap();
-            let notifier = services.to_learner.notifier_builder().create().unwrap();
-            let mut sent = 0u64;
-            let mut task_id = 0;
-            while !done.load(std::sync::atomic::Ordering::Relaxed) {
-                // Test fleets have identity 7 (`test_fleet`); a stranger learns it from any refusal.
-                let mut message = WorkerMessage::request(7, 0, Serves::Any);
-                for job in 0..2 {
-                    for id in task_id..task_id + 32 {
-                        message
-                            .push(wire::WireOutcome::new(job, &Outcome::new(id, 1e300, 0.0)).unwrap())
-                            .unwrap();
-                    }
-                }
-                task_id = (task_id + 32) % 256;
-                let pending = client.send_copy(message).unwrap();
-                notifier.notify().unwrap();
-                sent += 64;
-                // Each request is answered (with nothing) before the next goes out, or given up
-                // on after a second.
-                let asked = Instant::now();
-                while pending.receive().unwrap().is_none()
-                    && !done.load(std::sync::atomic::Ordering::Relaxed)
-                    && asked.elapsed() < Duration::from_secs(1)
-                {
-                    std::thread::sleep(Duration::from_micros(200));
-                }
-            }
-            sent
-        });
-        // Serving starts once both have asked, so the stranger's first outcomes are seen.
+        let insider = scope.spawn(|| stranger(true));
+        let outsider = scope.spawn(|| stranger(false));
+        // Serving starts once the worker and the insider have asked, so the insider's first
+        // outcomes are seen.
         let mut fleet = test_fleet(&run, 2);
-        // The run's shared memory is its user's alone, iceoryx2's node counter included, which
-        // iceoryx2 makes writable by everyone.
+        // The run's shared memory is its user's alone: iceoryx2's node counter, which iceoryx2
+        // makes writable by everyone, and the secret.
         let shared: Vec<_> = ipc::leftover_files(&run)
             .into_iter()
             .filter(|path| path.starts_with("/dev/shm"))
             .collect();
-        assert!(
-            shared
-                .iter()
-                .any(|path| path.to_string_lossy().ends_with(".global_mgmt")),
-            "{shared:?}"
-        );
+        for end in [".global_mgmt", "_secret"] {
+            assert!(
+                shared.iter().any(|path| path.to_string_lossy().ends_with(end)),
+                "{end}: {shared:?}"
+            );
+        }
         for path in &shared {
             let mode = std::os::unix::fs::PermissionsExt::mode(&std::fs::metadata(path).unwrap().permissions());
             assert_eq!(mode & 0o077, 0, "{} has mode {mode:o}", path.display());
         }
         let progress = serve_within(&mut fleet, &mut jobs, Duration::from_secs(60));
         done.store(true, std::sync::atomic::Ordering::Relaxed);
-        (progress, stranger.join().unwrap(), worker.join().unwrap())
+        (
+            progress,
+            insider.join().unwrap(),
+            outsider.join().unwrap(),
+            worker.join().unwrap(),
+        )
     });
-    let (progress, sent, worker) = served;
+    let (progress, insider, outsider, worker) = served;
     assert_eq!(episodes(&jobs), reference);
     assert_eq!(worker.unwrap().exit, WorkerExit::Finished);
     assert!(
-        progress.foreign > 0 && progress.foreign <= sent,
-        "{progress:?}, {sent} sent"
+        progress.foreign > 0 && progress.foreign <= insider,
+        "{progress:?}, {insider} sent by the insider"
     );
-    assert_eq!(progress.refused, 0, "{progress:?}");
+    assert!(
+        progress.refused > 0 && progress.refused * 64 <= outsider,
+        "{progress:?}, {outsider} sent without the secret"
+    );
     ipc::remove_run_files(&run).unwrap();
     assert_clean(&run);
 }

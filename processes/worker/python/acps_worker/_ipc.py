@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import stat
 import time
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,73 @@ def check_run_name(run: str) -> str:
     if not _RUN_NAME.fullmatch(run):
         raise ValueError(f"run name '{run}' must be 1 to 40 characters of letters, digits and '-'")
     return run
+
+
+class SecretFileError(AcpsWorkerError):
+    """The run's secret file is not one this user's learner wrote, or ``ACPS_RUN_SECRET``
+    holds no secret."""
+
+
+def _secret_from_hex(text: str) -> bytes | None:
+    """The secret written in ``text`` as the learner writes it, else None."""
+    text = text.strip()
+    if len(text) != 2 * _wire.SECRET_BYTES or not re.fullmatch(r"[0-9a-fA-F]+", text):
+        return None
+    return bytes.fromhex(text)
+
+
+def find_secret(run: str) -> tuple[bytes | None, str]:
+    """The secret a worker joining ``run`` sends, and where it found it, in the words of the
+    Rust worker's ``SecretOrigin``: ``ACPS_RUN_SECRET`` when ``ACPS_RUN`` names ``run`` (a worker
+    the fleet started), else the run's secret file, else none."""
+    text = os.environ.get(_wire.SECRET_ENV)
+    if os.environ.get(_wire.RUN_ENV) == run and text is not None:
+        secret = _secret_from_hex(text)
+        if secret is None:
+            raise SecretFileError(
+                f"{_wire.SECRET_ENV}: must be {2 * _wire.SECRET_BYTES} hexadecimal digits (the "
+                "run's secret, set by the fleet that starts the worker), "
+                f"got {len(text)} characters"
+            )
+        return secret, f"this worker sent the secret in {_wire.SECRET_ENV}"
+    path = Path(_wire.SECRET_FILE.format(run=run))
+
+    def refuse(reason: str) -> SecretFileError:
+        return SecretFileError(f"reading run '{run}''s secret from {path}: {reason}")
+
+    try:
+        status = path.lstat()
+    except FileNotFoundError:
+        return None, (
+            f"this worker found no secret ({_wire.SECRET_ENV} is not set for this run and "
+            f"{path} does not exist)"
+        )
+    except OSError as error:
+        raise refuse(str(error)) from error
+    # Checked before it is opened: opening a FIFO would block, and a secret another user could
+    # have written, or can read, is none.
+    if not stat.S_ISREG(status.st_mode):
+        raise refuse("not a regular file")
+    if status.st_uid != os.geteuid():
+        raise refuse(f"it belongs to user {status.st_uid}, not this worker's user {os.geteuid()}")
+    if status.st_mode & 0o077:
+        raise refuse(
+            f"its mode is {status.st_mode & 0o777:o}: other users may read or change it "
+            "(a learner writes 600)"
+        )
+    try:
+        with path.open("rb") as file:
+            content = file.read(64)
+    except FileNotFoundError:
+        return None, f"this worker found no secret ({path} was removed as it was read)"
+    except OSError as error:
+        raise refuse(str(error)) from error
+    secret = _secret_from_hex(content.decode("utf-8", "replace"))
+    if secret is None:
+        raise refuse(
+            f"it holds {len(content)} bytes, not {2 * _wire.SECRET_BYTES} hexadecimal digits"
+        )
+    return secret, f"this worker sent the secret in {path}"
 
 
 def prefix(run: str) -> str:

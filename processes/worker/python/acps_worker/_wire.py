@@ -12,7 +12,7 @@ from __future__ import annotations
 import ctypes
 
 #: Version of the wire format (Rust: ``PROTOCOL_VERSION``).
-PROTOCOL_VERSION = 9
+PROTOCOL_VERSION = 10
 #: Most bytes of an environment's name.
 MAX_NAME = 32
 #: Largest context a task carries.
@@ -45,9 +45,16 @@ REFUSAL_PROTOCOL = 1
 REFUSAL_RUN = 2
 REFUSAL_ENVIRONMENT = 3
 REFUSAL_SIZES = 4
+REFUSAL_SECRET = 5
+#: Bytes of a run's secret.
+SECRET_BYTES = 16
 
 #: The environment variable naming the run a started worker joins.
 RUN_ENV = "ACPS_RUN"
+#: The environment variable giving a started worker its run's secret (hexadecimal).
+SECRET_ENV = "ACPS_RUN_SECRET"
+#: Where the learner writes its run's secret for workers started by hand.
+SECRET_FILE = "/dev/shm/acps_{run}_secret"
 #: What the iceoryx2 prefix of a run's files is made from.
 PREFIX_FORMAT = "acps_{run}_"
 #: How long a process waits for another to finish creating a service of the run.
@@ -159,6 +166,7 @@ class WorkerMessage(ctypes.Structure):
         ("protocol", ctypes.c_uint32),
         ("want", ctypes.c_uint32),
         ("run", ctypes.c_uint64),
+        ("secret", ctypes.c_uint8 * SECRET_BYTES),
         ("count", ctypes.c_uint32),
         ("slowest_rollout_us", ctypes.c_uint32),
         ("serves_one", ctypes.c_uint32),

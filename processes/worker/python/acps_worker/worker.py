@@ -38,6 +38,9 @@ log = logging.getLogger("acps_worker")
 TICK_MS = 50
 #: How often a starting worker looks for the run's learner.
 JOIN_POLL = 0.002
+#: How long a worker that found the learner looks for the run's secret file before it goes on
+#: without (Rust: ``find_secret``).
+SECRET_PUBLISHED_WITHIN = 1.0
 #: How much simulation one request should carry (Rust: ``BATCH_TIME``).
 BATCH_TIME = 800e-6
 _U32_MAX = (1 << 32) - 1
@@ -229,12 +232,18 @@ def refusal_reason(
     serves: Environment,
     protocol: int,
     sizes: tuple[int, int] | None = None,
+    origin: str = "",
 ) -> str:
     """Why the learner's ``answer`` refused this worker (of run ``identity``, 0 before it learnt
-    one, serving ``serves`` of ``sizes``, speaking ``protocol``), naming both sides exactly as
-    the Rust worker's ``refusal_reason`` does."""
+    one, serving ``serves`` of ``sizes``, speaking ``protocol``, with the secret from
+    ``origin``), naming both sides exactly as the Rust worker's ``refusal_reason`` does."""
     if answer.protocol != protocol:
         return f"protocol version {protocol} here, {answer.protocol} at the learner (another build)"
+    if answer.refusal == _wire.REFUSAL_SECRET:
+        return (
+            f"its messages do not carry the run's secret: {origin}; a worker started by hand "
+            f"reads the file the learner writes, or takes the secret in {_wire.SECRET_ENV}"
+        )
     if answer.refusal == _wire.REFUSAL_ENVIRONMENT:
         return f"this worker serves {serves.shown()}; the run's jobs need {_needs(answer)}"
     if answer.refusal == _wire.REFUSAL_SIZES:
@@ -456,6 +465,8 @@ class _Session:
         self.rollout_seconds = 0.0
         self.joined: float | None = None
         self.logged_failure = False
+        self.secret: bytes | None = None
+        self.secret_origin = ""
 
     def report(self, exit: Exit) -> Report:
         """What the worker did, ending for ``exit``."""
@@ -535,8 +546,24 @@ class _Session:
         except Exception as error:
             raise _ipc.ipc_error("creating the worker's ports", error) from error
         self.learner_pid = _ipc.alive_learner_pid(self.config)
+        self.find_secret(started)
         log.info("worker %s joins run '%s'", self.name, self.run)
         return True
+
+    def find_secret(self, started: float) -> None:
+        """The run's secret and where it came from (Rust: ``find_secret``): the learner writes
+        its file just after it starts serving, so a worker that found the learner a moment
+        earlier looks again for a little while before it goes on without one."""
+        looking = time.monotonic()
+        while True:
+            self.secret, self.secret_origin = _ipc.find_secret(self.run)
+            now = time.monotonic()
+            waited_enough = (
+                now - looking >= SECRET_PUBLISHED_WITHIN or now - started >= self.startup_timeout
+            )
+            if self.secret is not None or waited_enough or self.stop.is_set():
+                return
+            time.sleep(JOIN_POLL)
 
     def learner_lives(self, listing: bool) -> bool:
         """Whether the learner lives: its process by PID (cheap) unless ``listing``, else (or
@@ -596,6 +623,8 @@ class _Session:
         slots = self.slots = [None] * (asking + 1)
         outbox = _wire.WorkerMessage()
         outbox.protocol = self.protocol
+        if self.secret is not None:
+            ctypes.memmove(outbox.secret, self.secret, len(self.secret))
         outbox.serves_one = 1
         outbox.environment = served
         outbox.settings_text_len, text = self.environment.settings_text_to_wire()
@@ -706,7 +735,12 @@ class _Session:
                         raise RefusedError(
                             self.run,
                             refusal_reason(
-                                answer, identity, self.environment, self.protocol, self.sizes
+                                answer,
+                                identity,
+                                self.environment,
+                                self.protocol,
+                                self.sizes,
+                                self.secret_origin,
                             ),
                         )
                     # The answered request must be gone before the next is sent: the service

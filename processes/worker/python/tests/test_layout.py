@@ -93,6 +93,8 @@ class LayoutTest(unittest.TestCase):
                 "protocol": _wire.REFUSAL_PROTOCOL,
                 "run": _wire.REFUSAL_RUN,
                 "environment": _wire.REFUSAL_ENVIRONMENT,
+                "sizes": _wire.REFUSAL_SIZES,
+                "secret": _wire.REFUSAL_SECRET,
             },
         )
 
@@ -100,6 +102,8 @@ class LayoutTest(unittest.TestCase):
         """Service settings, prefix, creation timeout, and the iceoryx2 version installed."""
         services = self.layout["services"]
         self.assertEqual(services["run_env"], _wire.RUN_ENV)
+        self.assertEqual(services["secret_env"], _wire.SECRET_ENV)
+        self.assertEqual(services["secret_file"], _wire.SECRET_FILE)
         self.assertEqual(services["prefix"], _wire.PREFIX_FORMAT)
         self.assertEqual(services["creation_timeout_ms"], _wire.CREATION_TIMEOUT_MS)
         tasks = dict(services["tasks"])

@@ -16,7 +16,7 @@ import threading
 import unittest
 
 import acps_worker
-from acps_worker import Environment, Exit, NoLearnerError, Policy, RefusedError, Task, _wire
+from acps_worker import Environment, Exit, NoLearnerError, Policy, RefusedError, Task, _ipc, _wire
 
 from .support import WATCHDOG, Learner, Serving, acps, leftovers, run_name, wait_for
 
@@ -137,13 +137,79 @@ class ServeTest(unittest.TestCase):
             with self.assertRaises(RefusedError) as refused:
                 acps_worker.serve(bowl, run)
             self.assertIn("this worker serves no named environment", refused.exception.reason)
+            # A secret that is not the run's, as a worker of an earlier run of the name has.
+            saved = {key: os.environ.get(key) for key in (_wire.RUN_ENV, _wire.SECRET_ENV)}
+            os.environ.update({_wire.RUN_ENV: run, _wire.SECRET_ENV: "0f" * _wire.SECRET_BYTES})
+            try:
+                with self.assertRaises(RefusedError) as refused:
+                    acps_worker.serve(bowl, run, environment=self.environment)
+            finally:
+                for key, value in saved.items():
+                    if value is None:
+                        os.environ.pop(key, None)
+                    else:
+                        os.environ[key] = value
+            self.assertEqual(
+                refused.exception.reason,
+                "its messages do not carry the run's secret: this worker sent the secret in "
+                f"{_wire.SECRET_ENV}; a worker started by hand reads the file the learner "
+                f"writes, or takes the secret in {_wire.SECRET_ENV}",
+            )
             acps_worker.serve(bowl, run, environment=self.environment)
         finally:
             learner.finished()
         log = learner.output()
+        self.assertIn("do not carry the run's secret", log)
         self.assertIn(f"protocol 6 (ours {_wire.PROTOCOL_VERSION})", log)
         self.assertIn(f"it serves environment {other}", log)
         self.assert_clean(run)
+
+    def test_the_secret_comes_from_the_environment_or_the_learners_file(self) -> None:
+        """ACPS_RUN_SECRET counts for the run ACPS_RUN names only; the file must be this
+        user's alone and hold a secret; every refusal names the file or the variable."""
+        run = run_name("secret")
+        path = _wire.SECRET_FILE.format(run=run)
+        secret = bytes(range(_wire.SECRET_BYTES))
+        saved = {key: os.environ.pop(key, None) for key in (_wire.RUN_ENV, _wire.SECRET_ENV)}
+        try:
+            missing = (
+                f"this worker found no secret ({_wire.SECRET_ENV} is not set for this run "
+                f"and {path} does not exist)"
+            )
+            self.assertEqual(_ipc.find_secret(run), (None, missing))
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            with os.fdopen(fd, "w") as file:
+                file.write(secret.hex() + "\n")
+            self.assertEqual(
+                _ipc.find_secret(run), (secret, f"this worker sent the secret in {path}")
+            )
+            # Another run's variable does not count; this run's does, and must be a secret.
+            os.environ.update({_wire.RUN_ENV: "another", _wire.SECRET_ENV: "ab" * 16})
+            self.assertEqual(_ipc.find_secret(run)[0], secret)
+            os.environ[_wire.RUN_ENV] = run
+            self.assertEqual(_ipc.find_secret(run)[0], bytes([0xAB] * 16))
+            os.environ[_wire.SECRET_ENV] = "xyz"
+            with self.assertRaisesRegex(
+                _ipc.SecretFileError, "ACPS_RUN_SECRET: must be 32 hexadecimal digits.*got 3"
+            ):
+                _ipc.find_secret(run)
+            del os.environ[_wire.SECRET_ENV]
+            os.chmod(path, 0o644)
+            with self.assertRaisesRegex(_ipc.SecretFileError, f"{path}: its mode is 644"):
+                _ipc.find_secret(run)
+            os.chmod(path, 0o600)
+            with open(path, "w") as file:
+                file.write("short")
+            with self.assertRaisesRegex(_ipc.SecretFileError, "holds 5 bytes, not 32"):
+                _ipc.find_secret(run)
+        finally:
+            if os.path.exists(path):
+                os.remove(path)
+            for key, value in saved.items():
+                if value is None:
+                    os.environ.pop(key, None)
+                else:
+                    os.environ[key] = value
 
     def test_no_learner_is_an_error_and_leaves_nothing(self) -> None:
         """A worker whose learner never comes gives up and removes what it created."""

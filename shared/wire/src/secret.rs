@@ -1,0 +1,327 @@
+//! A run's secret: 16 random bytes its learner makes when it starts, which every message of its
+//! workers carries. The learner refuses a worker without it, so a process of the same user that
+//! only knows the run's name (visible in /dev/shm and `ps`) cannot join and report made-up
+//! outcomes, and neither can a worker left over from an earlier run of the same name.
+//!
+//! Workers get it in one of two ways (docs/PROTOCOL.md, "The run's secret"):
+//! - a worker the fleet starts finds it in [`SECRET_ENV`], beside the run's name;
+//! - a worker started by hand reads the run's secret file, `/dev/shm/acps_<run>_secret`, which
+//!   the learner writes (mode 0600, its user's alone) once it serves the run, and which goes
+//!   with the run's other files.
+//!
+//! What it does not do: a process of the same user can read that file, or a started worker's
+//! environment, as it can read the learner's memory. The secret tells the run's workers from
+//! processes that were not given it; the user's account remains the boundary of trust.
+
+#[cfg(doc)]
+use crate::ipc::RUN_ENV;
+use crate::ipc::RunName;
+use std::io::{Read as _, Write as _};
+use std::os::unix::fs::{MetadataExt as _, OpenOptionsExt as _};
+use std::path::{Path, PathBuf};
+
+/// Bytes of a run's secret.
+pub const SECRET_BYTES: usize = 16;
+
+/// The environment variable that gives a worker the fleet started the secret of the run named in
+/// [`RUN_ENV`], as [`SECRET_BYTES`] * 2 hexadecimal digits.
+pub const SECRET_ENV: &str = "ACPS_RUN_SECRET";
+
+/// A run's secret. Its `Debug` shows no byte of it.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct RunSecret([u8; SECRET_BYTES]);
+
+impl std::fmt::Debug for RunSecret {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("RunSecret(..)")
+    }
+}
+
+/// Where a worker found the secret it sends, for the message that explains a refusal.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SecretOrigin {
+    /// [`SECRET_ENV`], set for the run named in [`RUN_ENV`].
+    Environment,
+    /// The run's secret file.
+    File(PathBuf),
+    /// Neither: the worker sends none (all zeros), and a learner of this build refuses it.
+    Missing(PathBuf),
+}
+
+impl std::fmt::Display for SecretOrigin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Environment => write!(f, "this worker sent the secret in {SECRET_ENV}"),
+            Self::File(path) => write!(f, "this worker sent the secret in {}", path.display()),
+            Self::Missing(path) => write!(
+                f,
+                "this worker found no secret ({SECRET_ENV} is not set for this run and {} does not exist)",
+                path.display()
+            ),
+        }
+    }
+}
+
+/// A secret that could not be made, written or read.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SecretError {
+    /// The system gave no random bytes.
+    #[error("making run '{run}''s secret from /dev/urandom: {reason}")]
+    Random {
+        /// The run.
+        run: RunName,
+        /// The system's reason.
+        reason: String,
+    },
+    /// The secret file could not be written, or another user's file is in its place.
+    #[error("writing run '{run}''s secret to {path}: {reason}")]
+    Write {
+        /// The run.
+        run: RunName,
+        /// The secret file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+    /// The secret file is not one this user's learner wrote: another user's, not a regular
+    /// file, readable by others, or not a secret.
+    #[error("reading run '{run}''s secret from {path}: {reason}")]
+    Read {
+        /// The run.
+        run: RunName,
+        /// The secret file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// [`SECRET_ENV`] holds no secret.
+    #[error("{SECRET_ENV}: must be {} hexadecimal digits (the run's secret, set by the fleet that starts the worker), got {got}", SECRET_BYTES * 2)]
+    Environment {
+        /// What it holds, described without showing it.
+        got: String,
+    },
+}
+
+impl RunSecret {
+    /// A fresh secret for `run`, from the system's random source.
+    pub fn generate(run: &RunName) -> Result<Self, SecretError> {
+        let mut bytes = [0; SECRET_BYTES];
+        std::fs::File::open("/dev/urandom")
+            .and_then(|mut random| random.read_exact(&mut bytes))
+            .map_err(|error| SecretError::Random {
+                run: run.clone(),
+                reason: error.to_string(),
+            })?;
+        Ok(Self(bytes))
+    }
+
+    /// The secret of these bytes: what a message carries.
+    pub fn from_bytes(bytes: [u8; SECRET_BYTES]) -> Self {
+        Self(bytes)
+    }
+
+    /// Its bytes.
+    pub fn bytes(&self) -> [u8; SECRET_BYTES] {
+        self.0
+    }
+
+    /// Whether a message's `bytes` are this secret. Every byte is compared, whatever the first
+    /// difference, so the time taken says nothing of where it is.
+    pub fn matches(&self, bytes: &[u8; SECRET_BYTES]) -> bool {
+        self.0.iter().zip(bytes).fold(0, |differ, (a, b)| differ | (a ^ b)) == 0
+    }
+
+    /// As [`SECRET_ENV`] and the secret file hold it: lowercase hexadecimal digits.
+    pub fn to_hex(&self) -> String {
+        self.0.iter().map(|byte| format!("{byte:02x}")).collect()
+    }
+
+    /// The secret written as [`to_hex`](Self::to_hex) writes it (surrounding whitespace
+    /// ignored), `None` for anything else.
+    pub fn from_hex(text: &str) -> Option<Self> {
+        let text = text.trim();
+        if text.len() != SECRET_BYTES * 2 || !text.is_ascii() {
+            return None;
+        }
+        let mut bytes = [0; SECRET_BYTES];
+        for (byte, pair) in bytes.iter_mut().zip(text.as_bytes().chunks(2)) {
+            *byte = u8::from_str_radix(std::str::from_utf8(pair).ok()?, 16).ok()?;
+        }
+        Some(Self(bytes))
+    }
+
+    /// Where the learner of `run` writes its secret for workers started by hand.
+    pub fn path(run: &RunName) -> PathBuf {
+        PathBuf::from(format!("/dev/shm/{}secret", run.prefix()))
+    }
+
+    /// Write the secret file of `run`, readable and writable by this user alone. It replaces the
+    /// file of a dead earlier run of the name whole (written beside it, then renamed), so a
+    /// worker never reads half of one; another user's file in its place is an error.
+    pub fn publish(&self, run: &RunName) -> Result<(), SecretError> {
+        let path = Self::path(run);
+        let error = |reason: String| SecretError::Write {
+            run: run.clone(),
+            path: path.clone(),
+            reason,
+        };
+        if let Ok(existing) = std::fs::symlink_metadata(&path)
+            && existing.uid() != current_user()
+        {
+            return Err(error(format!(
+                "a file of user {} is in its place (another user's run of the same name?)",
+                existing.uid()
+            )));
+        }
+        let written = PathBuf::from(format!("{}.new", path.display()));
+        let _ = std::fs::remove_file(&written);
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(0o600)
+            .open(&written)
+            .and_then(|mut file| file.write_all(format!("{}\n", self.to_hex()).as_bytes()))
+            .and_then(|()| std::fs::rename(&written, &path))
+            .map_err(|e| {
+                let _ = std::fs::remove_file(&written);
+                error(e.to_string())
+            })
+    }
+
+    /// The secret a worker joining `run` sends, and where it found it: [`SECRET_ENV`] when
+    /// [`RUN_ENV`] names `run` (a worker the fleet started), else the run's secret file, else
+    /// none ([`SecretOrigin::Missing`]).
+    pub fn for_worker(run: &RunName) -> Result<(Option<Self>, SecretOrigin), SecretError> {
+        if RunName::from_env().ok().flatten().as_ref() == Some(run)
+            && let Ok(text) = std::env::var(SECRET_ENV)
+        {
+            let secret = Self::from_hex(&text).ok_or_else(|| SecretError::Environment {
+                got: format!("{} characters", text.len()),
+            })?;
+            return Ok((Some(secret), SecretOrigin::Environment));
+        }
+        let path = Self::path(run);
+        match read_file(run, &path)? {
+            Some(secret) => Ok((Some(secret), SecretOrigin::File(path))),
+            None => Ok((None, SecretOrigin::Missing(path))),
+        }
+    }
+}
+
+/// The secret in `path`, `None` when there is no file.
+fn read_file(run: &RunName, path: &Path) -> Result<Option<RunSecret>, SecretError> {
+    let refuse = |reason: String| SecretError::Read {
+        run: run.clone(),
+        path: path.to_path_buf(),
+        reason,
+    };
+    let metadata = match std::fs::symlink_metadata(path) {
+        Ok(metadata) => metadata,
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(error) => return Err(refuse(error.to_string())),
+    };
+    // Checked before it is opened: opening a FIFO would block, and a secret another user could
+    // have written, or can read, is none.
+    if !metadata.file_type().is_file() {
+        return Err(refuse("not a regular file".into()));
+    }
+    if metadata.uid() != current_user() {
+        return Err(refuse(format!(
+            "it belongs to user {}, not this worker's user {}",
+            metadata.uid(),
+            current_user()
+        )));
+    }
+    if metadata.mode() & 0o077 != 0 {
+        return Err(refuse(format!(
+            "its mode is {:o}: other users may read or change it (a learner writes 600)",
+            metadata.mode() & 0o777
+        )));
+    }
+    let mut text = String::new();
+    match std::fs::File::open(path).and_then(|file| file.take(64).read_to_string(&mut text)) {
+        Ok(_) => {}
+        // The run ended and removed it between the look and the read.
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(error) => return Err(refuse(error.to_string())),
+    }
+    RunSecret::from_hex(&text).map(Some).ok_or_else(|| {
+        refuse(format!(
+            "it holds {} bytes, not {} hexadecimal digits",
+            text.len(),
+            SECRET_BYTES * 2
+        ))
+    })
+}
+
+fn current_user() -> u32 {
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    unsafe { libc::geteuid() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt as _;
+
+    fn run(name: &str) -> RunName {
+        RunName::new(&format!("{name}-{}", std::process::id())).unwrap()
+    }
+
+    #[test]
+    fn a_secret_survives_hex_and_a_different_one_does_not_match() {
+        let run = run("secret-hex");
+        let secret = RunSecret::generate(&run).unwrap();
+        let other = RunSecret::generate(&run).unwrap();
+        assert_ne!(secret, other, "two draws of 128 random bits");
+        assert_eq!(RunSecret::from_hex(&format!(" {}\n", secret.to_hex())), Some(secret));
+        assert!(secret.matches(&secret.bytes()));
+        assert!(!secret.matches(&other.bytes()));
+        assert!(!secret.matches(&[0; SECRET_BYTES]));
+        for bad in ["", "00", &"g".repeat(32), &"0".repeat(33), &"é".repeat(16)] {
+            assert_eq!(RunSecret::from_hex(bad), None, "{bad:?}");
+        }
+        assert_eq!(format!("{secret:?}"), "RunSecret(..)");
+    }
+
+    #[test]
+    fn a_published_secret_is_its_users_alone_and_workers_read_it_back() {
+        let run = run("secret-file");
+        let path = RunSecret::path(&run);
+        assert_eq!(
+            RunSecret::for_worker(&run).unwrap(),
+            (None, SecretOrigin::Missing(path.clone()))
+        );
+        let secret = RunSecret::generate(&run).unwrap();
+        secret.publish(&run).unwrap();
+        assert_eq!(std::fs::metadata(&path).unwrap().permissions().mode() & 0o777, 0o600);
+        assert_eq!(
+            RunSecret::for_worker(&run).unwrap(),
+            (Some(secret), SecretOrigin::File(path.clone()))
+        );
+        // A later run of the name replaces it.
+        let later = RunSecret::generate(&run).unwrap();
+        later.publish(&run).unwrap();
+        assert_eq!(RunSecret::for_worker(&run).unwrap().0, Some(later));
+        // A file others may read is no secret; nor is one that holds something else.
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let error = RunSecret::for_worker(&run).unwrap_err().to_string();
+        assert!(error.contains("its mode is 644"), "{error}");
+        std::fs::write(&path, "not a secret").unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let error = RunSecret::for_worker(&run).unwrap_err().to_string();
+        assert_eq!(
+            error,
+            format!(
+                "reading run '{run}''s secret from {}: it holds 12 bytes, not 32 hexadecimal digits",
+                path.display()
+            )
+        );
+        std::fs::remove_file(&path).unwrap();
+        std::fs::create_dir(&path).unwrap();
+        let error = RunSecret::for_worker(&run).unwrap_err().to_string();
+        assert!(error.ends_with("not a regular file"), "{error}");
+        std::fs::remove_dir(&path).unwrap();
+        assert!(!Path::new(&format!("{}.new", path.display())).exists());
+    }
+}
