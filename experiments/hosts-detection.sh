@@ -63,7 +63,7 @@ trial() { # FAULT INDEX
         >"$dir/learner.log" 2>&1 &
     local learner=$!
     waitfor "$dir/learner.log" "serves relays at"
-    setsid "${inside[@]}" "$acps" relay --connect "tcp/$host:$port" --workers 1 --lease "$lease" \
+    setsid "${inside[@]}" "$acps" relay --connect "tcp/$host:$port" --relay-key "$dir/out/relay.key" --workers 1 --lease "$lease" \
         --local-run "det$$-$fault-$i-h" --wait-for-learner 1 -v >"$dir/relay.log" 2>&1 &
     local relay=$!
     waitfor "$dir/learner.log" "admitted the relay"

@@ -673,11 +673,15 @@ fn relay_command(
         .context("finding a free loopback port")?
         .port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
+    // Among the run's files in /dev/shm, which go with them.
+    let key_file = std::path::PathBuf::from(format!("/dev/shm/{}relay.key", name.prefix()));
+    let (key, _) = acps_relay::net::RelayKey::make_or_take(&key_file)?;
     let net = acps_relay::NetOptions {
         listen: vec![endpoint.clone()],
         connect: Vec::new(),
         lease: acps_relay::net::DEFAULT_LEASE,
         config_file: None,
+        key: Some(key),
     };
     let listener = acps_relay::Listener::open(name, &net).with_context(|| format!("listening at {endpoint}"))?;
     let mut command = acps_experiments::workers::this_program();
@@ -690,6 +694,7 @@ fn relay_command(
         "--local-run",
         &format!("{name}-host"),
     ]);
+    command.arg("--relay-key").arg(&key_file);
     command.args(["--workers", &workers.to_string()]);
     command.args(["--worker-queue-depth", &options.worker_queue_depth.to_string(), "-q"]);
     if let Some(nice) = options.worker_nice {

@@ -256,11 +256,11 @@ pub(crate) struct RunArgs {
     /// started by hand join it, and how relays of other hosts name it (default: EXPERIMENT-PID).
     #[arg(long)]
     pub(crate) run: Option<String>,
-    /// Also serve relays of other hosts (`acps relay --connect ENDPOINT` there) at ENDPOINT:
-    /// tcp/ADDRESS:PORT, e.g. tcp/127.0.0.1:7447. Listening on an address other hosts reach is
-    /// your choice: on networks that are not private, listen on loopback and let relays come
-    /// through SSH tunnels, or require a password with --zenoh-config (docs/HOSTS.md). Repeat for
-    /// several addresses.
+    /// Also serve relays of other hosts (`acps relay --connect ENDPOINT --relay-key FILE`
+    /// there) at ENDPOINT: tcp/ADDRESS:PORT, e.g. tcp/10.0.0.1:7447. Relays must present the
+    /// run directory's relay.key (made if missing; see --relay-key). Listening on an address
+    /// other hosts reach is your choice: on networks that are not private, listen on loopback
+    /// and let relays come through SSH tunnels (docs/HOSTS.md). Repeat for several addresses.
     #[arg(long, value_name = "ENDPOINT")]
     pub(crate) listen: Vec<String>,
     #[command(flatten)]
@@ -270,6 +270,16 @@ pub(crate) struct RunArgs {
 /// How a learner or relay joins the network of hosts.
 #[derive(clap::Args, Default)]
 pub(crate) struct NetArgs {
+    /// The relays' credentials: a file of one line `acps-relay:PASSWORD`, its user's alone. A
+    /// learner (--listen) takes it, or makes it where there is none [default: relay.key in the
+    /// run directory, unless --zenoh-config sets the users]; a relay (--connect) presents it: a
+    /// copy of its learner's.
+    #[arg(long, value_name = "FILE", conflicts_with = "no_relay_key")]
+    pub(crate) relay_key: Option<PathBuf>,
+    /// Admit relays without credentials (a learner on loopback only: any process of this host
+    /// could join as a relay), or connect without (a relay of such a learner).
+    #[arg(long)]
+    pub(crate) no_relay_key: bool,
     /// A Zenoh configuration file (JSON5), for user/password authentication;
     /// acps sets the mode, endpoints, scouting (off) and lease on top of it (docs/HOSTS.md).
     #[arg(long, value_name = "FILE")]

@@ -12,6 +12,7 @@ use acps_experiments::run_dir::{self, RunDir, RunDirError, RunReport};
 use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
 use acps_fleet::{Fleet, FleetBuilder, FleetError, FleetProgress};
+use acps_relay::net::RelayKey;
 use acps_relay::{Listener, NetOptions, RelayOptions};
 use acps_shared::Serves;
 use acps_wire::ipc::{self, RunName};
@@ -275,24 +276,40 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     };
     let workers = args.started.count();
     // Once, for every experiment of the run: relays stay connected from one to the next.
-    let mut listener = match &net {
-        Some(net) => match Listener::open(&name, net) {
-            Ok(listener) => Some(listener),
-            Err(error) => {
-                for dir in &created {
-                    let _ = std::fs::remove_dir_all(dir);
+    let mut listener = match net {
+        Some(mut net) => {
+            let opened = learner_key(&args.net, out).and_then(|(key, told)| {
+                net.key = key;
+                let listener = Listener::open(&name, &net)
+                    .with_context(|| format!("--listen {}", args.listen.join(" --listen ")))?;
+                Ok((listener, told))
+            });
+            match opened {
+                Ok((listener, told)) => {
+                    if args.net.no_relay_key {
+                        eprintln!(
+                            "warning: run '{name}' admits relays without credentials (--no-relay-key): any process of this host can join as a relay and report outcomes"
+                        );
+                    }
+                    if !args.experiment.quiet {
+                        eprintln!(
+                            "run '{name}' serves relays at {}: on each other host, `acps relay --connect ENDPOINT{}",
+                            args.listen.join(", "),
+                            if told.is_empty() { "`".to_string() } else { told }
+                        );
+                    }
+                    Some(listener)
                 }
-                return Err(anyhow::Error::new(error).context(format!("--listen {}", args.listen.join(" --listen "))));
+                Err(error) => {
+                    for dir in &created {
+                        let _ = std::fs::remove_dir_all(dir);
+                    }
+                    return Err(error);
+                }
             }
-        },
+        }
         None => None,
     };
-    if listener.is_some() && !args.experiment.quiet {
-        eprintln!(
-            "run '{name}' serves relays at {}: on each other host, `acps relay --connect ENDPOINT` with this host's address",
-            args.listen.join(", ")
-        );
-    }
     for (index, Job { experiment, dir, .. }) in jobs.iter().enumerate() {
         let builder = Fleet::builder(name.clone())
             .identity(experiment.identity())
@@ -552,6 +569,14 @@ fn net_options(args: &NetArgs, listen: &[String], connect: &[String]) -> anyhow:
     {
         bail!("--zenoh-config {}: not a readable file", path.display());
     }
+    let key = match &args.relay_key {
+        // A learner's key is made or taken once its run directory exists (`learner_key`).
+        Some(path) if listen.is_empty() => Some(RelayKey::read(path).context("--relay-key")?),
+        None if listen.is_empty() && !args.no_relay_key && args.zenoh_config.is_none() => bail!(
+            "--relay-key FILE is missing: a copy of the relay.key its learner made in its run directory (or --no-relay-key for a learner that admits relays without credentials)"
+        ),
+        _ => None,
+    };
     Ok(Some(NetOptions {
         listen: listen.to_vec(),
         connect: connect.to_vec(),
@@ -559,7 +584,25 @@ fn net_options(args: &NetArgs, listen: &[String], connect: &[String]) -> anyhow:
             .lease
             .map_or(acps_relay::net::DEFAULT_LEASE, Duration::from_secs_f64),
         config_file: args.zenoh_config.clone(),
+        key,
     }))
+}
+
+/// The relays' key of a learner whose run directory is `out`, made there unless taken from
+/// --relay-key, or none (--no-relay-key, or --zenoh-config without --relay-key), and the words
+/// that tell the user how relays join with it.
+fn learner_key(args: &NetArgs, out: &Path) -> anyhow::Result<(Option<RelayKey>, String)> {
+    if args.no_relay_key || (args.zenoh_config.is_some() && args.relay_key.is_none()) {
+        return Ok((None, String::new()));
+    }
+    let path = args.relay_key.clone().unwrap_or_else(|| out.join("relay.key"));
+    let (key, made) = RelayKey::make_or_take(&path).context("--relay-key")?;
+    let told = format!(
+        " --relay-key relay.key` with this host's address and a copy of {} ({})",
+        path.display(),
+        if made { "made now" } else { "made before" }
+    );
+    Ok((Some(key), told))
 }
 
 impl StartedWorkers {

@@ -15,6 +15,8 @@ use zenoh::sample::SampleKind;
 
 /// How long a starting learner listens for another learner of its run on the network.
 const LEARNER_LOOKUP: Duration = Duration::from_millis(300);
+/// How long the learner asks whether a relay whose token went has another one left.
+const TOKEN_LOOKUP: Duration = Duration::from_millis(200);
 
 /// A learner that could not listen.
 #[derive(Debug, thiserror::Error)]
@@ -43,6 +45,8 @@ enum Incoming {
 /// A relay the learner admitted in the current serve.
 struct Admitted {
     host: String,
+    /// The admission's key, which the relay's messages must carry.
+    key: u128,
     publisher: zenoh::pubsub::Publisher<'static>,
     traffic: Traffic,
 }
@@ -77,8 +81,11 @@ struct Shared {
     serving: Option<Serving>,
     /// Admitted relays by peer.
     admitted: HashMap<PeerId, Admitted>,
-    /// Peers told they were evicted, not told again.
-    evicted: HashSet<PeerId>,
+    /// Peers given up on (evicted, or gone), by their admission's key, and whether they were
+    /// told so: a message of theirs is answered once with [`Down::Evicted`].
+    dismissed: HashMap<PeerId, (u128, bool)>,
+    /// Peers on whose channel a message with another key came, warned of once.
+    posed: HashSet<PeerId>,
     /// Peers told the serve is done, until their token goes: the learner's process waits for
     /// them (a little) before it ends, so that the news reaches them before its token goes.
     told_done: HashSet<PeerId>,
@@ -98,14 +105,17 @@ struct Serving {
 /// relays' hellos, and serves the admitted relays as peers of the fleet.
 ///
 /// ```no_run
-/// use acps_relay::{Listener, NetOptions};
+/// use acps_relay::{Listener, NetOptions, net::RelayKey};
 /// use std::time::Duration;
 ///
+/// // Made on the first run; each relay host gets a copy.
+/// let (key, _made) = RelayKey::make_or_take("runs/cannon/relay.key".as_ref())?;
 /// let options = NetOptions {
-///     listen: vec!["tcp/127.0.0.1:7447".into()],
+///     listen: vec!["tcp/10.0.0.1:7447".into()],
 ///     connect: vec![],
 ///     lease: Duration::from_secs(3),
 ///     config_file: None,
+///     key: Some(key),
 /// };
 /// let mut listener = Listener::open(&"cannon".parse()?, &options)?;
 /// // fleet.serve_with(&mut acps_fleet::Learners(&mut jobs), &mut observer, Some(&mut listener))
@@ -113,7 +123,6 @@ struct Serving {
 /// ```
 pub struct Listener {
     run: RunName,
-    instance: u64,
     shared: Arc<Mutex<Shared>>,
     pump: Option<Pump>,
     // Undeclared on drop, before the session closes.
@@ -149,7 +158,6 @@ impl Listener {
             .declare_token(&learner_key)
             .wait()
             .map_err(|e| NetError::zenoh("declaring the learner's token", e))?;
-        let instance = instance_number();
         let host = net::host_name();
         let shared = Arc::new(Mutex::new(Shared {
             next_peer: 1,
@@ -201,7 +209,7 @@ impl Listener {
                     let asked = query.key_expr().as_str().strip_prefix("acps/hello/").unwrap_or_default().to_string();
                     let hello = query.payload().map(|p| net::decode::<Hello>(&p.to_bytes()));
                     let welcome = match hello {
-                        Some(Ok(hello)) => welcome(&session, &shared, &run, &asked, instance, &host, &hello),
+                        Some(Ok(hello)) => welcome(&session, &shared, &run, &asked, &host, &hello),
                         Some(Err(error)) => Welcome::Refused {
                             run: run.clone(),
                             reason: format!("its greeting cannot be read ({error}): another acps build? (this learner runs acps {BUILD}, network protocol {NET_PROTOCOL})"),
@@ -220,7 +228,6 @@ impl Listener {
         };
         Ok(Self {
             run: run.clone(),
-            instance,
             shared,
             pump: None,
             _queryable: queryable,
@@ -234,6 +241,16 @@ impl Listener {
     /// The run's name.
     pub fn run(&self) -> &RunName {
         &self.run
+    }
+
+    /// Whether a liveliness token of relay `peer` is still declared.
+    fn token_lives(&self, peer: PeerId) -> bool {
+        self.session
+            .liveliness()
+            .get(net::key(&self.run, &format!("relay/{peer}")))
+            .timeout(TOKEN_LOOKUP)
+            .wait()
+            .is_ok_and(|replies| replies.recv().is_ok_and(|reply| reply.result().is_ok()))
     }
 
     fn tell(&self, peer: PeerId, message: &Down) {
@@ -292,27 +309,12 @@ fn peer_of(key: &str, prefix: &str) -> Option<PeerId> {
     key.strip_prefix(prefix)?.parse().ok()
 }
 
-/// A random number for this learner process: relays' messages to an earlier learner of the run
-/// (before a restart) are told apart.
-fn instance_number() -> u64 {
-    use std::hash::{BuildHasher as _, Hasher as _};
-    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
-    hasher.write_u32(std::process::id());
-    hasher.write_u128(
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos()),
-    );
-    hasher.finish()
-}
-
 /// Answer a relay's hello to run `asked`: admit it, or say why not, naming both sides.
 fn welcome(
     session: &zenoh::Session,
     shared: &Mutex<Shared>,
     run: &RunName,
     asked: &str,
-    instance: u64,
     host: &str,
     hello: &Hello,
 ) -> Welcome {
@@ -348,6 +350,13 @@ fn welcome(
             hello.identity, serving.identity
         ));
     }
+    let key = match acps_wire::secret::random_bytes::<16>() {
+        Ok(bytes) => u128::from_le_bytes(bytes),
+        Err(error) => {
+            drop(state);
+            return refused(format!("the learner could not make its key: {error}"));
+        }
+    };
     let peer = state.next_peer;
     state.next_peer += 1;
     let publisher = match session
@@ -365,6 +374,7 @@ fn welcome(
         peer,
         Admitted {
             host: hello.host.clone(),
+            key,
             publisher,
             traffic: Traffic::default(),
         },
@@ -373,7 +383,7 @@ fn welcome(
     Welcome::Accepted(Admission {
         run: run.clone(),
         peer,
-        instance,
+        key,
         identity: serving.identity,
         environments: serving.environments,
         sizes: serving.sizes,
@@ -393,7 +403,8 @@ impl Remote for Listener {
         let mut shared = lock(&self.shared);
         shared.incoming.clear();
         shared.admitted.clear();
-        shared.evicted.clear();
+        shared.dismissed.clear();
+        shared.posed.clear();
         shared.serving = Some(Serving {
             identity,
             environments: environments.to_vec(),
@@ -409,27 +420,36 @@ impl Remote for Listener {
         let mut shared = lock(&self.shared);
         shared.bell.awake();
         let mut evict = Vec::new();
+        let mut gone = Vec::new();
         while let Some(incoming) = shared.incoming.pop_front() {
             match incoming {
                 Incoming::Gone { peer } => {
-                    if let Some(admitted) = shared.admitted.remove(&peer) {
-                        tracing::warn!(
-                            "run '{}': the relay on {} (peer {peer}) is gone",
-                            self.run,
-                            admitted.host
-                        );
-                        admitted.traffic.log(&self.run, &admitted.host);
-                        events.push(RemoteEvent::Gone { peer });
+                    if shared.admitted.contains_key(&peer) {
+                        gone.push(peer);
                     }
                 }
                 Incoming::Up { peer, message } => {
-                    let instance = match &message {
-                        Up::Request { instance, .. } | Up::Note { instance, .. } => *instance,
+                    let key = match &message {
+                        Up::Request { key, .. } | Up::Note { key, .. } => *key,
                     };
-                    let Some(admitted) = shared.admitted.get_mut(&peer).filter(|_| instance == self.instance) else {
-                        // Evicted, or admitted by an earlier learner of the run: join again.
-                        if instance == self.instance && shared.evicted.insert(peer) {
-                            evict.push(peer);
+                    let Some(admitted) = shared.admitted.get_mut(&peer).filter(|admitted| admitted.key == key) else {
+                        let state = &mut *shared;
+                        match state.dismissed.get_mut(&peer) {
+                            // Given up on: told once to join again.
+                            Some((dismissed, told)) if *dismissed == key && !*told => {
+                                *told = true;
+                                evict.push(peer);
+                            }
+                            // Another key on an admitted relay's channel: a relay of an earlier
+                            // learner of the run that had the number, or a session posing as
+                            // this relay. Either way not the relay's.
+                            _ if state.admitted.contains_key(&peer) && state.posed.insert(peer) => {
+                                tracing::warn!(
+                                    "run '{}': a message on relay {peer}'s channel without its key was dropped (a relay of an earlier learner of the run, or another session posing as it); such messages are not reported again",
+                                    self.run
+                                );
+                            }
+                            _ => {}
                         }
                         continue;
                     };
@@ -463,6 +483,25 @@ impl Remote for Listener {
             }
         }
         drop(shared);
+        for peer in gone {
+            // Any admitted session may declare and drop a token of another relay's key: a relay
+            // is gone when no token of its key is left. Asked without the lock, which the
+            // callbacks that deliver the answer may need.
+            if self.token_lives(peer) {
+                continue;
+            }
+            let mut shared = lock(&self.shared);
+            if let Some(admitted) = shared.admitted.remove(&peer) {
+                shared.dismissed.insert(peer, (admitted.key, false));
+                tracing::warn!(
+                    "run '{}': the relay on {} (peer {peer}) is gone",
+                    self.run,
+                    admitted.host
+                );
+                admitted.traffic.log(&self.run, &admitted.host);
+                events.push(RemoteEvent::Gone { peer });
+            }
+        }
         for peer in evict {
             // Its publisher is gone with it: answer on a fresh one.
             if let Ok(publisher) = self
@@ -497,8 +536,8 @@ impl Remote for Listener {
         let mut shared = lock(&self.shared);
         if let Some(admitted) = shared.admitted.remove(&peer) {
             admitted.traffic.log(&self.run, &admitted.host);
+            shared.dismissed.insert(peer, (admitted.key, true));
         }
-        shared.evicted.insert(peer);
     }
 
     fn finish(&mut self, done: bool) {

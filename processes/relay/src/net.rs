@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// Version of these messages and keys; bump on any change.
-pub const NET_PROTOCOL: u32 = 1;
+pub const NET_PROTOCOL: u32 = 2;
 /// This build's version, which a relay and its learner must share.
 pub const BUILD: &str = env!("CARGO_PKG_VERSION");
 /// Most tasks (or outcomes) one message carries: 128 PA-10 tasks (36 parameters, about 350 bytes
@@ -67,8 +67,10 @@ pub struct Admission {
     pub run: RunName,
     /// The relay's number in this learner.
     pub peer: u32,
-    /// The learner process's random instance, which the relay's messages carry.
-    pub instance: u64,
+    /// 128 random bits the learner made for this admission, which the relay's messages carry:
+    /// a message on the relay's key expression without them is not the relay's (any admitted
+    /// session may publish there), nor one of an earlier admission or learner.
+    pub key: u128,
     /// The run's identity.
     pub identity: u64,
     /// The environment of each job.
@@ -146,8 +148,8 @@ pub enum Up {
     /// Outcomes, and a request for `want` tasks (0: none) of the environment `serves` (`None`:
     /// any), answered once with [`Down::Tasks`] of the same `request`.
     Request {
-        /// The learner instance that admitted the relay.
-        instance: u64,
+        /// The relay's [`Admission::key`].
+        key: u128,
         /// The request's number.
         request: u64,
         /// Tasks asked for.
@@ -163,8 +165,8 @@ pub enum Up {
     },
     /// Something the learner's user should read (a worker the relay refused).
     Note {
-        /// The learner instance that admitted the relay.
-        instance: u64,
+        /// The relay's [`Admission::key`].
+        key: u128,
         /// What happened.
         text: String,
     },
@@ -215,8 +217,98 @@ pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, CodecErro
     Ok(message)
 }
 
-/// How a process joins the network: where it listens or connects, its lease, and an optional
-/// Zenoh configuration file (user and password) under those.
+/// The user relays present to their learner with a [`RelayKey`].
+pub const RELAY_USER: &str = "acps-relay";
+
+/// The credentials of a learner's relays: a password of 32 random hexadecimal digits, in a
+/// file of one line `acps-relay:PASSWORD`, only its user's. The learner's Zenoh session takes
+/// the file as its dictionary of users (and so admits only sessions that present it); a relay's
+/// presents the user and password. The learner makes it (`acps run --listen`); relay hosts get
+/// a copy.
+#[derive(Clone, PartialEq, Eq)]
+pub struct RelayKey {
+    path: PathBuf,
+    password: String,
+}
+
+impl std::fmt::Debug for RelayKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RelayKey")
+            .field("path", &self.path)
+            .finish_non_exhaustive()
+    }
+}
+
+impl RelayKey {
+    /// The key in `path`, or a new one written there (0600) when there is no file; the flag
+    /// says whether it was made.
+    pub fn make_or_take(path: &Path) -> Result<(Self, bool), NetError> {
+        if let Some(key) = Self::try_read(path)? {
+            return Ok((key, false));
+        }
+        let error = |reason: String| NetError::Key {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let password = acps_wire::secret::random_bytes::<16>()
+            .map(|bytes| acps_wire::secret::to_hex(&bytes))
+            .map_err(|e| error(format!("no random bytes: {e}")))?;
+        acps_wire::secret::write_private(
+            path,
+            &format!("{RELAY_USER}:{password}\n"),
+            acps_wire::secret::Replace::Never,
+        )
+        .map_err(error)?;
+        Ok((
+            Self {
+                path: path.to_path_buf(),
+                password,
+            },
+            true,
+        ))
+    }
+
+    /// The key in `path`, which must exist: a relay's copy of its learner's.
+    pub fn read(path: &Path) -> Result<Self, NetError> {
+        Self::try_read(path)?.ok_or_else(|| NetError::Key {
+            path: path.to_path_buf(),
+            reason: "no such file (copy the key file the learner made, `relay.key` in its run directory, to this host)"
+                .into(),
+        })
+    }
+
+    fn try_read(path: &Path) -> Result<Option<Self>, NetError> {
+        let error = |reason: String| NetError::Key {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let Some(text) = acps_wire::secret::read_private(path).map_err(error)? else {
+            return Ok(None);
+        };
+        let password = text
+            .trim()
+            .strip_prefix(RELAY_USER)
+            .and_then(|rest| rest.strip_prefix(':'))
+            .filter(|password| acps_wire::secret::from_hex::<16>(password).is_some())
+            .ok_or_else(|| {
+                error(format!(
+                    "not a relay key (one line `{RELAY_USER}:` and 32 hexadecimal digits, as `acps run --listen` writes)"
+                ))
+            })?;
+        Ok(Some(Self {
+            path: path.to_path_buf(),
+            password: password.to_string(),
+        }))
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// How a process joins the network: where it listens or connects, its lease, its relays'
+/// credentials, and an optional Zenoh configuration file under those.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetOptions {
     /// Endpoints to listen on (`tcp/127.0.0.1:7447`).
@@ -228,6 +320,10 @@ pub struct NetOptions {
     /// A Zenoh configuration file (JSON5) whose settings (authentication) apply under
     /// those above.
     pub config_file: Option<PathBuf>,
+    /// The relays' credentials: a learner admits only sessions that present them, a relay
+    /// presents them. A learner without them, or a user and password of `config_file`, may
+    /// listen on loopback only ([`NetError::Unauthenticated`]).
+    pub key: Option<RelayKey>,
 }
 
 /// A network setting that cannot work.
@@ -240,6 +336,22 @@ pub enum NetError {
         endpoint: String,
         /// Why it is not one.
         reason: String,
+    },
+    /// A relay key file that cannot be made or read.
+    #[error("relay key {}: {reason}", path.display())]
+    Key {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// A learner would listen where other hosts reach it without requiring credentials.
+    #[error(
+        "listening on {endpoints} without relay credentials would let any program that reaches it join as a relay and report outcomes: give relays a key (a key file, which `acps run --listen` makes by default), require a user and password in a Zenoh configuration, or listen on loopback only (docs/HOSTS.md#security)"
+    )]
+    Unauthenticated {
+        /// The endpoints that are not loopback.
+        endpoints: String,
     },
     /// The lease is outside its range.
     #[error("lease must be 0.1..=3600 seconds, got {0:?}")]
@@ -366,7 +478,44 @@ pub(crate) fn zenoh_config(options: &NetOptions) -> Result<zenoh::Config, NetErr
             .insert_json5(key, &value)
             .map_err(|e| NetError::zenoh(format!("setting {key} = {value}"), e))?;
     }
+    if let Some(key) = &options.key {
+        let mut credentials = vec![
+            ("transport/auth/usrpwd/user", format!("{RELAY_USER:?}")),
+            ("transport/auth/usrpwd/password", format!("{:?}", key.password)),
+        ];
+        if !options.listen.is_empty() {
+            // The key file is a dictionary of one user: the relays'.
+            credentials.push((
+                "transport/auth/usrpwd/dictionary_file",
+                format!("{:?}", key.path.display().to_string()),
+            ));
+        }
+        for (setting, value) in credentials {
+            config
+                .insert_json5(setting, &value)
+                .map_err(|e| NetError::zenoh(format!("setting {setting} from {}", key.path.display()), e))?;
+        }
+    }
+    let checks_users = config
+        .get_json("transport/auth/usrpwd/dictionary_file")
+        .is_ok_and(|file| file != "null");
+    let exposed: Vec<&String> = options.listen.iter().filter(|e| !is_loopback(e)).collect();
+    if !checks_users && !exposed.is_empty() {
+        return Err(NetError::Unauthenticated {
+            endpoints: exposed.iter().map(|e| e.as_str()).collect::<Vec<_>>().join(", "),
+        });
+    }
     Ok(config)
+}
+
+/// Whether `endpoint` (checked by [`check_endpoint`]) is on this host's loopback only.
+pub fn is_loopback(endpoint: &str) -> bool {
+    let address = endpoint.split(['?', '#']).next().unwrap_or_default();
+    let host = address
+        .split_once('/')
+        .and_then(|(_, address)| address.rsplit_once(':'))
+        .map_or("", |(host, _)| host.trim_start_matches('[').trim_end_matches(']'));
+    host == "localhost" || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
 }
 
 fn serde_json_list(values: &[String]) -> String {
@@ -387,8 +536,9 @@ fn read_config(path: &Path) -> Result<zenoh::Config, NetError> {
     })
 }
 
-/// Open a Zenoh session.
-pub(crate) fn open(options: &NetOptions) -> Result<zenoh::Session, NetError> {
+/// Open a Zenoh session as `options` say: what the learner's [`Listener`](crate::Listener) and
+/// a relay open, for a program that speaks the network's messages itself.
+pub fn open(options: &NetOptions) -> Result<zenoh::Session, NetError> {
     use zenoh::Wait as _;
     let config = zenoh_config(options)?;
     zenoh::open(config).wait().map_err(|e| {
@@ -451,7 +601,7 @@ mod tests {
     fn messages_round_trip_and_a_nan_outcome_arrives_failed() {
         let outcome = Outcome::new(7, -1.5, 2.0).with_diagnostics(vec![0.25]);
         let up = Up::Request {
-            instance: 3,
+            key: u128::MAX - 3,
             request: 9,
             want: 4,
             serves: None,
@@ -459,9 +609,10 @@ mod tests {
             slowest_rollout_us: 1500,
             outcomes: vec![NetOutcome::new(1, &outcome)],
         };
-        let Up::Request { outcomes, .. } = decode::<Up>(&encode(&up).unwrap()).unwrap() else {
+        let Up::Request { outcomes, key, .. } = decode::<Up>(&encode(&up).unwrap()).unwrap() else {
             panic!("not a request")
         };
+        assert_eq!(key, u128::MAX - 3);
         assert_eq!(outcomes[0].to_outcome(), (1, outcome));
         let nan = NetOutcome {
             reward: f64::NAN,

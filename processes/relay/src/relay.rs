@@ -62,7 +62,7 @@ pub enum RelayError {
     Net(#[from] NetError),
     /// No learner answered in time.
     #[error(
-        "no learner{} answered at {endpoints} within {waited:?}: is it started with --listen on that address, and do both use the same user and password settings?",
+        "no learner{} answered at {endpoints} within {waited:?}: is it started with --listen on that address, and does this relay present its credentials (a copy of its relay.key, or the same user and password settings)?",
         run.as_ref().map_or(String::new(), |run| format!(" of run '{run}'"))
     )]
     NoLearner {
@@ -344,7 +344,8 @@ struct Inbox {
 /// The tasks a relay fetched from its learner, served to the host's workers.
 struct RelaySource {
     run: RunName,
-    instance: u64,
+    /// This admission's key, which every message to the learner carries.
+    key: u128,
     identity: u64,
     environments: Vec<EnvironmentSpec>,
     sizes: Vec<Sizes>,
@@ -464,7 +465,7 @@ impl RelaySource {
         let jobs = welcome.environments.len();
         Ok(Self {
             run,
-            instance: welcome.instance,
+            key: welcome.key,
             identity: welcome.identity,
             environments: welcome.environments,
             sizes: welcome.sizes,
@@ -521,7 +522,7 @@ impl RelaySource {
             self.requests.insert(request, (class, want, Instant::now()));
         }
         let message = Up::Request {
-            instance: self.instance,
+            key: self.key,
             request,
             want: want as u32,
             serves: match class {
@@ -679,10 +680,7 @@ impl ForwardingSource for RelaySource {
             self.take(message)?;
         }
         for text in std::mem::take(&mut self.notes) {
-            let note = Up::Note {
-                instance: self.instance,
-                text,
-            };
+            let note = Up::Note { key: self.key, text };
             let bytes = net::encode(&note).map_err(|e| ForwardError::Link(e.into()))?;
             self.publisher.put(bytes).wait().map_err(ForwardError::Link)?;
         }

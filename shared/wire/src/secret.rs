@@ -105,14 +105,10 @@ pub enum SecretError {
 impl RunSecret {
     /// A fresh secret for `run`, from the system's random source.
     pub fn generate(run: &RunName) -> Result<Self, SecretError> {
-        let mut bytes = [0; SECRET_BYTES];
-        std::fs::File::open("/dev/urandom")
-            .and_then(|mut random| random.read_exact(&mut bytes))
-            .map_err(|error| SecretError::Random {
-                run: run.clone(),
-                reason: error.to_string(),
-            })?;
-        Ok(Self(bytes))
+        random_bytes().map(Self).map_err(|error| SecretError::Random {
+            run: run.clone(),
+            reason: error.to_string(),
+        })
     }
 
     /// The secret of these bytes: what a message carries.
@@ -133,21 +129,13 @@ impl RunSecret {
 
     /// As [`SECRET_ENV`] and the secret file hold it: lowercase hexadecimal digits.
     pub fn to_hex(&self) -> String {
-        self.0.iter().map(|byte| format!("{byte:02x}")).collect()
+        to_hex(&self.0)
     }
 
     /// The secret written as [`to_hex`](Self::to_hex) writes it (surrounding whitespace
     /// ignored), `None` for anything else.
     pub fn from_hex(text: &str) -> Option<Self> {
-        let text = text.trim();
-        if text.len() != SECRET_BYTES * 2 || !text.is_ascii() {
-            return None;
-        }
-        let mut bytes = [0; SECRET_BYTES];
-        for (byte, pair) in bytes.iter_mut().zip(text.as_bytes().chunks(2)) {
-            *byte = u8::from_str_radix(std::str::from_utf8(pair).ok()?, 16).ok()?;
-        }
-        Some(Self(bytes))
+        from_hex(text.trim()).map(Self)
     }
 
     /// Where the learner of `run` writes its secret for workers started by hand.
@@ -160,32 +148,11 @@ impl RunSecret {
     /// worker never reads half of one; another user's file in its place is an error.
     pub fn publish(&self, run: &RunName) -> Result<(), SecretError> {
         let path = Self::path(run);
-        let error = |reason: String| SecretError::Write {
+        write_private(&path, &format!("{}\n", self.to_hex()), Replace::Whole).map_err(|reason| SecretError::Write {
             run: run.clone(),
             path: path.clone(),
             reason,
-        };
-        if let Ok(existing) = std::fs::symlink_metadata(&path)
-            && existing.uid() != current_user()
-        {
-            return Err(error(format!(
-                "a file of user {} is in its place (another user's run of the same name?)",
-                existing.uid()
-            )));
-        }
-        let written = PathBuf::from(format!("{}.new", path.display()));
-        let _ = std::fs::remove_file(&written);
-        std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .mode(0o600)
-            .open(&written)
-            .and_then(|mut file| file.write_all(format!("{}\n", self.to_hex()).as_bytes()))
-            .and_then(|()| std::fs::rename(&written, &path))
-            .map_err(|e| {
-                let _ = std::fs::remove_file(&written);
-                error(e.to_string())
-            })
+        })
     }
 
     /// The secret a worker joining `run` sends, and where it found it: [`SECRET_ENV`] when
@@ -215,42 +182,119 @@ fn read_file(run: &RunName, path: &Path) -> Result<Option<RunSecret>, SecretErro
         path: path.to_path_buf(),
         reason,
     };
-    let metadata = match std::fs::symlink_metadata(path) {
-        Ok(metadata) => metadata,
-        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(error) => return Err(refuse(error.to_string())),
+    let Some(text) = read_private(path).map_err(refuse)? else {
+        return Ok(None);
     };
-    // Checked before it is opened: opening a FIFO would block, and a secret another user could
-    // have written, or can read, is none.
-    if !metadata.file_type().is_file() {
-        return Err(refuse("not a regular file".into()));
-    }
-    if metadata.uid() != current_user() {
-        return Err(refuse(format!(
-            "it belongs to user {}, not this worker's user {}",
-            metadata.uid(),
-            current_user()
-        )));
-    }
-    if metadata.mode() & 0o077 != 0 {
-        return Err(refuse(format!(
-            "its mode is {:o}: other users may read or change it (a learner writes 600)",
-            metadata.mode() & 0o777
-        )));
-    }
-    let mut text = String::new();
-    match std::fs::File::open(path).and_then(|file| file.take(64).read_to_string(&mut text)) {
-        Ok(_) => {}
-        // The run ended and removed it between the look and the read.
-        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(error) => return Err(refuse(error.to_string())),
-    }
     RunSecret::from_hex(&text).map(Some).ok_or_else(|| {
         refuse(format!(
             "it holds {} bytes, not {} hexadecimal digits",
             text.len(),
             SECRET_BYTES * 2
         ))
+    })
+}
+
+/// `N` bytes from the system's random source.
+pub fn random_bytes<const N: usize>() -> std::io::Result<[u8; N]> {
+    let mut bytes = [0; N];
+    std::fs::File::open("/dev/urandom").and_then(|mut random| random.read_exact(&mut bytes))?;
+    Ok(bytes)
+}
+
+/// `bytes` as lowercase hexadecimal digits.
+pub fn to_hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|byte| format!("{byte:02x}")).collect()
+}
+
+/// The `N` bytes `text` writes in hexadecimal digits, `None` for anything else.
+pub fn from_hex<const N: usize>(text: &str) -> Option<[u8; N]> {
+    if text.len() != N * 2 || !text.is_ascii() {
+        return None;
+    }
+    let mut bytes = [0; N];
+    for (byte, pair) in bytes.iter_mut().zip(text.as_bytes().chunks(2)) {
+        *byte = u8::from_str_radix(std::str::from_utf8(pair).ok()?, 16).ok()?;
+    }
+    Some(bytes)
+}
+
+/// Most bytes a private file holds: a secret or a key is one short line.
+const PRIVATE_FILE_LIMIT: u64 = 256;
+
+/// The text of a file only this user may read and write (a secret, a key): `None` when there
+/// is none, and why not when it is not a regular file, belongs to another user, is open to
+/// others or is longer than a secret is.
+pub fn read_private(path: &Path) -> Result<Option<String>, String> {
+    let metadata = match std::fs::symlink_metadata(path) {
+        Ok(metadata) => metadata,
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(error) => return Err(error.to_string()),
+    };
+    // Checked before it is opened: opening a FIFO would block, and a secret another user could
+    // have written, or can read, is none.
+    if !metadata.file_type().is_file() {
+        return Err("not a regular file".into());
+    }
+    if metadata.uid() != current_user() {
+        return Err(format!(
+            "it belongs to user {}, not this process's user {}",
+            metadata.uid(),
+            current_user()
+        ));
+    }
+    if metadata.mode() & 0o077 != 0 {
+        return Err(format!(
+            "its mode is {:o}: other users may read or change it (acps writes 600)",
+            metadata.mode() & 0o777
+        ));
+    }
+    let mut text = String::new();
+    match std::fs::File::open(path).and_then(|file| file.take(PRIVATE_FILE_LIMIT).read_to_string(&mut text)) {
+        Ok(_) => Ok(Some(text)),
+        // Removed between the look and the read.
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(error) => Err(error.to_string()),
+    }
+}
+
+/// How [`write_private`] treats a file already there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Replace {
+    /// Replace it whole (written beside it, then renamed), unless another user's.
+    Whole,
+    /// Leave it: an error.
+    Never,
+}
+
+/// Write `text` to `path` readable and writable by this user alone, and why not.
+pub fn write_private(path: &Path, text: &str, replace: Replace) -> Result<(), String> {
+    if let Ok(existing) = std::fs::symlink_metadata(path) {
+        if replace == Replace::Never {
+            return Err("a file is already there".into());
+        }
+        if existing.uid() != current_user() {
+            return Err(format!(
+                "a file of user {} is in its place (another user's run of the same name?)",
+                existing.uid()
+            ));
+        }
+    }
+    let written = PathBuf::from(format!("{}.new", path.display()));
+    let _ = std::fs::remove_file(&written);
+    let created = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(&written)
+        .and_then(|mut file| file.write_all(text.as_bytes()));
+    let renamed = created.and_then(|()| match replace {
+        Replace::Whole => std::fs::rename(&written, path),
+        // A link fails where a file appeared meanwhile, where a rename would replace it.
+        Replace::Never => std::fs::hard_link(&written, path).and_then(|()| std::fs::remove_file(&written)),
+    });
+    renamed.map_err(|error| {
+        let _ = std::fs::remove_file(&written);
+        error.to_string()
     })
 }
 
@@ -307,6 +351,13 @@ mod tests {
         std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
         let error = RunSecret::for_worker(&run).unwrap_err().to_string();
         assert!(error.contains("its mode is 644"), "{error}");
+        // Never replacing a file: a key another process made stays.
+        let kept = std::fs::read(&path).unwrap();
+        assert_eq!(
+            write_private(&path, "other", Replace::Never),
+            Err("a file is already there".to_string())
+        );
+        assert_eq!(std::fs::read(&path).unwrap(), kept);
         std::fs::write(&path, "not a secret").unwrap();
         std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
         let error = RunSecret::for_worker(&run).unwrap_err().to_string();

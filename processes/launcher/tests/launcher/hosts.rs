@@ -19,6 +19,9 @@ use std::time::Duration;
 /// cannot make one) this host's loopback.
 struct Network {
     netns: Option<Netns>,
+    /// The relays' key of its learner, as a learner makes it.
+    key: std::path::PathBuf,
+    _keys: crate::TempDir,
 }
 
 impl Network {
@@ -33,7 +36,24 @@ impl Network {
             }
             Err(why) => panic!("ACPS_REQUIRE_NETNS is set, and no network namespace can be made: {why}"),
         };
-        Self { netns }
+        let keys = temp_dir("relay-key");
+        std::fs::create_dir_all(&*keys).unwrap();
+        let key = keys.join("relay.key");
+        acps_relay::net::RelayKey::make_or_take(&key).unwrap();
+        Self {
+            netns,
+            key,
+            _keys: keys,
+        }
+    }
+
+    /// The network's key as a learner or relay takes it, unless `extra` sets the credentials.
+    fn key_args(&self, extra: &[&str]) -> Vec<String> {
+        let own = ["--zenoh-config", "--relay-key", "--no-relay-key"];
+        if extra.iter().any(|arg| own.contains(arg)) {
+            return Vec::new();
+        }
+        vec!["--relay-key".into(), self.key.display().to_string()]
     }
 
     /// An endpoint for the learner, on a port that was free a moment ago: the learner's side of
@@ -71,6 +91,7 @@ fn relay(network: &Network, endpoint: &str, local: &RunName, workers: usize, ext
             "--workers",
         ])
         .arg(workers.to_string())
+        .args(network.key_args(extra))
         .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
@@ -86,13 +107,15 @@ fn kill_host(child: &mut Child) {
     let _ = child.wait();
 }
 
-/// `acps run ARGS --listen ENDPOINT --run RUN --out OUT`, not quiet (it reports re-issued tasks).
-fn learner(args: &[&str], endpoint: &str, run: &RunName, out: &Path, extra: &[&str]) -> Child {
+/// `acps run ARGS --listen ENDPOINT --run RUN --out OUT` with `network`'s key, not quiet (it
+/// reports re-issued tasks).
+fn learner(network: &Network, args: &[&str], endpoint: &str, run: &RunName, out: &Path, extra: &[&str]) -> Child {
     let loud: Vec<&str> = args.iter().copied().filter(|a| *a != "-q").collect();
     watched()
         .arg("run")
         .args(&loud)
         .args(["--listen", endpoint, "--run", run.as_str()])
+        .args(network.key_args(extra))
         .args(extra)
         .arg("--out")
         .arg(out)
@@ -115,7 +138,7 @@ fn a_run_served_only_through_a_relay_matches_the_in_process_run() {
     let network = Network::new(1);
     let endpoint = network.endpoint();
     let out = dir.join("fleet");
-    let learner = learner(&GRID, &endpoint, &run, &out, &["--workers", "0"]);
+    let learner = learner(&network, &GRID, &endpoint, &run, &out, &["--workers", "0"]);
     let relay = relay(&network, &endpoint, &local, 2, &[]).spawn().unwrap();
     let stdout = finished(learner);
     assert!(stdout.contains("and relays of other hosts"), "{stdout}");
@@ -140,6 +163,7 @@ fn a_killed_relay_s_tasks_go_to_other_workers_and_a_late_relay_joins() {
     let endpoint = network.endpoint();
     let (first, second) = (run_name("relay-kill-h1"), run_name("relay-kill-h2"));
     let learner = learner(
+        &network,
         &SLOW,
         &endpoint,
         &run,
@@ -183,7 +207,14 @@ fn leased_run(name: &str, network: &Network, workers: usize) -> LeasedRun {
     let endpoint = network.endpoint();
     let workers = workers.to_string();
     let options = ["--in-flight", "8", "--workers", &workers, "--checkpoint-every", "1"];
-    let learner = learner(&SLOW, &endpoint, &slow.run, &slow.out, &[&options[..], &LEASE].concat());
+    let learner = learner(
+        network,
+        &SLOW,
+        &endpoint,
+        &slow.run,
+        &slow.out,
+        &[&options[..], &LEASE].concat(),
+    );
     LeasedRun {
         local: run_name(&format!("{name}-h1")),
         slow,
@@ -245,7 +276,7 @@ fn a_relay_waits_for_its_killed_learner_to_resume_and_the_run_ends_as_in_process
     let endpoint = network.endpoint();
     let local = run_name("relay-resume-h1");
     let args = ["--workers", "0", "--checkpoint-every", "1"];
-    let mut first = learner(&SLOW, &endpoint, &run, &out, &args);
+    let mut first = learner(&network, &SLOW, &endpoint, &run, &out, &args);
     let relay = relay(&network, &endpoint, &local, 1, &["-q", "--wait-for-learner", "120"])
         .spawn()
         .unwrap();
@@ -255,6 +286,7 @@ fn a_relay_waits_for_its_killed_learner_to_resume_and_the_run_ends_as_in_process
     kill_host(&mut first);
     // The relay waits; the resumed learner (same run, same address) gets it back.
     let resumed = learner(
+        &network,
         &SLOW,
         &endpoint,
         &run,
@@ -277,6 +309,7 @@ fn a_relay_whose_learner_is_gone_for_good_stops_its_workers_and_says_so() {
     let endpoint = network.endpoint();
     let out = dir.join("fleet");
     let mut learner = learner(
+        &network,
         &SLOW,
         &endpoint,
         &run,
@@ -334,6 +367,7 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
     };
     let learner_config = config("learner.json5", "learner", "learner", true);
     let learner = learner(
+        &network,
         &GRID,
         &endpoint,
         &run,
@@ -382,6 +416,263 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
     finished(learner);
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
+}
+
+#[test]
+fn a_learner_makes_its_relays_key_and_relays_without_it_are_refused() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = temp_dir("relay-key");
+    let reference = in_process(&GRID, &dir.join("in-process"));
+    let run = run_name("relay-key");
+    let network = Network::new(8);
+    let endpoint = network.endpoint();
+    let out = dir.join("fleet");
+    // No credentials given: the learner makes the key in its run directory and says where.
+    let learner = watched()
+        .arg("run")
+        .args(GRID.iter().filter(|a| **a != "-q"))
+        .args(["--listen", &endpoint, "--run", run.as_str(), "--workers", "0"])
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .process_group(0)
+        .spawn()
+        .unwrap();
+    let key = out.join("relay.key");
+    wait_until("the learner's key", Duration::from_secs(60), || key.exists());
+    let mode = std::fs::metadata(&key).unwrap().permissions().mode();
+    assert_eq!(mode & 0o777, 0o600, "{mode:o}");
+    let relay_with = |local: &str, credentials: &[&str], startup: &str| {
+        relay(
+            &network,
+            &endpoint,
+            &run_name(local),
+            2,
+            &[&["-q", "--startup-timeout", startup][..], credentials].concat(),
+        )
+        .output()
+        .unwrap()
+    };
+    // A relay must say which credentials it presents.
+    let output = network
+        .watched()
+        .args(["relay", "--connect", &endpoint, "--local-run", "relay-key-h0"])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    assert!(said.contains("--relay-key FILE is missing"), "{said}");
+    // Without the key, or with another, the learner's session does not admit it.
+    let other = dir.join("other.key");
+    acps_relay::net::RelayKey::make_or_take(&other).unwrap();
+    for (local, credentials) in [
+        ("relay-key-h1", vec!["--no-relay-key"]),
+        ("relay-key-h2", vec!["--relay-key", other.to_str().unwrap()]),
+    ] {
+        let output = relay_with(local, &credentials, "2");
+        let said = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{said}");
+        assert!(said.contains("no learner") && said.contains("relay.key"), "{said}");
+        assert_clean(&run_name(local));
+    }
+    // With the learner's key it serves the run to its in-process end.
+    let served = relay_with("relay-key-h3", &["--relay-key", key.to_str().unwrap()], "30");
+    assert!(served.status.success(), "{}", String::from_utf8_lossy(&served.stderr));
+    let output = learner.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "--relay-key relay.key` with this host's address and a copy of {} (made now)",
+            key.display()
+        )),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    assert_clean(&run);
+    // Without credentials a learner listens on loopback only.
+    let output = watched()
+        .args([
+            "run",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "10",
+            "--workers",
+            "1",
+            "-q",
+        ])
+        .args(["--listen", "tcp/0.0.0.0:7447", "--no-relay-key", "--run", run.as_str()])
+        .arg("--out")
+        .arg(dir.join("exposed"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains("listening on tcp/0.0.0.0:7447 without relay credentials would let any program that reaches it join as a relay"),
+        "{said}"
+    );
+    assert!(!dir.join("exposed").exists(), "a refused run leaves no directory");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let output = watched()
+        .args([
+            "run",
+            "function",
+            "--runs",
+            "1",
+            "--episodes",
+            "10",
+            "--workers",
+            "1",
+            "-q",
+        ])
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}"), "--no-relay-key"])
+        .arg("--out")
+        .arg(dir.join("loopback"))
+        .output()
+        .unwrap();
+    succeeded(&output);
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        said.contains("admits relays without credentials (--no-relay-key): any process of this host can join"),
+        "{said}"
+    );
+}
+
+#[test]
+fn a_session_posing_as_an_admitted_relay_changes_nothing() {
+    // An honest relay serves the run; beside it a session with the relays' credentials joins
+    // as a relay itself (so it has an admission key of its own) and publishes outcomes of 1e300
+    // for every task id on the channels of the other relay numbers, as if it were them. Its key
+    // is not theirs: none is taken.
+    use acps_relay::net::{self, Hello, NetOutcome, RelayKey, Up, Welcome};
+    use zenoh::Wait as _;
+    let dir = temp_dir("relay-posing");
+    let reference = in_process(&GRID, &dir.join("in-process"));
+    let (run, local) = (run_name("relay-posing"), run_name("relay-posing-h1"));
+    let network = Network::new(9);
+    let endpoint = network.endpoint();
+    let out = dir.join("fleet");
+    let learner = learner(&network, &GRID, &endpoint, &run, &out, &["--workers", "0"]);
+    let relay = relay(&network, &endpoint, &local, 2, &["-q"]).spawn().unwrap();
+    let admitted_session = || {
+        net::open(&acps_relay::NetOptions {
+            listen: Vec::new(),
+            connect: vec![endpoint.clone()],
+            lease: net::DEFAULT_LEASE,
+            config_file: None,
+            key: Some(RelayKey::read(&network.key).unwrap()),
+        })
+        .unwrap()
+    };
+    let session = admitted_session();
+    // Another admitted session listens to every relay's messages to the learner: it must hear
+    // none (they go to the learner alone, whose peer-mode session forwards nothing), or the
+    // admission keys they carry could be read and used.
+    let sniffer = admitted_session();
+    let listen = |what: &str| {
+        let heard = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let counter = heard.clone();
+        let subscriber = sniffer
+            .declare_subscriber(net::key(&run, what))
+            .callback(move |_| {
+                counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            })
+            .wait()
+            .unwrap();
+        (heard, subscriber)
+    };
+    // The learner's tasks to the relays it does hear: it is connected and listening.
+    let (heard, _up) = listen("up/*");
+    let (tasks, _down) = listen("down/*");
+    let hello = Hello {
+        net_protocol: net::NET_PROTOCOL,
+        wire_protocol: acps_wire::wire::PROTOCOL_VERSION,
+        build: net::BUILD.into(),
+        run: run.to_string(),
+        identity: 0,
+        host: "poser".into(),
+        pid: std::process::id(),
+    };
+    let mut admission = None;
+    wait_until("the posing session's admission", Duration::from_secs(60), || {
+        let replies = session
+            .get(net::hello_key(Some(&run)))
+            .payload(net::encode(&hello).unwrap())
+            .wait()
+            .unwrap();
+        if let Ok(reply) = replies.recv()
+            && let Ok(sample) = reply.result()
+            && let Ok(Welcome::Accepted(admitted)) = net::decode(&sample.payload().to_bytes())
+        {
+            admission = Some(admitted);
+        }
+        admission.is_some()
+    });
+    let admission = admission.unwrap();
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let posed = std::thread::scope(|scope| {
+        let poser = scope.spawn(|| {
+            let mut sent = 0u64;
+            while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                for peer in (1..=4u32).filter(|&peer| peer != admission.peer) {
+                    let outcomes = (0..2)
+                        .flat_map(|job| {
+                            (0..128).map(move |id| NetOutcome::new(job, &acps_shared::Outcome::new(id, 1e300, 0.0)))
+                        })
+                        .collect();
+                    let message = Up::Request {
+                        key: admission.key,
+                        request: sent,
+                        want: 0,
+                        serves: None,
+                        workers: 1,
+                        slowest_rollout_us: 0,
+                        outcomes,
+                    };
+                    let bytes = net::encode(&message).unwrap();
+                    session
+                        .put(net::key(&run, &format!("up/{peer}")), bytes)
+                        .wait()
+                        .unwrap();
+                    sent += 1;
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            sent
+        });
+        let output = learner.wait_with_output().unwrap();
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        (output, poser.join().unwrap())
+    });
+    let (output, sent) = posed;
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{said}");
+    assert!(sent > 0);
+    assert!(said.contains("channel without its key was dropped"), "{said}");
+    assert_eq!(
+        heard.load(std::sync::atomic::Ordering::Relaxed),
+        0,
+        "relays' messages reached another session"
+    );
+    assert!(
+        tasks.load(std::sync::atomic::Ordering::Relaxed) > 0,
+        "the listening session heard no tasks either"
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
+    let relayed = relay.wait_with_output().unwrap();
+    assert!(relayed.status.success(), "{}", String::from_utf8_lossy(&relayed.stderr));
+    let _ = session.close().wait();
+    let _ = sniffer.close().wait();
+    assert_clean(&run);
+    assert_clean(&local);
 }
 
 /// An emulated host with a network of its own: a network namespace joined to this one by a

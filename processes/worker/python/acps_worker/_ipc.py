@@ -109,11 +109,13 @@ def find_secret(run: str) -> tuple[bytes | None, str]:
     if not stat.S_ISREG(status.st_mode):
         raise refuse("not a regular file")
     if status.st_uid != os.geteuid():
-        raise refuse(f"it belongs to user {status.st_uid}, not this worker's user {os.geteuid()}")
+        raise refuse(
+            f"it belongs to user {status.st_uid}, not this process's user {os.geteuid()}"
+        )
     if status.st_mode & 0o077:
         raise refuse(
             f"its mode is {status.st_mode & 0o777:o}: other users may read or change it "
-            "(a learner writes 600)"
+            "(acps writes 600)"
         )
     try:
         with path.open("rb") as file:
