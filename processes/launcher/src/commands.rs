@@ -478,14 +478,14 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
 
 /// Serve this host's workers from a learner on another host.
 pub(crate) fn relay(args: RelayArgs) -> anyhow::Result<()> {
-    let Some(net) = net_options(&args.net, &[], &args.connect)? else {
-        bail!("--connect ENDPOINT is missing: where the learner listens (its --listen)");
-    };
     let run = args
         .run
         .as_deref()
         .map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
         .transpose()?;
+    let Some(net) = net_options(&args.net, &[], &args.connect)? else {
+        bail!("--connect ENDPOINT is missing: where the learner listens (its --listen)");
+    };
     args.started.check()?;
     let local = args
         .local_run

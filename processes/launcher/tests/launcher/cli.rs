@@ -795,6 +795,35 @@ fn numbers_outside_their_ranges_are_refused_before_anything_runs() {
             2,
             "--run a_b",
         ),
+        // Relay credentials: a key file that is not there, or none said.
+        (
+            &[
+                "relay",
+                "--connect",
+                "tcp/127.0.0.1:1",
+                "--relay-key",
+                "/nonexistent/relay.key",
+            ],
+            2,
+            "--relay-key: relay key /nonexistent/relay.key: no such file (copy the key file the learner made, `relay.key` in its run directory, to this host)",
+        ),
+        (
+            &["relay", "--connect", "tcp/127.0.0.1:1"],
+            2,
+            "--relay-key FILE is missing: a copy of the relay.key its learner made",
+        ),
+        (
+            &[
+                "relay",
+                "--connect",
+                "tcp/127.0.0.1:1",
+                "--relay-key",
+                "k",
+                "--no-relay-key",
+            ],
+            2,
+            "the argument '--relay-key <FILE>' cannot be used with '--no-relay-key'",
+        ),
         // Not a number at all.
         (
             &["experiment", "toy", "--runs", "three"],
