@@ -25,7 +25,10 @@ fn init_logging(verbose: u8) {
         _ => "trace",
     };
     // Zenoh's own notes (its settings, reconnections) say nothing an acps user acts on: acps
-    // reports what matters in its words.
+    // reports what matters in its words, and every Zenoh call that fails returns its error to
+    // acps. Its log stays off by default: a relay killed mid-query made it print "ERROR Received
+    // Query for unknown key_expr" into a run that went on unharmed. -v shows its errors.
+    let zenoh_level = if verbose == 0 { "off" } else { "error" };
     let zenoh = [
         "zenoh",
         "zenoh_transport",
@@ -33,7 +36,7 @@ fn init_logging(verbose: u8) {
         "zenoh_link_tcp",
         "zenoh_config",
     ]
-    .map(|target| format!(",{target}=error"))
+    .map(|target| format!(",{target}={zenoh_level}"))
     .concat();
     let default = || tracing_subscriber::EnvFilter::new(format!("{level}{zenoh}"));
     let filter = match std::env::var("ACPS_LOG") {

@@ -282,6 +282,27 @@ impl ContextSelector for SelfPaced {
                 state.mean.len()
             )));
         }
+        // As a live one: its mean a weighted mean of contexts in the space, every variance
+        // between its floor and what contexts in the space can spread (the floor may be added
+        // to a whole diagonal: the square of the width, four times the most, bounds both). A
+        // forged 1e300 would otherwise reach C-REPS as an infinite log-density ratio.
+        let (low, high) = self.space.bounding_box();
+        for j in 0..dim {
+            let (mean, variance, width) = (state.mean[j], state.covariance[j * dim + j], high[j] - low[j]);
+            if !(low[j]..=high[j]).contains(&mean) {
+                return Err(SelectorRestoreError::SelfPaced(format!(
+                    "mean coordinate {j} is {mean:?}, outside the space's {}..={}",
+                    low[j], high[j]
+                )));
+            }
+            let floor = self.floor[j] * (1.0 - 1e-9);
+            if !(floor..=width * width).contains(&variance) {
+                return Err(SelectorRestoreError::SelfPaced(format!(
+                    "variance {j} is {variance:?}, outside {floor}..={} (the floor of min_std, and the square of the space's width)",
+                    width * width
+                )));
+            }
+        }
         let covariance = DMatrix::from_row_slice(dim, dim, &state.covariance);
         let finite = state.mean.iter().chain(&state.covariance).all(|x| x.is_finite());
         let factor = Cholesky::new(covariance.clone())
@@ -525,6 +546,25 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         let choice = selector.choose(&mut rng);
         assert!(selector.space.contains(&choice.context));
+    }
+
+    #[test]
+    fn restored_states_a_live_selector_cannot_have_are_refused() {
+        let selector = unit_square();
+        let SelectorState::SelfPaced(live) = selector.save_state() else {
+            panic!("a self-paced state")
+        };
+        let forged = |change: fn(&mut SelfPacedState)| {
+            let mut state = live.clone();
+            change(&mut state);
+            unit_square().restore_state(SelectorState::SelfPaced(state)).unwrap_err().to_string()
+        };
+        assert!(forged(|s| s.mean[0] = 1e300).contains("mean coordinate 0 is 1e300, outside the space's"));
+        assert!(forged(|s| s.covariance[3] = 1e300).contains("variance 1 is 1e300, outside"));
+        assert!(forged(|s| s.covariance[0] = 0.0).contains("variance 0 is 0.0, outside"));
+        assert!(forged(|s| s.mean[1] = f64::NAN).contains("mean coordinate 1 is NaN"));
+        let mut restored = unit_square();
+        restored.restore_state(SelectorState::SelfPaced(live)).unwrap();
     }
 
     #[test]
