@@ -68,6 +68,23 @@ pub enum IpcError {
         /// The system's reason.
         reason: String,
     },
+    /// The run's shared memory, or iceoryx2's directory, belongs to another user, who alone may
+    /// write there.
+    #[error(
+        "creating node '{node}' of run '{run}': {what} belongs to user {owner}, who alone may use it; run this process as that user (this one runs as user {user})"
+    )]
+    OtherUser {
+        /// The node's name.
+        node: String,
+        /// The run.
+        run: RunName,
+        /// What belongs to the other user: the run's shared memory, or iceoryx2's directory.
+        what: String,
+        /// The user who owns the run's files.
+        owner: u32,
+        /// This process's user.
+        user: u32,
+    },
     /// iceoryx2 could not create the process's node of the run (permissions, resources).
     #[error("creating node '{node}' of run '{run}'")]
     NodeCreate {
@@ -431,10 +448,41 @@ fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Ser
         .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|source| IpcError::NodeCreate {
-            node: name.to_string(),
-            run: run.clone(),
-            source,
+        .map_err(|source| {
+            // iceoryx2 says only that it could not make a node id: name the owner instead.
+            use std::os::unix::fs::MetadataExt as _;
+            let user = crate::secret::current_user();
+            let foreign = |path: &Path| std::fs::metadata(path).ok().map(|m| m.uid()).filter(|&uid| uid != user);
+            // iceoryx2 keeps every user's nodes in one directory, whose maker alone may write in it.
+            let root = Path::new(NODES_DIR).parent().unwrap_or(Path::new(NODES_DIR));
+            let owner = leftover_files(run)
+                .iter()
+                .find_map(|path| foreign(path))
+                .map(|owner| (owner, "the run's shared memory".to_string()))
+                .or_else(|| foreign(root).map(|owner| (owner, format!("iceoryx2's directory {}", root.display()))));
+            match owner {
+                Some((owner, what)) => {
+                    // What this process made of a run that is not its user's (iceoryx2's
+                    // node counter, as it tried): nobody else would remove it.
+                    for path in leftover_files(run) {
+                        if std::fs::metadata(&path).is_ok_and(|m| m.uid() == user) {
+                            let _ = std::fs::remove_file(&path);
+                        }
+                    }
+                    IpcError::OtherUser {
+                        node: name.to_string(),
+                        run: run.clone(),
+                        what,
+                        owner,
+                        user,
+                    }
+                }
+                None => IpcError::NodeCreate {
+                    node: name.to_string(),
+                    run: run.clone(),
+                    source,
+                },
+            }
         })
 }
 

@@ -298,7 +298,8 @@ pub fn write_private(path: &Path, text: &str, replace: Replace) -> Result<(), St
     })
 }
 
-fn current_user() -> u32 {
+/// This process's effective user.
+pub(crate) fn current_user() -> u32 {
     // SAFETY: geteuid has no preconditions and cannot fail.
     unsafe { libc::geteuid() }
 }

@@ -1284,6 +1284,60 @@ fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
 }
 
 #[test]
+fn a_worker_of_another_user_is_told_whose_run_it_is() {
+    // Needs root to become another user; elsewhere, and where that user cannot run this build
+    // (its directories closed to others), it says so and checks nothing.
+    let as_nobody = || {
+        let mut command = Command::new("runuser");
+        command.args([
+            "-u",
+            "nobody",
+            "--",
+            "timeout",
+            "--signal=KILL",
+            "60",
+            env!("CARGO_BIN_EXE_acps"),
+        ]);
+        command
+    };
+    let runs = as_nobody().arg("--version").output();
+    if !runs.is_ok_and(|output| output.status.success()) {
+        eprintln!("skipped: this test runs acps as user nobody, which needs root and a build others may run");
+        return;
+    }
+    let SlowRun {
+        dir: _dir, run, out, ..
+    } = slow_run("other-user");
+    let learner = acps()
+        .arg("run")
+        .args(SLOW)
+        .args(["--workers", "1", "--run", run.as_str()])
+        .arg("--out")
+        .arg(&out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_until("the learner to serve", Duration::from_secs(60), || {
+        ipc::live_nodes(&run).unwrap_or(0) >= 1
+    });
+    let output = as_nobody().args(["worker", "--run", run.as_str()]).output().unwrap();
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    // The run's files, or iceoryx2's directory when it is closed to other users (iceoryx2 made
+    // it so under acps's umask): either way the owner is named.
+    assert!(
+        said.contains(&format!("of run '{run}': "))
+            && said.contains(
+                " belongs to user 0, who alone may use it; run this process as that user (this one runs as user 65534)"
+            ),
+        "{said}"
+    );
+    let output = learner.wait_with_output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_clean(&run);
+}
+
+#[test]
 fn after_a_kill_9_of_everything_the_next_start_of_any_fleet_removes_what_was_left() {
     let dir = temp_dir("kill-all");
     let run = run_name("kill-all");

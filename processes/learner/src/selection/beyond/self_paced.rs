@@ -557,7 +557,10 @@ mod tests {
         let forged = |change: fn(&mut SelfPacedState)| {
             let mut state = live.clone();
             change(&mut state);
-            unit_square().restore_state(SelectorState::SelfPaced(state)).unwrap_err().to_string()
+            unit_square()
+                .restore_state(SelectorState::SelfPaced(state))
+                .unwrap_err()
+                .to_string()
         };
         assert!(forged(|s| s.mean[0] = 1e300).contains("mean coordinate 0 is 1e300, outside the space's"));
         assert!(forged(|s| s.covariance[3] = 1e300).contains("variance 1 is 1e300, outside"));
