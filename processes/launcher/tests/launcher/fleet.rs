@@ -1245,6 +1245,19 @@ fn children_of(pid: u32) -> Vec<u32> {
         .collect()
 }
 
+/// `acps run` of the slow run `run` into `out` with one started worker, its stderr piped.
+fn slow_learner(run: &RunName, out: &Path) -> Child {
+    acps()
+        .arg("run")
+        .args(SLOW)
+        .args(["--workers", "1", "--run", run.as_str()])
+        .arg("--out")
+        .arg(out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 #[test]
 fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
     let SlowRun {
@@ -1253,15 +1266,7 @@ fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
         run,
         out,
     } = slow_run("hand-worker");
-    let learner = acps()
-        .arg("run")
-        .args(SLOW)
-        .args(["--workers", "1", "--run", run.as_str()])
-        .arg("--out")
-        .arg(&out)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let learner = slow_learner(&run, &out);
     let mut hand = acps()
         .args(["worker", "--run", run.as_str(), "--name", "by-hand", "-q"])
         .spawn()
@@ -1308,15 +1313,7 @@ fn a_worker_of_another_user_is_told_whose_run_it_is() {
     let SlowRun {
         dir: _dir, run, out, ..
     } = slow_run("other-user");
-    let learner = acps()
-        .arg("run")
-        .args(SLOW)
-        .args(["--workers", "1", "--run", run.as_str()])
-        .arg("--out")
-        .arg(&out)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let learner = slow_learner(&run, &out);
     wait_until("the learner to serve", Duration::from_secs(60), || {
         ipc::live_nodes(&run).unwrap_or(0) >= 1
     });

@@ -130,16 +130,61 @@ fn finished(child: Child) -> String {
     succeeded(&child.wait_with_output().unwrap())
 }
 
-#[test]
-fn a_run_served_only_through_a_relay_matches_the_in_process_run() {
-    let dir = temp_dir("relay-only");
+/// The grid run `name`, served only by one relay of two workers on network `tag`, both started,
+/// with the in-process run's summary to compare.
+struct RelayedGrid {
+    _dir: crate::TempDir,
+    reference: Vec<u8>,
+    run: RunName,
+    local: RunName,
+    network: Network,
+    endpoint: String,
+    out: std::path::PathBuf,
+    learner: Child,
+    relay: Child,
+}
+
+/// The grid run `name` to serve on network `tag`: its directory (the in-process run's summary
+/// read from it), its name, the network, the learner's endpoint and its run directory.
+fn grid_on_network(name: &str, tag: u32) -> (crate::TempDir, Vec<u8>, RunName, Network, String, std::path::PathBuf) {
+    let dir = temp_dir(name);
     let reference = in_process(&GRID, &dir.join("in-process"));
-    let (run, local) = (run_name("relay-only"), run_name("relay-only-h1"));
-    let network = Network::new(1);
+    let network = Network::new(tag);
     let endpoint = network.endpoint();
     let out = dir.join("fleet");
+    (dir, reference, run_name(name), network, endpoint, out)
+}
+
+fn relayed_grid(name: &str, tag: u32, relay_args: &[&str]) -> RelayedGrid {
+    let (dir, reference, run, network, endpoint, out) = grid_on_network(name, tag);
+    let local = run_name(&format!("{name}-h1"));
     let learner = learner(&network, &GRID, &endpoint, &run, &out, &["--workers", "0"]);
-    let relay = relay(&network, &endpoint, &local, 2, &[]).spawn().unwrap();
+    let relay = relay(&network, &endpoint, &local, 2, relay_args).spawn().unwrap();
+    RelayedGrid {
+        _dir: dir,
+        reference,
+        run,
+        local,
+        network,
+        endpoint,
+        out,
+        learner,
+        relay,
+    }
+}
+
+#[test]
+fn a_run_served_only_through_a_relay_matches_the_in_process_run() {
+    let RelayedGrid {
+        _dir,
+        reference,
+        run,
+        local,
+        learner,
+        relay,
+        out,
+        ..
+    } = relayed_grid("relay-only", 1, &[]);
     let stdout = finished(learner);
     assert!(stdout.contains("and relays of other hosts"), "{stdout}");
     let relayed = relay.wait_with_output().unwrap();
@@ -340,12 +385,7 @@ fn a_relay_whose_learner_is_gone_for_good_stops_its_workers_and_says_so() {
 
 #[test]
 fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
-    let dir = temp_dir("relay-refused");
-    let reference = in_process(&GRID, &dir.join("in-process"));
-    let run = run_name("relay-refused");
-    let network = Network::new(6);
-    let endpoint = network.endpoint();
-    let out = dir.join("fleet");
+    let (dir, reference, run, network, endpoint, out) = grid_on_network("relay-refused", 6);
     let users = dir.join("users.txt");
     std::fs::create_dir_all(&*dir).unwrap();
     std::fs::write(&users, "relay:right\n").unwrap();
@@ -421,12 +461,7 @@ fn relays_of_another_run_or_with_the_wrong_password_are_refused_naming_why() {
 #[test]
 fn a_learner_makes_its_relays_key_and_relays_without_it_are_refused() {
     use std::os::unix::fs::PermissionsExt as _;
-    let dir = temp_dir("relay-key");
-    let reference = in_process(&GRID, &dir.join("in-process"));
-    let run = run_name("relay-key");
-    let network = Network::new(8);
-    let endpoint = network.endpoint();
-    let out = dir.join("fleet");
+    let (dir, reference, run, network, endpoint, out) = grid_on_network("relay-key", 8);
     // No credentials given: the learner makes the key in its run directory and says where.
     let learner = watched()
         .arg("run")
@@ -492,23 +527,26 @@ fn a_learner_makes_its_relays_key_and_relays_without_it_are_refused() {
     assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), reference);
     assert_clean(&run);
     // Without credentials a learner listens on loopback only.
-    let output = watched()
-        .args([
-            "run",
-            "function",
-            "--runs",
-            "1",
-            "--episodes",
-            "10",
-            "--workers",
-            "1",
-            "-q",
-        ])
-        .args(["--listen", "tcp/0.0.0.0:7447", "--no-relay-key", "--run", run.as_str()])
-        .arg("--out")
-        .arg(dir.join("exposed"))
-        .output()
-        .unwrap();
+    let short_run = |listen: &str, out: &str| {
+        watched()
+            .args([
+                "run",
+                "function",
+                "--runs",
+                "1",
+                "--episodes",
+                "10",
+                "--workers",
+                "1",
+                "-q",
+            ])
+            .args(["--listen", listen, "--no-relay-key"])
+            .arg("--out")
+            .arg(dir.join(out))
+            .output()
+            .unwrap()
+    };
+    let output = short_run("tcp/0.0.0.0:7447", "exposed");
     let said = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{said}");
     assert!(
@@ -521,23 +559,7 @@ fn a_learner_makes_its_relays_key_and_relays_without_it_are_refused() {
         .local_addr()
         .unwrap()
         .port();
-    let output = watched()
-        .args([
-            "run",
-            "function",
-            "--runs",
-            "1",
-            "--episodes",
-            "10",
-            "--workers",
-            "1",
-            "-q",
-        ])
-        .args(["--listen", &format!("tcp/127.0.0.1:{port}"), "--no-relay-key"])
-        .arg("--out")
-        .arg(dir.join("loopback"))
-        .output()
-        .unwrap();
+    let output = short_run(&format!("tcp/127.0.0.1:{port}"), "loopback");
     succeeded(&output);
     let said = String::from_utf8_lossy(&output.stderr);
     assert!(
@@ -554,14 +576,17 @@ fn a_session_posing_as_an_admitted_relay_changes_nothing() {
     // is not theirs: none is taken.
     use acps_relay::net::{self, Hello, NetOutcome, RelayKey, Up, Welcome};
     use zenoh::Wait as _;
-    let dir = temp_dir("relay-posing");
-    let reference = in_process(&GRID, &dir.join("in-process"));
-    let (run, local) = (run_name("relay-posing"), run_name("relay-posing-h1"));
-    let network = Network::new(9);
-    let endpoint = network.endpoint();
-    let out = dir.join("fleet");
-    let learner = learner(&network, &GRID, &endpoint, &run, &out, &["--workers", "0"]);
-    let relay = relay(&network, &endpoint, &local, 2, &["-q"]).spawn().unwrap();
+    let RelayedGrid {
+        _dir,
+        reference,
+        run,
+        local,
+        network,
+        endpoint,
+        out,
+        learner,
+        relay,
+    } = relayed_grid("relay-posing", 9, &["-q"]);
     let admitted_session = || {
         net::open(&acps_relay::NetOptions {
             listen: Vec::new(),
