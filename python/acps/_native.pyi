@@ -44,6 +44,7 @@ def run(
     quiet: bool,
     checkpoint_every: int,
     resume: bool,
+    force: bool,
     progress: Callable[[str, int, int, str, bool], None] | None,
     line: bool,
 ) -> str:

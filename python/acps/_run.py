@@ -52,6 +52,7 @@ def run(
     quiet: bool = False,
     checkpoint_every: int = 10,
     resume: bool = False,
+    force: bool = False,
     progress: Callable[[Progress], None] | None = None,
 ) -> Path:
     """Run every (method, run) of the experiment or problem file ``settings`` (a path, or a
@@ -69,7 +70,8 @@ def run(
     threads that run the jobs). Ctrl-C, or an exception of your function or of ``progress``,
     stops the run after every unfinished job wrote its checkpoint
     (``checkpoint_every`` learning rounds apart; 0 writes none) and is raised here;
-    ``resume=True`` continues from them.
+    ``resume=True`` continues from them. A directory that holds a finished run (its
+    ``summary.json``) is refused unless ``force=True``, which replaces its results.
 
     Raises :class:`acps.SettingsError` for settings acps refuses and :class:`acps.AcpsError`
     when the run fails (for example when every rollout of a job failed).
@@ -102,6 +104,7 @@ def run(
         quiet,
         checkpoint_every,
         resume,
+        force,
         None if progress is None else _reporting(progress),
         line,
     )

@@ -32,7 +32,7 @@ fn pictures(summary: &Summary, dir: &Path) -> Result<(), Box<dyn std::error::Err
 /// (KeyboardInterrupt), or an exception of `perform` or `progress`, stops the run after every
 /// unfinished job wrote its checkpoint, and is raised here.
 #[pyfunction]
-#[pyo3(signature = (path, json, origin, out, perform, quiet, checkpoint_every, resume, progress, line))]
+#[pyo3(signature = (path, json, origin, out, perform, quiet, checkpoint_every, resume, force, progress, line))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run(
     py: Python<'_>,
@@ -44,6 +44,7 @@ pub(crate) fn run(
     quiet: bool,
     checkpoint_every: u64,
     resume: bool,
+    force: bool,
     progress: Option<Py<PyAny>>,
     line: bool,
 ) -> PyResult<String> {
@@ -63,6 +64,7 @@ pub(crate) fn run(
             out.map(PathBuf::from),
             checkpoint_every,
             resume,
+            force,
         )?
     };
     let mut raised: Option<PyErr> = None;
@@ -115,18 +117,21 @@ fn observer(progress: Py<PyAny>, stop: Arc<AtomicBool>, failed: Arc<Mutex<Option
     })
 }
 
-/// The checked run directory of `file` (read from `path`, if it was) writing into `out`.
+/// The checked run directory of `file` (read from `path`, if it was) writing into `out`,
+/// replacing a finished run there when `force`.
 fn plan(
     file: &LoadedFile,
     path: Option<&Path>,
     out: Option<PathBuf>,
     checkpoint_every: u64,
     resume: bool,
+    force: bool,
 ) -> PyResult<RunDir> {
     let refused = |e: RunDirError| SettingsError::new_err(e.to_string());
     let plan = Plan::new(Some(file), &ExperimentFile::default()).map_err(|e| SettingsError::new_err(e.to_string()))?;
     let run_dir = RunDir::of(&plan, path, out)
         .and_then(|r| r.checkpointing(checkpoint_every, resume))
+        .map(|r| RunDir { replace: force, ..r })
         .map_err(refused)?;
     run_dir.prepare().map_err(refused)?;
     Ok(run_dir)

@@ -72,6 +72,17 @@ class RunTest(unittest.TestCase):
                 self.assertTrue((out / "curves.png").is_file())
                 self.assertEqual(len(list((out / "policies").iterdir())), 4)
 
+    def test_a_finished_run_is_replaced_only_when_asked(self) -> None:
+        with tempfile.TemporaryDirectory() as d:
+            out = acps.run(BOWL_TOML, batch_rollout=batch_bowl, out=Path(d) / "bowl", quiet=True)
+            (out / "mine.txt").write_text("kept")
+            with self.assertRaisesRegex(acps.SettingsError, "holds a finished run .*--force"):
+                acps.run(BOWL_TOML, batch_rollout=batch_bowl, out=out, quiet=True)
+            self.assertEqual(tables(out), self.reference)
+            acps.run(BOWL_TOML, batch_rollout=batch_bowl, out=out, quiet=True, force=True)
+            self.assertEqual(tables(out), self.reference)
+            self.assertEqual((out / "mine.txt").read_text(), "kept")
+
     def test_an_exception_stops_the_run_with_checkpoints_that_resume_to_the_same_bytes(
         self,
     ) -> None:

@@ -151,6 +151,10 @@ pub(crate) struct LearnArgs {
     #[arg(long, value_name = "DIR")]
     #[allow(clippy::option_option)]
     pub(crate) resume: Option<Option<PathBuf>>,
+    /// Replace a finished run in --out (its summary, tables, pictures and policies) instead
+    /// of refusing to start there.
+    #[arg(long, conflicts_with = "resume")]
+    pub(crate) force: bool,
     /// No progress line.
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -176,6 +180,7 @@ impl LearnArgs {
                 resume: self.resume.map(|dir| dir.unwrap_or_else(|| self.out.clone())),
                 out: Some(self.out),
                 checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
+                force: self.force,
                 quiet: self.quiet,
                 progress_every: PROGRESS_EVERY.as_secs_f64(),
                 max_failed_share: MAX_FAILED_SHARE,
@@ -412,6 +417,10 @@ pub(crate) struct ExperimentArgs {
     /// with. The result is bit for bit that of an uninterrupted run.
     #[arg(long, value_name = "DIR")]
     pub(crate) resume: Option<PathBuf>,
+    /// Replace a finished run in the output directory (its summary, tables, pictures and
+    /// policies) instead of refusing to start there.
+    #[arg(long, conflicts_with = "resume")]
+    pub(crate) force: bool,
     /// No progress bar.
     #[arg(long, short)]
     pub(crate) quiet: bool,

@@ -203,6 +203,7 @@ fn run_dir(args: &ExperimentArgs) -> anyhow::Result<Option<RunDir>> {
     let run = RunDir {
         progress_every: Duration::from_secs_f64(args.progress_every),
         max_failed_share: args.max_failed_share,
+        replace: args.force,
         ..RunDir::of(&plan, args.config.as_deref(), out)?
     };
     Ok(Some(run.checkpointing(args.checkpoint_every, args.resume.is_some())?))

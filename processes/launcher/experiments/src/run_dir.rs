@@ -70,6 +70,15 @@ pub enum RunDirError {
         /// The run directory.
         dir: PathBuf,
     },
+    /// The output directory holds a finished run (its summary), which a new run would replace.
+    #[error(
+        "{} holds a finished run (its summary.json): continue it with --resume, write this run elsewhere with --out, or replace it with --force",
+        dir.display()
+    )]
+    Finished {
+        /// The run directory.
+        dir: PathBuf,
+    },
     /// The output path exists and is not a directory.
     #[error("output directory {} exists and is not a directory: choose another --out", dir.display())]
     NotADirectory {
@@ -162,6 +171,31 @@ pub struct RunDir {
     /// The largest share of a method's rollouts (training and evaluation) that may fail before
     /// the run is an error ([`MAX_FAILED_SHARE`] unless set).
     pub max_failed_share: f64,
+    /// Start afresh in a directory that holds a finished run, replacing its results; without
+    /// it [`prepare`](Self::prepare) refuses ([`RunDirError::Finished`]).
+    pub replace: bool,
+}
+
+/// Remove what a finished run wrote into `dir` (its summary, run report, tables, pictures and
+/// policies); checkpoints, the experiment file and files of the user's stay.
+fn remove_results(dir: &Path) -> std::io::Result<()> {
+    // No directory yet, or something else in its place, which making it will name.
+    if !dir.is_dir() {
+        return Ok(());
+    }
+    let entries = std::fs::read_dir(dir)?;
+    for entry in entries {
+        let path = entry?.path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let result = matches!(name, "summary.json" | "run.json")
+            || [".csv", ".png", ".svg"].iter().any(|end| name.ends_with(end));
+        if name == crate::records::POLICY_DIR && path.is_dir() {
+            std::fs::remove_dir_all(&path)?;
+        } else if result && path.is_file() {
+            std::fs::remove_file(&path)?;
+        }
+    }
+    Ok(())
 }
 
 /// The share of a method's rollouts that may fail unless set: a quarter. Beyond it the test
@@ -197,6 +231,7 @@ impl RunDir {
             progress_line: true,
             observer: None,
             max_failed_share: MAX_FAILED_SHARE,
+            replace: false,
         })
     }
 
@@ -225,7 +260,25 @@ impl RunDir {
     /// resolved experiment file there: an output that cannot be written fails now, not after the
     /// run. Returns the directories it created, the outermost of each path, for a run refused
     /// before it started to take back.
+    ///
+    /// A run that does not resume starts afresh: a directory that holds a finished run (its
+    /// `summary.json`) is refused unless [`replace`](Self::replace), and the results of an
+    /// earlier run there (summary, tables, pictures, policies) are removed, so that a directory
+    /// holds a summary only when its run finished.
     pub fn prepare(&self) -> Result<Vec<PathBuf>, RunDirError> {
+        if !self.resume {
+            for job in &self.jobs {
+                if job.dir.join("summary.json").exists() && !self.replace {
+                    return Err(RunDirError::Finished { dir: job.dir.clone() });
+                }
+            }
+            for job in &self.jobs {
+                remove_results(&job.dir).map_err(|source| RunDirError::Summary {
+                    path: job.dir.clone(),
+                    source,
+                })?;
+            }
+        }
         let mut created = Vec::new();
         for job in &self.jobs {
             let outermost = job

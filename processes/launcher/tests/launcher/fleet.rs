@@ -379,7 +379,7 @@ fn a_killed_worker_is_noticed_its_tasks_reissued_and_the_result_unchanged() {
 }
 
 /// Send `signal` to process `pid`; asserts that it was there to receive it.
-fn signal(signal: &str, pid: u32) {
+pub(crate) fn signal(signal: &str, pid: u32) {
     let status = Command::new("kill").args([signal, &pid.to_string()]).status().unwrap();
     assert!(status.success(), "kill {signal} {pid}: no such process");
 }

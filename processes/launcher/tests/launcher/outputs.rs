@@ -74,7 +74,6 @@ fn an_output_that_cannot_be_written_is_refused_before_the_run() {
 #[test]
 fn the_final_lines_give_the_summarys_scores_with_unit_and_sem() {
     let dir = temp_dir("final-lines");
-    let out = dir.to_str().unwrap();
     let cases = [
         (
             vec!["grid", "--runs", "2", "--episodes", "200", "--method", "random"],
@@ -88,16 +87,18 @@ fn the_final_lines_give_the_summarys_scores_with_unit_and_sem() {
         ),
     ];
     for (args, name, unit) in cases {
+        let out = dir.join(args[0]);
         let stdout = crate::succeeded(
             &watched()
                 .arg("experiment")
                 .args(&args)
-                .args(["--out", out])
+                .arg("--out")
+                .arg(&out)
                 .output()
                 .unwrap(),
         );
         let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
         let random = &summary["methods"]["random"];
         let (mean, sem) = (
             random["final_mean"].as_f64().unwrap(),
@@ -152,4 +153,84 @@ fn a_run_directory_is_its_users_alone() {
         seen += 1;
     }
     assert!(seen > 10, "{seen} files and folders");
+}
+
+#[test]
+fn a_finished_run_is_replaced_only_when_asked_and_an_interrupted_one_holds_no_summary() {
+    let dir = temp_dir("finished");
+    let out = dir.join("run");
+    let experiment = |extra: &[&str]| {
+        watched()
+            .args(["experiment", "function", "--runs", "1", "--episodes", "60", "-q"])
+            .arg("--out")
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    crate::succeeded(&experiment(&[]));
+    let summary = std::fs::read(out.join("summary.json")).unwrap();
+    std::fs::write(out.join("mine.txt"), "kept").unwrap();
+    // Again into the same directory: refused, the finished run untouched.
+    let again = experiment(&[]);
+    let said = String::from_utf8_lossy(&again.stderr);
+    assert_eq!(again.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains(&format!(
+            "{} holds a finished run (its summary.json): continue it with --resume, write this run elsewhere with --out, or replace it with --force",
+            out.display()
+        )),
+        "{said}"
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), summary);
+    let both = experiment(&["--force", "--resume", out.to_str().unwrap()]);
+    assert_eq!(both.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&both.stderr).contains("cannot be used with"));
+    // Replaced when asked: the same results again, the user's file kept.
+    crate::succeeded(&experiment(&["--force"]));
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), summary);
+    assert_eq!(std::fs::read_to_string(out.join("mine.txt")).unwrap(), "kept");
+    // A forced run stopped half way leaves checkpoints, and no summary that could be taken for
+    // its result.
+    let started = std::time::SystemTime::now();
+    // Not under the watchdog: SIGINT must reach acps itself.
+    let mut long = std::process::Command::new(env!("CARGO_BIN_EXE_acps"))
+        .args([
+            "experiment",
+            "grid",
+            "--runs",
+            "1",
+            "--episodes",
+            "1000000",
+            "--method",
+            "monotonic-progress",
+            "-q",
+            "--force",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    crate::fleet::wait_until(
+        "a checkpoint of the long run",
+        std::time::Duration::from_secs(60),
+        || {
+            std::fs::read_dir(out.join("checkpoints")).is_ok_and(|entries| {
+                // A checkpoint of this run, not of the finished one before it.
+                entries
+                    .flatten()
+                    .any(|e| e.metadata().and_then(|m| m.modified()).is_ok_and(|at| at > started))
+            })
+        },
+    );
+    crate::fleet::signal("-INT", long.id());
+    let status = long.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    assert!(!out.join("summary.json").exists(), "an interrupted run left a summary");
+    assert!(
+        !out.join("curves.png").exists(),
+        "an interrupted run left the earlier pictures"
+    );
+    assert_eq!(std::fs::read_to_string(out.join("mine.txt")).unwrap(), "kept");
 }

@@ -109,9 +109,7 @@ def find_secret(run: str) -> tuple[bytes | None, str]:
     if not stat.S_ISREG(status.st_mode):
         raise refuse("not a regular file")
     if status.st_uid != os.geteuid():
-        raise refuse(
-            f"it belongs to user {status.st_uid}, not this process's user {os.geteuid()}"
-        )
+        raise refuse(f"it belongs to user {status.st_uid}, not this process's user {os.geteuid()}")
     if status.st_mode & 0o077:
         raise refuse(
             f"its mode is {status.st_mode & 0o777:o}: other users may read or change it "
