@@ -426,6 +426,17 @@ pub struct LearnerSnapshot {
     run: RunState,
 }
 
+impl LearnerSnapshot {
+    /// The first rollout a C-REPS state remembers: its context, to forge in tests.
+    #[cfg(test)]
+    pub(crate) fn first_context_mut(&mut self) -> Option<&mut Vec<f64>> {
+        match &mut self.policy {
+            Some(SearchState::CReps(state)) => state.first_context_mut(),
+            _ => None,
+        }
+    }
+}
+
 /// What of a learner changes as it runs, apart from its selector and policy: the learner holds
 /// it and a snapshot saves it as it is, so the two cannot drift apart. Bincode writes a nested
 /// struct as its fields in order, so a snapshot's bytes are those of these fields written after
@@ -902,6 +913,9 @@ impl Learner {
     pub fn restore(&mut self, snapshot: LearnerSnapshot) -> Result<(), LearnerRestoreError> {
         snapshot.fit.check(&Fit::of(self))?;
         snapshot.check().map_err(LearnerRestoreError::Inconsistent)?;
+        if let Some(state) = &snapshot.policy {
+            self.check_contexts(state)?;
+        }
         let policy = match (&self.policy, snapshot.policy) {
             (Some(policy), Some(state)) => {
                 let mut policy = policy.clone();
@@ -921,6 +935,32 @@ impl Learner {
         self.policy = policy;
         self.run = snapshot.run;
         Ok(())
+    }
+
+    /// Refuse remembered rollouts whose contexts no run of this problem could have trained on:
+    /// outside the box that holds its space and its training contexts (by more than rounding).
+    /// A forged 1e300 there reached a self-paced update as an infinite log-density ratio.
+    fn check_contexts(&self, state: &SearchState) -> Result<(), LearnerRestoreError> {
+        let (mut low, mut high) = self.problem.space.bounding_box();
+        for context in &self.problem.training_contexts {
+            for ((l, h), x) in low.iter_mut().zip(high.iter_mut()).zip(context) {
+                *l = l.min(*x);
+                *h = h.max(*x);
+            }
+        }
+        let inside = |context: &[f64]| {
+            context.len() == low.len()
+                && context.iter().zip(low.iter().zip(&high)).all(|(x, (l, h))| {
+                    let slack = 1e-9 * (h - l).abs().max(1.0);
+                    (l - slack..=h + slack).contains(x)
+                })
+        };
+        match state.contexts().into_iter().find(|context| !inside(context)) {
+            Some(context) => Err(LearnerRestoreError::Inconsistent(format!(
+                "a remembered rollout's context {context:?} lies outside the problem's contexts ({low:?}..={high:?})"
+            ))),
+            None => Ok(()),
+        }
     }
 
     fn create(&mut self, kind: TaskKind, context: Vec<f64>, role: Role) {

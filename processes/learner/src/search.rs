@@ -103,6 +103,17 @@ pub enum SearchState {
     CCmaes(CCmaesState),
 }
 
+impl SearchState {
+    /// The contexts of the rollouts a C-REPS state remembers (none for C-CMA-ES, whose
+    /// generation is refit by regression alone).
+    pub(crate) fn contexts(&self) -> Vec<&[f64]> {
+        match self {
+            Self::CReps(state) => state.contexts().collect(),
+            Self::CCmaes(_) => Vec::new(),
+        }
+    }
+}
+
 /// What one update of either learner did.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum SearchReport {

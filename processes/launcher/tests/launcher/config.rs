@@ -269,7 +269,10 @@ fn a_saved_or_written_config_reruns_bit_for_bit() {
         assert_eq!(settings(&saved), settings(&written));
         // A different seed on top of the file changes the results: the rerun really read the file.
         // (Into the rerun's directory, which it replaces when asked.)
-        run(&["--config", written.to_str().unwrap(), "--seed", "1", "--force"], &rerun);
+        run(
+            &["--config", written.to_str().unwrap(), "--seed", "1", "--force"],
+            &rerun,
+        );
         assert_ne!(std::fs::read(rerun.join("summary.json")).unwrap(), summary);
         assert!(settings(&rerun.join("config.toml")).contains("seed = 1\n"));
     }

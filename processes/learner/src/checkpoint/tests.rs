@@ -298,6 +298,22 @@ fn a_checkpoint_of_another_learner_is_refused_by_restore() {
     assert!(error.to_string().starts_with("environment state: "), "{error}");
 }
 
+#[test]
+fn a_remembered_rollout_no_run_of_the_problem_could_have_is_refused() {
+    // A context of 1e300 reached a self-paced update as an infinite log-density ratio.
+    let mut forged = half_way();
+    *forged.learner.first_context_mut().unwrap() = vec![1e300];
+    let error = forged.apply(&mut learner(7, 60), &mut Quadratic).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "the checkpoint's learner state is inconsistent: a remembered rollout's context [1e300] lies outside the problem's contexts ([0.0]..=[1.0])"
+    );
+    // At the edge of the space it is a context a run may have had.
+    let mut edge = half_way();
+    *edge.learner.first_context_mut().unwrap() = vec![1.0];
+    edge.apply(&mut learner(7, 60), &mut Quadratic).unwrap();
+}
+
 /// Run `learner` to the end, taking its records after every `take_every` outcomes (0: never),
 /// and return every task it handed out and every record, in order.
 fn run_taking(mut learner: Learner, take_every: usize) -> (Vec<Task>, crate::Records, Learner) {

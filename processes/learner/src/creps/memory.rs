@@ -103,6 +103,15 @@ impl Memory {
         }
     }
 
+    /// The first stored sample, to forge in tests.
+    #[cfg(test)]
+    pub fn first_mut(&mut self) -> Option<&mut Sample> {
+        match self {
+            Memory::Window { samples, .. } => samples.front_mut(),
+            Memory::PerTask { buckets, .. } => buckets.iter_mut().flatten().next(),
+        }
+    }
+
     pub fn len(&self) -> usize {
         match self {
             Memory::Window { samples, .. } => samples.len(),

@@ -214,6 +214,19 @@ pub struct CRepsState {
     dropped: usize,
 }
 
+impl CRepsState {
+    /// The contexts of the remembered rollouts.
+    pub(crate) fn contexts(&self) -> impl Iterator<Item = &[f64]> {
+        self.memory.samples().map(|sample| sample.context.as_slice())
+    }
+
+    /// The first remembered rollout's context, to forge in tests.
+    #[cfg(test)]
+    pub(crate) fn first_context_mut(&mut self) -> Option<&mut Vec<f64>> {
+        self.memory.first_mut().map(|sample| &mut sample.context)
+    }
+}
+
 /// A context distribution that moves with the policy, in one dual (SPRL, Klink et al. 2019):
 /// [`CReps::record_paced`] asks it for the context side of every update and hands it the context
 /// weights to refit itself with. The self-paced selector implements it; a learner core drives it
