@@ -408,6 +408,11 @@ const TLS_REFUSED: &str = "TLS is not built in: Zenoh 1.10's TLS links are unsou
      (eclipse-zenoh/zenoh issue 2557; ours dropped within a second); to encrypt, carry tcp/ through an SSH tunnel \
      or a VPN, and authenticate with a user and password (docs/HOSTS.md#security)";
 
+/// An endpoint's protocol and address (`HOST:PORT`), without its options or fragment.
+fn split_endpoint(endpoint: &str) -> Option<(&str, &str)> {
+    endpoint.split(['?', '#']).next().unwrap_or_default().split_once('/')
+}
+
 /// Check an endpoint's form: `tcp/`, a host and a port. TLS is refused with its reason: Zenoh
 /// 1.10's TLS link lets a read and a write use one rustls session at once (eclipse-zenoh/zenoh
 /// issue 2557), and under traffic both ways, as a relay's, our links dropped within a second.
@@ -416,8 +421,7 @@ pub fn check_endpoint(endpoint: &str) -> Result<(), NetError> {
         endpoint: endpoint.to_string(),
         reason: reason.to_string(),
     };
-    let address = endpoint.split(['?', '#']).next().unwrap_or_default();
-    let Some((protocol, address)) = address.split_once('/') else {
+    let Some((protocol, address)) = split_endpoint(endpoint) else {
         return Err(error("no protocol"));
     };
     match protocol {
@@ -509,10 +513,8 @@ pub(crate) fn zenoh_config(options: &NetOptions) -> Result<zenoh::Config, NetErr
 }
 
 /// Whether `endpoint` (checked by [`check_endpoint`]) is on this host's loopback only.
-pub fn is_loopback(endpoint: &str) -> bool {
-    let address = endpoint.split(['?', '#']).next().unwrap_or_default();
-    let host = address
-        .split_once('/')
+fn is_loopback(endpoint: &str) -> bool {
+    let host = split_endpoint(endpoint)
         .and_then(|(_, address)| address.rsplit_once(':'))
         .map_or("", |(host, _)| host.trim_start_matches('[').trim_end_matches(']'));
     host == "localhost" || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
@@ -594,6 +596,17 @@ mod tests {
         ] {
             let message = check_endpoint(bad).unwrap_err().to_string();
             assert!(message.contains(why) && message.contains(bad), "{bad}: {message}");
+        }
+        for (endpoint, loopback) in [
+            ("tcp/127.0.0.1:7447", true),
+            ("tcp/127.1.2.3:7447?opt#x", true),
+            ("tcp/[::1]:1", true),
+            ("tcp/localhost:1", true),
+            ("tcp/0.0.0.0:7447", false),
+            ("tcp/10.0.0.1:7447", false),
+            ("tcp/learner.lab:7447", false),
+        ] {
+            assert_eq!(is_loopback(endpoint), loopback, "{endpoint}");
         }
     }
 

@@ -111,11 +111,6 @@ impl RunSecret {
         })
     }
 
-    /// The secret of these bytes: what a message carries.
-    pub fn from_bytes(bytes: [u8; SECRET_BYTES]) -> Self {
-        Self(bytes)
-    }
-
     /// Its bytes.
     pub fn bytes(&self) -> [u8; SECRET_BYTES] {
         self.0
@@ -249,7 +244,11 @@ pub fn read_private(path: &Path) -> Result<Option<String>, String> {
         ));
     }
     let mut text = String::new();
-    match std::fs::File::open(path).and_then(|file| file.take(PRIVATE_FILE_LIMIT).read_to_string(&mut text)) {
+    // One byte beyond the limit: a longer file is refused, not cut.
+    match std::fs::File::open(path).and_then(|file| file.take(PRIVATE_FILE_LIMIT + 1).read_to_string(&mut text)) {
+        Ok(read) if read as u64 > PRIVATE_FILE_LIMIT => Err(format!(
+            "longer than the {PRIVATE_FILE_LIMIT} bytes a secret or key takes"
+        )),
         Ok(_) => Ok(Some(text)),
         // Removed between the look and the read.
         Err(error) if error.kind() == std::io::ErrorKind::NotFound => Ok(None),
@@ -368,6 +367,12 @@ mod tests {
                 "reading run '{run}''s secret from {}: it holds 12 bytes, not 32 hexadecimal digits",
                 path.display()
             )
+        );
+        std::fs::write(&path, "0".repeat(1000)).unwrap();
+        let error = RunSecret::for_worker(&run).unwrap_err().to_string();
+        assert!(
+            error.ends_with("longer than the 256 bytes a secret or key takes"),
+            "{error}"
         );
         std::fs::remove_file(&path).unwrap();
         std::fs::create_dir(&path).unwrap();
