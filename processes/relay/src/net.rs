@@ -581,6 +581,38 @@ mod tests {
     }
 
     #[test]
+    fn a_relay_key_is_made_once_taken_after_and_refused_when_it_is_none() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = std::env::temp_dir().join(format!("acps-relay-key-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("relay.key");
+        let (made, fresh) = RelayKey::make_or_take(&path).unwrap();
+        assert!(fresh);
+        assert_eq!(std::fs::metadata(&path).unwrap().permissions().mode() & 0o777, 0o600);
+        let (taken, fresh) = RelayKey::make_or_take(&path).unwrap();
+        assert!(!fresh);
+        assert_eq!(taken, made);
+        assert_eq!(RelayKey::read(&path).unwrap(), made);
+        std::fs::write(&path, "hello\n").unwrap();
+        let error = RelayKey::read(&path).unwrap_err().to_string();
+        assert_eq!(
+            error,
+            format!(
+                "relay key {}: not a relay key (one line `acps-relay:` and 32 hexadecimal digits, as `acps run --listen` writes)",
+                path.display()
+            )
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+        let error = RelayKey::read(&path).unwrap_err().to_string();
+        assert!(
+            error.ends_with(
+                "no such file (copy the key file the learner made, `relay.key` in its run directory, to this host)"
+            ),
+            "{error}"
+        );
+    }
+
+    #[test]
     fn endpoints_are_checked_naming_what_is_wrong() {
         for good in ["tcp/127.0.0.1:7447", "tcp/learner.lab:7447", "tcp/[::1]:1"] {
             assert!(check_endpoint(good).is_ok(), "{good}");
