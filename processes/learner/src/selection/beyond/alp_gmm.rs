@@ -284,6 +284,29 @@ impl ContextSelector for AlpGmm {
                 self.config.fit_rate
             ));
         }
+        // What a live selector holds: scaled contexts in the unit cube, finite returns, and
+        // absolute learning progress (a distance of returns) that is finite and not negative.
+        let unit = |x: &f64| (0.0..=1.0).contains(x);
+        if let Some(x) = state.points.iter().find(|x| !unit(x)) {
+            return refuse(format!("a context coordinate of {x}, outside the scaled unit cube"));
+        }
+        if let Some(r) = state.returns.iter().find(|r| !r.is_finite()) {
+            return refuse(format!("a return of {r}"));
+        }
+        for point in state.window.chunks(row) {
+            let (context, alp) = point.split_at(dim);
+            if !(context.iter().all(unit) && alp[0].is_finite() && alp[0] >= 0.0) {
+                return refuse(format!(
+                    "a window point {point:?}, not a scaled context and its progress"
+                ));
+            }
+        }
+        let finite = |c: &Component| {
+            c.weight.is_finite() && c.weight >= 0.0 && c.mean.iter().chain(&c.covariance).all(|x| x.is_finite())
+        };
+        if state.mixture.iter().flatten().any(|c| !finite(c)) {
+            return refuse("a mixture component with a weight, mean or covariance no fit makes".into());
+        }
         let mixture = match state.mixture {
             None => None,
             Some(components) => match Mixture::new(row, components) {
@@ -518,5 +541,38 @@ mod tests {
         assert!(selector.restore_state(other.save_state()).is_err());
         assert!(selector.restore_state(SelectorState::UniformContinuous).is_err());
         assert_eq!(selector.save_state(), before);
+    }
+
+    #[test]
+    fn restored_states_a_live_selector_cannot_have_are_refused() {
+        let mut live = AlpGmm::new(square(), None, small()).unwrap();
+        run(&mut live, &mut ChaCha8Rng::seed_from_u64(5), 250, 1.0);
+        let SelectorState::AlpGmm(saved) = live.save_state() else {
+            unreachable!("an ALP-GMM state")
+        };
+        assert!(saved.mixture.is_some(), "the forgeries below include a mixture's");
+        type Forgery = (&'static str, fn(&mut AlpGmmState));
+        let forged: [Forgery; 5] = [
+            ("a context coordinate of 2, outside", |s| s.points[0] = 2.0),
+            ("a return of NaN", |s| s.returns[1] = f64::NAN),
+            ("a window point", |s| s.window[2] = -1.0),
+            ("a window point", |s| s.window[0] = f64::NAN),
+            ("a mixture component", |s| {
+                s.mixture.as_mut().unwrap()[0].covariance[0] = f64::INFINITY;
+            }),
+        ];
+        let mut selector = AlpGmm::new(square(), None, small()).unwrap();
+        selector.restore_state(SelectorState::AlpGmm(saved.clone())).unwrap();
+        let before = selector.save_state();
+        for (said, forge) in forged {
+            let mut state = saved.clone();
+            forge(&mut state);
+            let error = selector
+                .restore_state(SelectorState::AlpGmm(state))
+                .unwrap_err()
+                .to_string();
+            assert!(error.contains(said), "{said}: {error}");
+            assert_eq!(selector.save_state(), before, "{said}: the selector changed");
+        }
     }
 }

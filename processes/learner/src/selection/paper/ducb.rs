@@ -43,17 +43,22 @@ pub enum DUcbUpdateError {
     NonFiniteReward(f64),
 }
 
-/// Why [`DUcb::restore`] refuses saved statistics: they are of a bandit with another number of
-/// arms. The bandit is left unchanged.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("D-UCB statistics for {counts} counts and {means} means, this bandit has {arms} arms")]
-pub struct DUcbRestoreError {
-    /// The number of saved counts.
-    pub counts: usize,
-    /// The number of saved means.
-    pub means: usize,
-    /// This bandit's number of arms.
-    pub arms: usize,
+/// Why [`DUcb::restore`] refuses saved statistics. The bandit is left unchanged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DUcbRestoreError {
+    /// They are of a bandit with another number of arms.
+    #[error("D-UCB statistics for {counts} counts and {means} means, this bandit has {arms} arms")]
+    Arms {
+        /// The number of saved counts.
+        counts: usize,
+        /// The number of saved means.
+        means: usize,
+        /// This bandit's number of arms.
+        arms: usize,
+    },
+    /// They hold a value no bandit's updates make (a forged or corrupted checkpoint).
+    #[error("D-UCB statistics no bandit has: {0}")]
+    Values(String),
 }
 
 /// D-UCB parameters (paper Algorithm 1 and Sec. 3.3, in its notation).
@@ -310,13 +315,33 @@ impl DUcb {
     }
 
     /// Continue from saved statistics, which must have one count and one mean per arm.
+    ///
+    /// Also refused: what [`DUcb::update`] cannot make. A count negative or not finite, a mean
+    /// not finite, or a total that is not the counts' sum.
     pub fn restore(&mut self, state: DUcbState) -> Result<(), DUcbRestoreError> {
         if state.counts.len() != self.arms() || state.means.len() != self.arms() {
-            return Err(DUcbRestoreError {
+            return Err(DUcbRestoreError::Arms {
                 counts: state.counts.len(),
                 means: state.means.len(),
                 arms: self.arms(),
             });
+        }
+        let refuse = |why: String| Err(DUcbRestoreError::Values(why));
+        if let Some((i, n)) = state
+            .counts
+            .iter()
+            .enumerate()
+            .find(|(_, n)| !(n.is_finite() && **n >= 0.0))
+        {
+            return refuse(format!("count N_{i} = {n}"));
+        }
+        if let Some((i, m)) = state.means.iter().enumerate().find(|(_, m)| !m.is_finite()) {
+            return refuse(format!("mean m_{i} = {m}"));
+        }
+        let sum: f64 = state.counts.iter().sum();
+        // The total and the counts are discounted alike; they differ by rounding only.
+        if !state.total.is_finite() || (state.total - sum).abs() > 1e-6 * (1.0 + sum) {
+            return refuse(format!("total n = {} for counts summing to {sum}", state.total));
         }
         self.counts = state.counts;
         self.means = state.means;
@@ -620,6 +645,34 @@ mod tests {
             // The best of the others: removing it as well leaves neither.
             let third = ducb.clone().select_among(&pending, |arm| arm != best && arm != second);
             assert!(third != best && third != second);
+        }
+    }
+
+    #[test]
+    fn statistics_no_bandit_has_are_refused_and_leave_it_unchanged() {
+        let mut bandit = DUcb::new(3, config(0.99, 1.0, 1.0)).unwrap();
+        for step in 0..2000 {
+            let arm = bandit.select();
+            bandit.update(arm, f64::from(step % 7) - 3.0).unwrap();
+        }
+        let live = bandit.state();
+        let mut restored = DUcb::new(3, config(0.99, 1.0, 1.0)).unwrap();
+        restored.restore(live.clone()).unwrap();
+        assert_eq!(restored.state(), live, "a live bandit's statistics restore exactly");
+        type Forgery = (&'static str, fn(&mut DUcbState));
+        let forged: [Forgery; 5] = [
+            ("count N_1 = NaN", |s| s.counts[1] = f64::NAN),
+            ("count N_0 = -1", |s| s.counts[0] = -1.0),
+            ("mean m_2 = inf", |s| s.means[2] = f64::INFINITY),
+            ("total n = 1000000000 for counts", |s| s.total = 1e9),
+            ("total n = NaN", |s| s.total = f64::NAN),
+        ];
+        for (said, forge) in forged {
+            let mut state = live.clone();
+            forge(&mut state);
+            let error = restored.restore(state).unwrap_err().to_string();
+            assert!(error.contains(said), "{said}: {error}");
+            assert_eq!(restored.state(), live, "{said}: the bandit changed");
         }
     }
 }

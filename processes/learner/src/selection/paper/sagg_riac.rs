@@ -194,20 +194,39 @@ impl SaggRiac {
                 root.low, root.high, self.regions[0].low, self.regions[0].high
             ));
         }
+        // Inside the root's box: what every region, sample and cut of a live tree lies in.
+        let inside = |x: &[f64]| (0..dim).all(|d| (root.low[d]..=root.high[d]).contains(&x[d]));
         for (index, region) in regions.iter().enumerate() {
             if region.low.len() != dim || region.high.len() != dim {
                 return Err(format!("region {index} does not have the space's dimension {dim}"));
+            }
+            if !inside(&region.low) || !inside(&region.high) || (0..dim).any(|d| region.low[d] > region.high[d]) {
+                return Err(format!(
+                    "region {index} {:?}..{:?} is not a box inside the root's",
+                    region.low, region.high
+                ));
             }
             match &region.node {
                 Node::Leaf(samples) => {
                     if samples.iter().any(|s| s.context.len() != dim) {
                         return Err(format!("a sample of region {index} does not have dimension {dim}"));
                     }
+                    if let Some(sample) = samples.iter().find(|s| !inside(&s.context) || !s.reward.is_finite()) {
+                        return Err(format!(
+                            "a sample of region {index} at {:?} with return {}, which no run observes",
+                            sample.context, sample.reward
+                        ));
+                    }
                 }
                 Node::Split {
-                    dim: cut_dim, children, ..
+                    dim: cut_dim,
+                    cut,
+                    children,
                 } => {
-                    if *cut_dim >= dim || children.iter().any(|&c| c <= index || c >= regions.len()) {
+                    if *cut_dim >= dim
+                        || children.iter().any(|&c| c <= index || c >= regions.len())
+                        || !(region.low[*cut_dim]..=region.high[*cut_dim]).contains(cut)
+                    {
                         return Err(format!("region {index} is split inconsistently"));
                     }
                 }
@@ -911,5 +930,76 @@ mod tests {
             (0.7, 0.2, 0.1)
         );
         assert!(config.validate().is_ok());
+    }
+
+    #[test]
+    fn restored_trees_a_live_selector_cannot_have_are_refused() {
+        let mut live = SaggRiac::new(unit_box(2), None, SaggRiacConfig::default()).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        for t in 0..300 {
+            let choice = live.choose(&mut rng);
+            live.observe(&choice, (t as f64 / 50.0) * choice.context[0] - choice.context[1]);
+        }
+        let SelectorState::SaggRiac(saved) = live.save_state() else {
+            unreachable!("a SAGG-RIAC state")
+        };
+        let split = saved
+            .regions
+            .iter()
+            .position(|r| matches!(r.node, Node::Split { .. }))
+            .unwrap();
+        let leaf = saved
+            .regions
+            .iter()
+            .rposition(|r| matches!(&r.node, Node::Leaf(s) if !s.is_empty()))
+            .unwrap();
+        let mut selector = SaggRiac::new(unit_box(2), None, SaggRiacConfig::default()).unwrap();
+        selector.restore_state(SelectorState::SaggRiac(saved.clone())).unwrap();
+        let before = selector.save_state();
+        type Forgery = (&'static str, Box<dyn Fn(&mut SaggRiacState)>);
+        let forgeries: Vec<Forgery> = vec![
+            (
+                "is not a box inside the root's",
+                Box::new(move |s| s.regions[leaf].high[0] = 1e300),
+            ),
+            (
+                "is not a box inside the root's",
+                Box::new(move |s| s.regions[leaf].low[1] = f64::NAN),
+            ),
+            (
+                "which no run observes",
+                Box::new(move |s| {
+                    if let Node::Leaf(samples) = &mut s.regions[leaf].node {
+                        samples[0].reward = f64::INFINITY;
+                    }
+                }),
+            ),
+            (
+                "which no run observes",
+                Box::new(move |s| {
+                    if let Node::Leaf(samples) = &mut s.regions[leaf].node {
+                        samples[0].context[0] = -7.0;
+                    }
+                }),
+            ),
+            (
+                "is split inconsistently",
+                Box::new(move |s| {
+                    if let Node::Split { cut, .. } = &mut s.regions[split].node {
+                        *cut = f64::NAN;
+                    }
+                }),
+            ),
+        ];
+        for (said, forge) in forgeries {
+            let mut state = saved.clone();
+            forge(&mut state);
+            let error = selector
+                .restore_state(SelectorState::SaggRiac(state))
+                .unwrap_err()
+                .to_string();
+            assert!(error.contains(said), "{said}: {error}");
+            assert_eq!(selector.save_state(), before, "{said}: the selector changed");
+        }
     }
 }
