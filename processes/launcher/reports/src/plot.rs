@@ -845,14 +845,17 @@ impl Exploration {
 
 impl Picture for Exploration {
     fn size(&self) -> (u32, u32) {
-        (1100, 60 + Self::ROW_HEIGHT * self.methods.len() as u32)
+        // One or two methods get taller rows rather than a strip.
+        let rows = (Self::ROW_HEIGHT * self.methods.len() as u32).max(2 * Self::ROW_HEIGHT + 60);
+        (1100, 60 + rows)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
     where
         DB::ErrorType: 'static,
     {
-        let root = titled(root, &self.caption, 17.0)?;
+        // A gap between the caption and the first method's name.
+        let root = titled(root, &self.caption, 17.0)?.margin(8, 0, 0, 0);
         let all = || self.methods.iter().flat_map(|(_, runs)| runs.iter().flatten());
         let x_max = all().map(|u| u.0).fold(1.0, f64::max);
         let trace_range = log_range(all().map(|u| u.1));
@@ -964,7 +967,7 @@ where
     let thin = runs.iter().map(|run| {
         (
             run.iter().map(|u| (u.0, value(u))).collect(),
-            ShapeStyle::from(color.mix(0.25)),
+            ShapeStyle::from(color.mix(0.45)),
         )
     });
     for (points, style) in thin.chain([(median, color.stroke_width(2))]) {
@@ -1241,9 +1244,11 @@ impl Picture for SelectionsOverTime {
             0.0..most.max(uniform),
             &|share| fade(DARK, level(share)),
             &|share| compact(*share),
+            // The darkest share is named: the bar's last tick is often below it.
             &format!(
-                "share of a bin's episodes (uniform: 1/{contexts} = {})",
-                compact(uniform)
+                "share of a bin's episodes (uniform: 1/{contexts} = {}; darkest: {})",
+                compact(uniform),
+                compact(most.max(uniform))
             ),
             None,
         )
@@ -1407,13 +1412,20 @@ impl SelectionMaps {
         let columns = self.methods.len().clamp(1, 3);
         (columns, self.methods.len().div_ceil(columns).max(1))
     }
+
+    /// The side of each panel: one method's fills the width that the colour bar needs.
+    fn side(&self) -> u32 {
+        (2 * Self::PANEL / self.grid().0 as u32).max(Self::PANEL)
+    }
 }
 
 impl Picture for SelectionMaps {
     fn size(&self) -> (u32, u32) {
         let (columns, rows) = self.grid();
-        let width = (Self::PANEL * columns as u32).max(2 * Self::PANEL);
-        (width, TITLE_HEIGHT + Self::PANEL * rows as u32 + BAR_HEIGHT)
+        (
+            self.side() * columns as u32,
+            TITLE_HEIGHT + self.side() * rows as u32 + BAR_HEIGHT,
+        )
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> PlotResult
@@ -1448,8 +1460,6 @@ impl Picture for SelectionMaps {
         );
         let body = titled(&body, &title, 18.0)?;
         let (columns, rows) = self.grid();
-        let side = (body.dim_in_pixel().0 - Self::PANEL * columns as u32) / 2;
-        let body = body.margin(0, 0, side, side);
         for ((name, shares), area) in self.methods.iter().zip(body.split_evenly((rows, columns))) {
             let area = titled(&area, name, 14.0)?;
             let mut chart = ChartBuilder::on(&area)
@@ -1502,7 +1512,11 @@ impl Picture for SelectionMaps {
                 contexts.len(),
                 compact(uniform)
             ),
-            Some((NEVER, "none")),
+            // The swatch of contexts no episode went to, when there are any.
+            self.methods
+                .iter()
+                .any(|(_, shares)| shares.contains(&0.0))
+                .then_some((NEVER, "none")),
         )
     }
 }
@@ -1609,8 +1623,10 @@ impl Picture for Dartboard<'_> {
             let right = titled(
                 &right,
                 &format!(
-                    "selections per field of each ring so far, mean over the ring's fields and {} runs",
-                    summary.runs
+                    "selections per field of each ring in the first {} training episodes (cumulative), mean over the ring's fields and {} run{}",
+                    100 * longest,
+                    summary.runs,
+                    if summary.runs == 1 { "" } else { "s" }
                 ),
                 15.0,
             )?;
@@ -2549,26 +2565,68 @@ mod tests {
         assert!(said(
             "grid: share of each bin of 200 training episodes that went to each target, mean over 20 runs"
         ));
-        assert!(said("share of a bin's episodes (uniform: 1/25 = 0.04)"));
+        // The darkest share is named (the first fifth's most-chosen targets: 1.75 / 25 = 0.07).
+        assert!(said("share of a bin's episodes (uniform: 1/25 = 0.04; darkest: 0.07)"));
         for context in &grid.training_contexts {
             let label = context_label(context);
             assert!(said(&label), "{label} not on the axis");
         }
-        let maps = grid_shares(&grid, 1)
+        let mut maps: Vec<(String, Vec<f64>)> = grid_shares(&grid, 1)
             .into_iter()
             .map(|(name, shares)| (name, shares.into_iter().map(|row| row[0]).collect()))
             .collect();
-        save(&SelectionMaps::of(&grid, 250, maps), &dir, "maps").unwrap_or_else(|e| panic!("{e}"));
+        // Every target chosen: no swatch for "none".
+        save(&SelectionMaps::of(&grid, 250, maps.clone()), &dir, "maps").unwrap_or_else(|e| panic!("{e}"));
         let (_, texts) = svg_texts(&drawn(&dir, "maps"));
         let said = |what: &str| texts.iter().any(|t| t.content == what);
         for what in [
             "target x (m)",
             "target y (m)",
             "share of the first 250 episodes, log scale (white: uniform, 1/25 = 0.04)",
-            "none",
         ] {
             assert!(said(what), "{what:?} not in the maps");
         }
+        assert!(
+            !said("none"),
+            "a swatch for targets never chosen, where every target was"
+        );
+        maps[0].1[3] = 0.0;
+        save(&SelectionMaps::of(&grid, 250, maps), &dir, "maps").unwrap_or_else(|e| panic!("{e}"));
+        let (_, texts) = svg_texts(&drawn(&dir, "maps"));
+        assert!(
+            texts.iter().any(|t| t.content == "none"),
+            "no swatch for a target never chosen"
+        );
+    }
+
+    #[test]
+    fn one_method_s_pictures_fill_their_canvas() {
+        let dir = dir("one-method");
+        let grid = grid_like();
+        let maps = grid_shares(&grid, 1)
+            .into_iter()
+            .take(1)
+            .map(|(name, shares)| (name, shares.into_iter().map(|row| row[0]).collect()))
+            .collect();
+        save(&SelectionMaps::of(&grid, 250, maps), &dir, "maps").unwrap_or_else(|e| panic!("{e}"));
+        let ((width, _), texts) = svg_texts(&drawn(&dir, "maps"));
+        // The x axis' ticks (target x in m) span most of the canvas: no empty half beside them.
+        let ticks: Vec<f64> = texts
+            .iter()
+            .filter(|t| !t.upwards && t.content.parse::<f64>().is_ok_and(|x| x < -2.0))
+            .map(|t| t.x)
+            .collect();
+        let spread = ticks.iter().fold(f64::MIN, |a, &b| a.max(b)) - ticks.iter().fold(f64::MAX, |a, &b| a.min(b));
+        assert!(spread > 0.6 * width, "the ticks span {spread:.0} of {width:.0} px");
+        let run = (1..50).map(|u| (50.0 * f64::from(u), 1.0, 10.0)).collect();
+        let updates = Exploration::of(&grid, vec![("random".to_string(), vec![run])]);
+        let (width, height) = updates.size();
+        assert!(
+            3 * height >= width,
+            "{width}x{height}: one method's updates are a strip"
+        );
+        save(&updates, &dir, "updates").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(outside(&drawn(&dir, "updates")), Vec::<String>::new());
     }
 
     #[test]
