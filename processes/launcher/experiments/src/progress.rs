@@ -4,7 +4,7 @@
 
 use crate::summary::{Summary, UserProblem, mean};
 use acps_learner::LearningProgress;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{HumanDuration, ProgressBar, ProgressState, ProgressStyle};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -105,6 +105,14 @@ pub struct Progress {
     rollouts: AtomicU64,
 }
 
+/// The time left, once there is something to estimate it from (not "eta 0s" at the start) and
+/// until the run is done.
+fn eta(state: &ProgressState, out: &mut dyn std::fmt::Write) {
+    if state.pos() > 0 && state.len().is_some_and(|len| state.pos() < len) {
+        let _ = write!(out, " (eta {:#})", HumanDuration(state.eta()));
+    }
+}
+
 /// How often a run's progress is written as a plain line when stderr is not a terminal, unless
 /// set (`--progress-every`).
 pub const PROGRESS_EVERY: Duration = Duration::from_secs(5);
@@ -128,12 +136,15 @@ impl Progress {
             bar
         } else {
             // The length is known from the start: no "0/0" bar drawn full before the first report.
+            // The message comes last and is cut to the terminal's width: at 80 columns the line
+            // keeps the test error; wider ones also show the rollouts/s and workers.
             let bar = ProgressBar::new(total)
                 .with_style(
                     ProgressStyle::with_template(
-                        "{prefix} [{bar:25}] {human_pos}/{human_len} episodes, {msg}, {elapsed} (eta {eta})",
+                        "{prefix} [{bar:16}] {human_pos}/{human_len}, {elapsed}{eta}: {wide_msg}",
                     )
                     .expect("a valid template")
+                    .with_key("eta", eta)
                     .progress_chars("=> "),
                 )
                 .with_prefix(experiment.to_string())
