@@ -26,12 +26,20 @@ pub const WILCOXON_EXACT_MAX: usize = 25;
 #[derive(Debug, thiserror::Error)]
 pub enum CompareError {
     /// A file of the run directory could not be read.
-    #[error("cannot read {}: {source} (a run directory written by `acps experiment` or `acps run` holds summary.json and runs.csv)", path.display())]
+    #[error("cannot read {}: {reason} (a run directory written by `acps experiment` or `acps run` holds summary.json and runs.csv)", path.display())]
     Read {
         /// The file.
         path: PathBuf,
-        /// Why.
-        source: std::io::Error,
+        /// Why (shown in the message; not a source, which would say it twice).
+        reason: std::io::Error,
+    },
+    /// A directory of several panels (`acps experiment toy`, `dims`), each a run directory.
+    #[error("{} holds no run of its own but {} panels, each a run directory ({}): compare one, e.g. `acps compare {}`", dir.display(), panels.len(), panels.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "), panels[0].display())]
+    Panels {
+        /// The directory given.
+        dir: PathBuf,
+        /// Its run directories (at least one).
+        panels: Vec<PathBuf>,
     },
     /// A file of the run directory is not what acps writes.
     #[error("{}: {detail}", path.display())]
@@ -132,14 +140,30 @@ pub struct RunData {
 }
 
 fn read(path: &Path) -> Result<String, CompareError> {
-    std::fs::read_to_string(path).map_err(|source| CompareError::Read {
+    std::fs::read_to_string(path).map_err(|reason| CompareError::Read {
         path: path.to_path_buf(),
-        source,
+        reason,
     })
 }
 
 fn read_head(dir: &Path) -> Result<SummaryHead, CompareError> {
     let path = dir.join("summary.json");
+    if !path.exists() {
+        let mut panels: Vec<PathBuf> = std::fs::read_dir(dir)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|entry| entry.path())
+            .filter(|panel| panel.join("summary.json").is_file())
+            .collect();
+        panels.sort();
+        if !panels.is_empty() {
+            return Err(CompareError::Panels {
+                dir: dir.to_path_buf(),
+                panels,
+            });
+        }
+    }
     serde_json::from_str(&read(&path)?).map_err(|e| CompareError::Malformed {
         path,
         detail: e.to_string(),

@@ -176,6 +176,19 @@ fn compare_names_bad_input() {
     let missing = dir.join("nothing");
     let error = refused(&["compare", missing.to_str().unwrap()]);
     assert!(error.contains("nothing/summary.json"), "{error}");
+    assert_eq!(error.matches("os error 2").count(), 1, "the reason once: {error}");
+    // A directory of panels (`acps experiment toy` writes DIR/a..d) names them.
+    let panels = temp_dir("compare-panels");
+    for panel in ["a", "b"] {
+        run_dir(&panels.join(panel), "toy", false, &[("random", RANDOM)]);
+    }
+    let error = refused(&["compare", panels.to_str().unwrap()]);
+    let first = panels.join("a");
+    assert!(
+        error.contains("holds no run of its own but 2 panels")
+            && error.contains(&format!("`acps compare {}`", first.display())),
+        "{error}"
+    );
     let error = refused(&["compare", dir_arg, "--baseline", "corners"]);
     assert!(
         error.contains("method 'corners' is not in") && error.contains("alp-gmm, random"),
