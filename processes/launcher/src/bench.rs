@@ -593,7 +593,7 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
     }
     let mut fleet = builder.start()?;
     let (mut listener, command) = if relayed {
-        let (listener, command) = relay_command(&name, options, workers)?;
+        let (listener, command) = crate::hosts::relay_command(&name, options, workers)?;
         (Some(listener), Some(command))
     } else {
         (None, None)
@@ -620,7 +620,7 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
                 stop.store(true, std::sync::atomic::Ordering::Relaxed);
             }
         },
-        listener.as_mut().map(|l| l as &mut dyn acps_fleet::Remote),
+        listener.as_deref_mut().map(|l| l as &mut dyn acps_fleet::Remote),
     );
     let cpu_seconds = cpu_before.zip(CpuTicks::now()).and_then(|(a, b)| a.process_seconds(b));
     let total_seconds = start.elapsed().as_secs_f64();
@@ -658,49 +658,6 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
         }),
         others_share: None,
     })
-}
-
-/// Listen for relays of run `name` on a free loopback port, and the command of `acps relay` (this
-/// executable) there with `workers` workers, its own local run named after `name`.
-fn relay_command(
-    name: &RunName,
-    options: &BenchOptions,
-    workers: usize,
-) -> anyhow::Result<(acps_relay::Listener, std::process::Command)> {
-    // A port the system had free a moment ago; Zenoh binds it again at once.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|socket| socket.local_addr())
-        .context("finding a free loopback port")?
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
-    // Among the run's files in /dev/shm, which go with them.
-    let key_file = std::path::PathBuf::from(format!("/dev/shm/{}relay.key", name.prefix()));
-    let (key, _) = acps_relay::net::RelayKey::make_or_take(&key_file)?;
-    let net = acps_relay::NetOptions {
-        listen: vec![endpoint.clone()],
-        connect: Vec::new(),
-        lease: acps_relay::net::DEFAULT_LEASE,
-        config_file: None,
-        key: Some(key),
-    };
-    let listener = acps_relay::Listener::open(name, &net).with_context(|| format!("listening at {endpoint}"))?;
-    let mut command = acps_experiments::workers::this_program();
-    command.args([
-        "relay",
-        "--connect",
-        &endpoint,
-        "--run",
-        name.as_str(),
-        "--local-run",
-        &format!("{name}-host"),
-    ]);
-    command.arg("--relay-key").arg(&key_file);
-    command.args(["--workers", &workers.to_string()]);
-    command.args(["--worker-queue-depth", &options.worker_queue_depth.to_string(), "-q"]);
-    if let Some(nice) = options.worker_nice {
-        command.args(["--worker-nice", &nice.to_string()]);
-    }
-    Ok((listener, command))
 }
 
 /// The rows as an aligned table.

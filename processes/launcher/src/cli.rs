@@ -291,7 +291,7 @@ pub(crate) struct NetArgs {
     pub(crate) zenoh_config: Option<PathBuf>,
     /// Seconds without a word after which a frozen or cut-off host is given up on (0.1..=3600;
     /// a host that crashes is noticed at once) [default: 3].
-    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true, value_parser = number("a number of seconds in 0.1..=3600", |x| acps_relay::net::LEASES.contains(&x)))]
+    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true, value_parser = number("a number of seconds in 0.1..=3600", crate::hosts::lease_ok))]
     pub(crate) lease: Option<f64>,
 }
 

@@ -1,9 +1,7 @@
 //! What each `acps` command does.
 
 use crate::bench::BenchEvent;
-use crate::cli::{
-    self, BenchArgs, Command, EvaluateArgs, ExperimentArgs, NetArgs, RelayArgs, RunArgs, StartedWorkers, WorkerArgs,
-};
+use crate::cli::{self, BenchArgs, Command, EvaluateArgs, ExperimentArgs, RunArgs, StartedWorkers, WorkerArgs};
 use acps_experiments::checkpoints::Checkpoints;
 use acps_experiments::experiment::RunError;
 use acps_experiments::file::LoadedFile;
@@ -11,9 +9,7 @@ use acps_experiments::plan::{Job, Plan};
 use acps_experiments::run_dir::{self, RunDir, RunDirError, RunReport};
 use acps_experiments::summary::Summary;
 use acps_experiments::workers::ModelFactory;
-use acps_fleet::{Fleet, FleetBuilder, FleetError, FleetProgress};
-use acps_relay::net::RelayKey;
-use acps_relay::{Listener, NetOptions, RelayOptions};
+use acps_fleet::{Fleet, FleetBuilder, FleetError};
 use acps_shared::Serves;
 use acps_wire::ipc::{self, RunName};
 use acps_wire::wire;
@@ -64,6 +60,8 @@ pub enum Stopped {
     #[error(
         "interrupted; this host's workers were stopped and its shared memory removed; the learner hands their tasks to other hosts"
     )]
+    // Made by `acps relay`, which only a build with the `hosts` feature carries out.
+    #[cfg_attr(not(feature = "hosts"), allow(dead_code))]
     RelayInterrupted,
     /// Any other error, after which the checkpoints written so far continue the run.
     #[error("{}\n{}", described(error), continue_hint(Some(resume)))]
@@ -242,7 +240,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         .as_deref()
         .map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
         .transpose()?;
-    let net = net_options(&args.net, &args.listen, &[])?;
+    let hosts = crate::hosts::plan(&args.net, &args.listen)?;
     let Some(planned) = run_dir(&args.experiment)? else {
         return Ok(());
     };
@@ -277,39 +275,14 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     };
     let workers = args.started.count();
     // Once, for every experiment of the run: relays stay connected from one to the next.
-    let mut listener = match net {
-        Some(mut net) => {
-            let opened = learner_key(&args.net, out).and_then(|(key, told)| {
-                net.key = key;
-                let listener = Listener::open(&name, &net)
-                    .with_context(|| format!("--listen {}", args.listen.join(" --listen ")))?;
-                Ok((listener, told))
-            });
-            match opened {
-                Ok((listener, told)) => {
-                    if args.net.no_relay_key {
-                        eprintln!(
-                            "warning: run '{name}' admits relays without credentials (--no-relay-key): any process of this host can join as a relay and report outcomes"
-                        );
-                    }
-                    if !args.experiment.quiet {
-                        eprintln!(
-                            "run '{name}' serves relays at {}: on each other host, `acps relay --connect ENDPOINT{}",
-                            args.listen.join(", "),
-                            if told.is_empty() { "`".to_string() } else { told }
-                        );
-                    }
-                    Some(listener)
-                }
-                Err(error) => {
-                    for dir in &created {
-                        let _ = std::fs::remove_dir_all(dir);
-                    }
-                    return Err(error);
-                }
+    let mut listener = match hosts.map(|plan| plan.open(&args.net, &name, out, args.experiment.quiet)) {
+        Some(Err(error)) => {
+            for dir in &created {
+                let _ = std::fs::remove_dir_all(dir);
             }
+            return Err(error);
         }
-        None => None,
+        opened => opened.transpose()?,
     };
     for (index, Job { experiment, dir, .. }) in jobs.iter().enumerate() {
         let builder = Fleet::builder(name.clone())
@@ -344,7 +317,7 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
         }
         let progress = experiment.progress(args.experiment.quiet, planned.progress_every);
         let checkpoints = planned.checkpoints(dir);
-        let remote = listener.as_mut().map(|l| l as &mut dyn acps_fleet::Remote);
+        let remote = listener.as_deref_mut().map(|l| l as &mut dyn acps_fleet::Remote);
         let outcome = experiment.run_fleet(&mut fleet, checkpoints.as_ref(), remote, |p| {
             progress.show(&p.learning, p.outcomes, Some(p.workers));
         });
@@ -378,6 +351,9 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
         rounds: args.rounds,
         relay: args.relay,
     };
+    if options.relay {
+        crate::hosts::available("acps bench --relay")?;
+    }
     let long_run = options.envs.contains(&crate::bench::BenchEnv::LongRun);
     let throughput = options.envs.len() > usize::from(long_run);
     if throughput {
@@ -477,138 +453,9 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Serve this host's workers from a learner on another host.
-pub(crate) fn relay(args: RelayArgs) -> anyhow::Result<()> {
-    let run = args
-        .run
-        .as_deref()
-        .map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
-        .transpose()?;
-    let Some(net) = net_options(&args.net, &[], &args.connect)? else {
-        bail!("--connect ENDPOINT is missing: where the learner listens (its --listen)");
-    };
-    args.started.check()?;
-    let local = args
-        .local_run
-        .clone()
-        .unwrap_or_else(|| format!("relay-{}", std::process::id()));
-    let builder = Fleet::builder(RunName::new(&local).with_context(|| format!("--local-run {local}"))?).ctrl_c(true);
-    let mut fleet = args
-        .started
-        .spawn(builder)
-        .start()
-        .with_context(|| format!("--local-run {local}"))?;
-    if !args.quiet {
-        eprintln!(
-            "relay: this host's run is '{local}' (workers started by hand: `acps worker --run {local}`); asking {} for tasks",
-            args.connect.join(", ")
-        );
-    }
-    let options = RelayOptions {
-        net,
-        run,
-        identity: 0,
-        startup_timeout: Duration::from_secs_f64(args.startup_timeout),
-        wait_for_learner: Duration::from_secs_f64(args.wait_for_learner),
-        queue: args.queue,
-    };
-    let bar = (!args.quiet).then(|| {
-        ProgressBar::new_spinner()
-            .with_style(ProgressStyle::with_template("{spinner} relay: {msg}, {elapsed}").expect("a valid template"))
-    });
-    let mut observer = |progress: &FleetProgress| {
-        if let Some(bar) = &bar {
-            bar.set_message(format!(
-                "{} outcomes from {} workers",
-                progress.outcomes, progress.workers
-            ));
-            bar.tick();
-        }
-    };
-    let served = acps_relay::relay::serve(&mut fleet, &options, &mut observer);
-    if let Some(bar) = &bar {
-        bar.finish_and_clear();
-    }
-    match served {
-        Ok(report) => {
-            if !args.quiet {
-                eprintln!(
-                    "relay: run '{}' is over: {} outcomes forwarded in {} serves",
-                    report.run, report.outcomes, report.serves
-                );
-            }
-            Ok(())
-        }
-        Err(acps_relay::RelayError::Fleet(acps_fleet::FleetError::Interrupted)) => {
-            Err(Stopped::RelayInterrupted.into())
-        }
-        Err(error) => Err(anyhow::Error::new(error).context(format!("relay to {}", args.connect.join(", ")))),
-    }
-}
-
-/// The network settings of a learner that listens on `listen` or a relay that connects to
-/// `connect`; `None` when there is neither.
-fn net_options(args: &NetArgs, listen: &[String], connect: &[String]) -> anyhow::Result<Option<NetOptions>> {
-    if listen.is_empty() && connect.is_empty() {
-        if args.zenoh_config.is_some() || args.lease.is_some() {
-            bail!(
-                "--zenoh-config and --lease set up the network of hosts, which only --listen (acps run) or --connect (acps relay) opens"
-            );
-        }
-        return Ok(None);
-    }
-    let (flag, endpoints) = if listen.is_empty() {
-        ("--connect", connect)
-    } else {
-        ("--listen", listen)
-    };
-    for endpoint in endpoints {
-        acps_relay::net::check_endpoint(endpoint).with_context(|| format!("{flag} {endpoint}"))?;
-    }
-    if let Some(path) = &args.zenoh_config
-        && !path.is_file()
-    {
-        bail!("--zenoh-config {}: not a readable file", path.display());
-    }
-    let key = match &args.relay_key {
-        // A learner's key is made or taken once its run directory exists (`learner_key`).
-        Some(path) if listen.is_empty() => Some(RelayKey::read(path).context("--relay-key")?),
-        None if listen.is_empty() && !args.no_relay_key && args.zenoh_config.is_none() => bail!(
-            "--relay-key FILE is missing: a copy of the relay.key its learner made in its run directory (or --no-relay-key for a learner that admits relays without credentials)"
-        ),
-        _ => None,
-    };
-    Ok(Some(NetOptions {
-        listen: listen.to_vec(),
-        connect: connect.to_vec(),
-        lease: args
-            .lease
-            .map_or(acps_relay::net::DEFAULT_LEASE, Duration::from_secs_f64),
-        config_file: args.zenoh_config.clone(),
-        key,
-    }))
-}
-
-/// The relays' key of a learner whose run directory is `out`, made there unless taken from
-/// --relay-key, or none (--no-relay-key, or --zenoh-config without --relay-key), and the words
-/// that tell the user how relays join with it.
-fn learner_key(args: &NetArgs, out: &Path) -> anyhow::Result<(Option<RelayKey>, String)> {
-    if args.no_relay_key || (args.zenoh_config.is_some() && args.relay_key.is_none()) {
-        return Ok((None, String::new()));
-    }
-    let path = args.relay_key.clone().unwrap_or_else(|| out.join("relay.key"));
-    let (key, made) = RelayKey::make_or_take(&path).context("--relay-key")?;
-    let told = format!(
-        " --relay-key relay.key` with this host's address and a copy of {} ({})",
-        path.display(),
-        if made { "made now" } else { "made before" }
-    );
-    Ok((Some(key), told))
-}
-
 impl StartedWorkers {
     /// Refuse a --worker-command that starts nothing. Also warns, once, of a deprecated option.
-    fn check(&self) -> anyhow::Result<()> {
+    pub(crate) fn check(&self) -> anyhow::Result<()> {
         self.deprecated.warn();
         if let Some(command) = &self.worker_command {
             if command.trim().is_empty() {
@@ -622,7 +469,7 @@ impl StartedWorkers {
     }
 
     /// How many workers to start: --workers, or the cores (at most a fleet's most).
-    fn count(&self) -> usize {
+    pub(crate) fn count(&self) -> usize {
         self.workers.unwrap_or_else(|| {
             std::thread::available_parallelism()
                 .map_or(1, |n| n.get())
@@ -631,7 +478,7 @@ impl StartedWorkers {
     }
 
     /// `builder`, starting these workers.
-    fn spawn(&self, mut builder: FleetBuilder) -> FleetBuilder {
+    pub(crate) fn spawn(&self, mut builder: FleetBuilder) -> FleetBuilder {
         let workers = self.count();
         if workers > 0 {
             builder = match &self.worker_command {
@@ -690,7 +537,7 @@ pub(crate) fn run(command: Command) -> anyhow::Result<()> {
         Command::Learn(args) => fleet(args.run_args()),
         Command::Run(args) => fleet(args),
         Command::Worker(args) => worker(args),
-        Command::Relay(args) => relay(args),
+        Command::Relay(args) => crate::hosts::relay(args),
         Command::Bench(args) => bench(args),
         Command::Evaluate(args) => evaluate(args),
         Command::Compare(args) => {
