@@ -31,50 +31,61 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub(crate) enum Command {
-    /// The main job with its defaults: the PA-10 learns to throw at the grid problem's 25
-    /// targets (paper Section 5.2.3) through a fleet of simulator workers (rapier3d physics),
-    /// choosing targets with D-UCB and monotonic progress. Shows the test error falling and
-    /// writes DIR (default runs/learn). The same as `acps run grid --sim rapier --method
-    /// monotonic-progress --runs 4 --episodes 10000 --in-flight 8 --out runs/learn`. Takes 40 s
-    /// on 2 idle cores, 70-140 s when other programs compete; Ctrl-C prints the command that
+    /// The main job: the PA-10 arm learns to throw at 25 targets through a worker fleet.
+    ///
+    /// The grid problem (paper Section 5.2.3) with rapier3d physics, D-UCB with monotonic
+    /// progress choosing the targets; shows the test error falling and writes DIR (default
+    /// runs/learn). The same as `acps run grid --sim rapier --method monotonic-progress --runs 4
+    /// --episodes 10000 --in-flight 8 --out runs/learn`. Ctrl-C prints the command that
     /// continues it (`acps learn --resume`).
     Learn(LearnArgs),
-    /// Run one of the paper's experiments in this process, for several methods x seeds in
-    /// parallel, and write DIR/summary.json, the plots and DIR/config.toml. Name the experiment
-    /// (`acps experiment grid --runs 5`) or give an experiment file (`acps experiment --config
-    /// experiments/grid-fig8.toml`).
+    /// Run one of the paper's experiments or an experiment file in this process.
+    ///
+    /// Several methods x seeds in parallel; writes DIR/summary.json, the plots and
+    /// DIR/config.toml. Name the experiment (`acps experiment grid --runs 5`) or give an
+    /// experiment file (`acps experiment --config experiments/grid-fig8.toml`).
+    #[command(override_usage = "acps experiment <NAME> [OPTIONS]\n       acps experiment --config FILE [OPTIONS]")]
     Experiment(ExperimentArgs),
-    /// Run an experiment through a worker fleet: this process is the learner and serves tasks
-    /// over iceoryx2 shared memory to worker processes it starts. Writes the same DIR/summary.json
-    /// as `acps experiment` with the same --in-flight and --seed. An experiment file with a
-    /// \[problem\] table of your own runs here only, on your workers (--worker-command CMD, or
-    /// --workers 0 and start them yourself).
+    /// Run an experiment or problem file through a fleet of worker processes.
+    ///
+    /// This process is the learner and serves tasks over iceoryx2 shared memory to worker
+    /// processes it starts. Writes the same DIR/summary.json as `acps experiment` with the same
+    /// --in-flight and --seed. An experiment file with a \[problem\] table of your own runs here
+    /// only, on your workers (--worker-command CMD, or --workers 0 and start them yourself).
+    #[command(override_usage = "acps run <NAME> [OPTIONS]\n       acps run --config FILE [OPTIONS]")]
     Run(RunArgs),
-    /// Serve the learner of a running fleet (`acps run ... --run NAME`) as one more worker.
+    /// Serve a running fleet's learner (`acps run ... --run NAME`) as one more worker.
     Worker(WorkerArgs),
-    /// Serve this host's workers from a learner on another host (`acps run ... --listen
-    /// ENDPOINT` there), over Zenoh: to the workers this is their learner, to the learner one
-    /// peer that asks for their tasks in batches. Starts --workers W workers (default: the
-    /// cores) for every experiment of the run, and exits when the learner's run is over
-    /// (docs/HOSTS.md).
+    /// Serve this host's workers from a learner on another host (docs/HOSTS.md).
+    ///
+    /// Over Zenoh, from `acps run ... --listen ENDPOINT` there: to the workers this is their
+    /// learner, to the learner one peer that asks for their tasks in batches. Starts --workers W
+    /// workers (default: the cores) for every experiment of the run, and exits when the
+    /// learner's run is over. Needs a build with the `hosts` feature.
     Relay(RelayArgs),
-    /// Measure rollouts per second in-process and through fleets of 1 ..= cores workers, for a
-    /// trivial environment (the transport's cost) and the analytic and rapier PA-10, in
-    /// interleaved rounds; print a table and write DIR/bench.json, bench.svg and bench.png.
+    /// Measure rollouts per second in-process and through worker fleets.
+    ///
+    /// For fleets of 1 ..= cores workers, a trivial environment (the transport's cost) and the
+    /// analytic and rapier PA-10, in interleaved rounds; prints a table and writes
+    /// DIR/bench.json, bench.svg and bench.png.
     Bench(BenchArgs),
-    /// Replay a learned policy from a run directory greedily (its mean, exploration off) at
-    /// --target points or at the problem's test contexts, in the simulator the run used (named
-    /// in the report), printing the landing point, error and reward of every throw (the return of
-    /// every context for the contextual function).
+    /// Replay a learned policy from a run directory, exploration off.
+    ///
+    /// Its mean, at --target points or at the problem's test contexts, in the simulator the run
+    /// used (named in the report), printing the landing point, error and reward of every throw
+    /// (the return of every context for the contextual function).
     Evaluate(EvaluateArgs),
-    /// Compare every method of a run directory with a baseline, paired over runs of the same
-    /// seed: the final score, the area under the learning curve (as a mean score) and the
-    /// episodes to each --levels value, with mean +- SEM, the paired difference and two-sided
-    /// p-values (Wilcoxon signed-rank, paired t). Prints a markdown table, or JSON.
+    /// Compare the methods of run directories with a baseline, paired over seeds.
+    ///
+    /// The final score, the area under the learning curve (as a mean score) and the episodes to
+    /// each --levels value, with mean +- SEM, the paired difference and two-sided p-values
+    /// (Wilcoxon signed-rank, paired t). Prints a markdown table, or JSON.
     Compare(CompareArgs),
-    /// Print the wire protocol's layout as JSON: every payload's fields (type, offset, size,
-    /// alignment), the iceoryx2 type names, capacities, codes and service settings. Workers in
-    /// other languages are tested against it; docs/PROTOCOL.md explains it.
+    /// Print the wire protocol's layout as JSON, for workers in other languages.
+    ///
+    /// Every payload's fields (type, offset, size, alignment), the iceoryx2 type names,
+    /// capacities, codes and service settings. Workers in other languages are tested against
+    /// it; docs/PROTOCOL.md explains it.
     Protocol,
 }
 

@@ -1229,3 +1229,29 @@ fn a_full_output_is_an_error_naming_standard_output() {
         "{stderr}"
     );
 }
+
+#[test]
+fn help_gives_each_command_one_line_and_usage_shows_the_file_form() {
+    let help = succeeded(&acps(&["--help"]));
+    let commands: Vec<&str> = help
+        .lines()
+        .skip_while(|line| *line != "Commands:")
+        .skip(1)
+        .take_while(|line| !line.is_empty())
+        .collect();
+    assert!(commands.len() >= 9, "{help}");
+    for line in &commands {
+        assert!(
+            line.len() <= 100,
+            "a command's line of {} characters: {line}",
+            line.len()
+        );
+        assert!(!line.contains(" s on "), "a timing claim: {line}");
+    }
+    for command in ["run", "experiment"] {
+        let output = acps(&[command]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains(&format!("acps {command} --config FILE")), "{stderr}");
+    }
+}
