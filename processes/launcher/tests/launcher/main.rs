@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 mod cli;
 mod compare;
 mod config;
+mod docs;
 mod fleet;
 mod hosts;
 mod outputs;
