@@ -73,6 +73,12 @@ pub enum Stopped {
     },
 }
 
+/// The run `--run` names, if it names one.
+pub(crate) fn run_name(arg: Option<&str>) -> anyhow::Result<Option<RunName>> {
+    arg.map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
+        .transpose()
+}
+
 /// Write `text` to stdout. A reader that closed it (`acps protocol | head`) ends the command
 /// quietly ([`Stopped::Closed`]) instead of a panic of `print!`.
 pub(crate) fn out(text: &str) -> anyhow::Result<()> {
@@ -235,11 +241,7 @@ pub(crate) fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
 /// and Ctrl-C.
 pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     // Before the output directory is made.
-    let run = args
-        .run
-        .as_deref()
-        .map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
-        .transpose()?;
+    let run = run_name(args.run.as_deref())?;
     let hosts = crate::hosts::plan(&args.net, &args.listen)?;
     let Some(planned) = run_dir(&args.experiment)? else {
         return Ok(());

@@ -66,11 +66,7 @@ impl Plan {
 
 /// Serve this host's workers from a learner on another host.
 pub(crate) fn relay(args: RelayArgs) -> anyhow::Result<()> {
-    let run = args
-        .run
-        .as_deref()
-        .map(|name| RunName::new(name).with_context(|| format!("--run {name}")))
-        .transpose()?;
+    let run = crate::commands::run_name(args.run.as_deref())?;
     let Some(net) = net_options(&args.net, &[], &args.connect)? else {
         bail!("--connect ENDPOINT is missing: where the learner listens (its --listen)");
     };
