@@ -50,7 +50,7 @@ pub(crate) enum Command {
     ///
     /// This process is the learner and serves tasks over iceoryx2 shared memory to worker
     /// processes it starts. Writes the same DIR/summary.json as `acps experiment` with the same
-    /// --in-flight and --seed. An experiment file with a \[problem\] table of your own runs here
+    /// --in-flight and --seed. An experiment file with a `[problem]` table of your own runs here
     /// only, on your workers (--worker-command CMD, or --workers 0 and start them yourself).
     #[command(override_usage = "acps run <NAME> [OPTIONS]\n       acps run --config FILE [OPTIONS]")]
     Run(RunArgs),

@@ -66,6 +66,30 @@ fn init_logging(verbose: u8) {
     ipc::quiet_iceoryx2_log();
 }
 
+/// A value of more than this many characters is shown cut in a usage error.
+const SHOWN_CHARS: usize = 120;
+
+/// `text` with every word longer than [`SHOWN_CHARS`] cut to its start, `...` and its length:
+/// clap echoes a bad value whole, twice for some errors (a 100 kB method name made 200 kB of
+/// error).
+fn shortened(text: &str) -> String {
+    let mut out = String::with_capacity(text.len().min(4096));
+    for (i, line) in text.split('\n').enumerate() {
+        if i > 0 {
+            out.push('\n');
+        }
+        let words: Vec<String> = line
+            .split(' ')
+            .map(|word| match word.char_indices().nth(SHOWN_CHARS) {
+                Some((cut, _)) => format!("{}... ({} characters)", &word[..cut], word.chars().count()),
+                None => word.to_string(),
+            })
+            .collect();
+        out.push_str(&words.join(" "));
+    }
+    out
+}
+
 /// The command line [`main`] runs.
 static COMMAND_LINE: OnceLock<Vec<String>> = OnceLock::new();
 
@@ -91,7 +115,15 @@ where
     // Kept for the command that continues an interrupted run: it is what the user typed (the
     // Python package's `acps` runs inside an interpreter, whose own arguments differ).
     let _ = COMMAND_LINE.set(args.iter().map(|a| a.to_string_lossy().into_owned()).collect());
-    let cli = Cli::parse_from(args);
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        // Help and version print as clap does.
+        Err(error) if !error.use_stderr() => error.exit(),
+        Err(error) => {
+            eprint!("{}", shortened(&error.render().to_string()));
+            return 2;
+        }
+    };
     // Every file a command creates (the run directory, checkpoints, iceoryx2's shared memory
     // and its management files, some of which iceoryx2 makes 0666) is its user's alone: no
     // other user can read a run's data or write into its services. Started workers inherit it.
@@ -112,5 +144,25 @@ where
                 2
             }
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_long_value_in_a_usage_error_is_shown_cut_with_its_length() {
+        let long = "x".repeat(100_000);
+        let error = format!("error: invalid value '{long}' for '--method <METHOD>'\n  [possible values: a, b]\n");
+        let shown = shortened(&error);
+        assert!(shown.len() < 300, "{} bytes", shown.len());
+        assert!(
+            shown.contains(&format!("'{}... (100002 characters) for", "x".repeat(SHOWN_CHARS - 1))),
+            "{shown}"
+        );
+        assert!(shown.ends_with("[possible values: a, b]\n"), "{shown}");
+        let short = "error: unexpected argument '--typo' found\n\nUsage: acps run <NAME>\n";
+        assert_eq!(shortened(short), short);
     }
 }

@@ -1255,3 +1255,16 @@ fn help_gives_each_command_one_line_and_usage_shows_the_file_form() {
         assert!(stderr.contains(&format!("acps {command} --config FILE")), "{stderr}");
     }
 }
+
+#[test]
+fn a_huge_bad_value_is_shown_cut_not_echoed_whole() {
+    let name = "x".repeat(100_000);
+    let output = acps(&["experiment", "function", "--method", &name]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.len() < 2000, "{} bytes of error", stderr.len());
+    assert!(
+        stderr.contains("(100002 characters)") && stderr.contains("--method"),
+        "{stderr}"
+    );
+}
