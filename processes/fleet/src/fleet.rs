@@ -443,6 +443,22 @@ impl Fleet {
                 waited,
                 command: shown((spawn.command)(0)),
             },
+            (
+                FleetError::NoWorkers {
+                    run,
+                    started,
+                    waited,
+                    refused,
+                    ..
+                },
+                _,
+            ) => FleetError::NoWorkers {
+                run,
+                started,
+                waited,
+                refused,
+                exits: processes::exits(&mut children),
+            },
             (error, _) => error,
         })
     }

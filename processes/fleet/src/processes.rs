@@ -86,6 +86,33 @@ pub fn running(children: &mut [Child]) -> usize {
         .count()
 }
 
+/// How `children` ended, counted by kind: `2 with status 1, 1 killed by signal 9`; those not
+/// ended yet are left out. A worker that stopped on an error exits with a status other than 0,
+/// which tells the user whether to look for an error above.
+pub fn exits(children: &mut [Child]) -> String {
+    use std::os::unix::process::ExitStatusExt as _;
+    let mut kinds: Vec<(String, usize)> = Vec::new();
+    for child in children {
+        let Ok(Some(status)) = child.try_wait() else {
+            continue;
+        };
+        let kind = match (status.code(), status.signal()) {
+            (Some(code), _) => format!("with status {code}"),
+            (None, Some(signal)) => format!("killed by signal {signal}"),
+            (None, None) => format!("{status}"),
+        };
+        match kinds.iter_mut().find(|(k, _)| *k == kind) {
+            Some((_, count)) => *count += 1,
+            None => kinds.push((kind, 1)),
+        }
+    }
+    kinds
+        .iter()
+        .map(|(kind, count)| format!("{count} {kind}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// Wait for the workers to leave (they stop when the learner says the run is over or is gone);
 /// kill any that does not within a few seconds, or that cannot be waited for.
 pub fn reap(children: &mut [Child]) {

@@ -511,8 +511,9 @@ pub enum FleetError {
     /// No worker was connected and none was on its way for the grace period
     /// ([`Liveness::no_workers`]): every started worker exited, and no other joined.
     #[error(
-        "no worker can go on with run '{run}': none connected for {waited:?}{started}{why}",
-        started = if *started > 0 { format!(", and all {started} started worker processes exited (see their messages above)") } else { String::new() },
+        "no worker can go on with run '{run}': none connected for {seconds:.1} s{started}{why}",
+        seconds = waited.as_secs_f64(),
+        started = if *started > 0 { format!(", and all {started} started worker processes exited{} (see their messages above)", if exits.is_empty() { String::new() } else { format!(": {exits}") }) } else { String::new() },
         why = refused.as_ref().map_or(String::new(), |reason| format!("; the learner refused a worker: {reason}"))
     )]
     NoWorkers {
@@ -520,6 +521,9 @@ pub enum FleetError {
         run: RunName,
         /// Worker processes the fleet started.
         started: usize,
+        /// How they ended, counted by exit status (`2 with status 1`), once the fleet has
+        /// reaped them; empty before, or without started workers.
+        exits: String,
         /// How long the run was without a worker.
         waited: Duration,
         /// Why the learner refused the last worker it refused, if it refused any and no
@@ -1117,6 +1121,7 @@ pub(crate) fn serve<'r>(
                     return Err(FleetError::NoWorkers {
                         run: run.clone(),
                         started: launched,
+                        exits: String::new(),
                         waited: since.elapsed(),
                         refused: last_refusal.map(|(reason, _)| reason),
                     });

@@ -1674,6 +1674,11 @@ fn a_fleet_run_that_fails_half_way_prints_the_command_that_continues_it() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("no worker can go on"), "{stderr}");
+    // How the started worker ended, so that the user knows it did not just finish.
+    assert!(
+        stderr.contains("all 1 started worker processes exited: 1 killed by signal 9"),
+        "{stderr}"
+    );
     let printed = stderr
         .split("the checkpoints written so far continue the run with\n")
         .nth(1)
