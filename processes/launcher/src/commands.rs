@@ -277,14 +277,17 @@ pub(crate) fn fleet(args: RunArgs) -> anyhow::Result<()> {
     };
     let workers = args.started.count();
     // Once, for every experiment of the run: relays stay connected from one to the next.
-    let mut listener = match hosts.map(|plan| plan.open(&args.net, &name, out, args.experiment.quiet)) {
-        Some(Err(error)) => {
+    let mut listener = match hosts
+        .map(|plan| plan.open(&args.net, &name, out, args.experiment.quiet))
+        .transpose()
+    {
+        Ok(listener) => listener,
+        Err(error) => {
             for dir in &created {
                 let _ = std::fs::remove_dir_all(dir);
             }
             return Err(error);
         }
-        opened => opened.transpose()?,
     };
     for (index, Job { experiment, dir, .. }) in jobs.iter().enumerate() {
         let builder = Fleet::builder(name.clone())

@@ -17,6 +17,7 @@ mod no_hosts;
 #[cfg(not(feature = "hosts"))]
 use no_hosts as hosts;
 
+use acps_experiments::file::shown_value;
 use acps_wire::ipc;
 use clap::Parser;
 use cli::Cli;
@@ -66,28 +67,16 @@ fn init_logging(verbose: u8) {
     ipc::quiet_iceoryx2_log();
 }
 
-/// A value of more than this many characters is shown cut in a usage error.
-const SHOWN_CHARS: usize = 120;
-
-/// `text` with every word longer than [`SHOWN_CHARS`] cut to its start, `...` and its length:
-/// clap echoes a bad value whole, twice for some errors (a 100 kB method name made 200 kB of
-/// error).
+/// `text` with every word of more than
+/// [`SHOWN_CHARS`](acps_experiments::file::SHOWN_CHARS) characters shown cut, as a file's values
+/// are: clap echoes a bad value whole, twice for some errors (a 100 kB method name made 200 kB
+/// of error).
 fn shortened(text: &str) -> String {
-    let mut out = String::with_capacity(text.len().min(4096));
-    for (i, line) in text.split('\n').enumerate() {
-        if i > 0 {
-            out.push('\n');
-        }
-        let words: Vec<String> = line
-            .split(' ')
-            .map(|word| match word.char_indices().nth(SHOWN_CHARS) {
-                Some((cut, _)) => format!("{}... ({} characters)", &word[..cut], word.chars().count()),
-                None => word.to_string(),
-            })
-            .collect();
-        out.push_str(&words.join(" "));
-    }
-    out
+    let lines: Vec<String> = text
+        .split('\n')
+        .map(|line| line.split(' ').map(shown_value).collect::<Vec<_>>().join(" "))
+        .collect();
+    lines.join("\n")
 }
 
 /// The command line [`main`] runs.
@@ -150,6 +139,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+    use acps_experiments::file::SHOWN_CHARS;
 
     #[test]
     fn a_long_value_in_a_usage_error_is_shown_cut_with_its_length() {
@@ -158,7 +148,7 @@ mod tests {
         let shown = shortened(&error);
         assert!(shown.len() < 300, "{} bytes", shown.len());
         assert!(
-            shown.contains(&format!("'{}... (100002 characters) for", "x".repeat(SHOWN_CHARS - 1))),
+            shown.contains(&format!("'{} ... (100002 characters) for", "x".repeat(SHOWN_CHARS - 1))),
             "{shown}"
         );
         assert!(shown.ends_with("[possible values: a, b]\n"), "{shown}");

@@ -28,11 +28,19 @@ fn read_text(path: &Path) -> std::io::Result<String> {
     })
 }
 
-/// A value as written in a file, for an error: its start and its length when it is long (a list
-/// of a million points is not echoed whole).
-fn shown_value(text: &str) -> String {
-    const SHOWN: usize = 120;
-    match text.char_indices().nth(SHOWN) {
+/// Characters of a value an error shows before it is cut ([`shown_value`]).
+pub const SHOWN_CHARS: usize = 120;
+
+/// A value as written in a file or on the command line, for an error: its start and its length
+/// when it is long (a list of a million points is not echoed whole).
+///
+/// ```
+/// use acps_experiments::file::shown_value;
+/// assert_eq!(shown_value("grid"), "grid");
+/// assert!(shown_value(&"x".repeat(1000)).ends_with("x ... (1000 characters)"));
+/// ```
+pub fn shown_value(text: &str) -> String {
+    match text.char_indices().nth(SHOWN_CHARS) {
         None => text.to_string(),
         Some((end, _)) => format!("{} ... ({} characters)", &text[..end], text.chars().count()),
     }
