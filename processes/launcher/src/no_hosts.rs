@@ -103,5 +103,11 @@ mod tests {
                 .to_string()
                 .starts_with("acps bench --relay is for")
         );
+        let cli = crate::cli::Cli::try_parse_from(["acps", "relay", "--connect", "tcp/10.0.0.1:7447"]).unwrap();
+        let crate::cli::Command::Relay(args) = cli.command else {
+            unreachable!("parsed as acps relay")
+        };
+        let error = relay(args).unwrap_err().to_string();
+        assert!(error.starts_with("acps relay is for workers on other hosts"), "{error}");
     }
 }
