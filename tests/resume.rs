@@ -6,12 +6,15 @@ use acps_learner::ccmaes::CCmaesConfig;
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
 use acps_learner::creps::{CRepsConfig, FeatureMap, MemoryConfig};
 use acps_learner::selection::{AbsoluteProgressConfig, AlpGmmConfig, EmaRates, RetireConfig, SelfPacedConfig};
-use acps_learner::{BanditConfig, Learner, LearnerConfig, Method, SearchConfig, SelectorConfig, run_in_process};
+use acps_learner::{
+    BanditConfig, Learner, LearnerConfig, LearnerTellError, Method, SearchConfig, SelectorConfig, run_in_process,
+};
 use acps_models::contextual_function::ContextualFunction;
 use acps_models::learning_model::{LearningModel, LearningModelConfig};
 use acps_shared::{Environment, EnvironmentSpec, Outcome, Task};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use std::cell::Cell;
 
 const STAMP: Stamp = Stamp { identity: 1, job: 0 };
 
@@ -410,6 +413,73 @@ fn the_interrupted_runs_did_fail_retry_and_update() {
         stats.retries > 0 && stats.failed_episodes > 0 && stats.updates > 0,
         "{stats:?}"
     );
+}
+
+/// Drive `setup` to its end, stopping each update at its first question of `stop`, then at
+/// its second, ... until it asks no more (Ctrl-C at every step of a solve and a fit), going on
+/// from the stopped learner itself or from its checkpoint, alternately; the final bits and the
+/// number of updates stopped.
+fn stopped_updates(setup: Setup) -> (Vec<u8>, usize) {
+    let (mut learner, mut environment) = setup.build();
+    let (mut stopped, mut in_a_row) = (0, 0);
+    while let Some(task) = learner.ask() {
+        let outcome = environment.rollout(&task);
+        let before = bits(&learner, environment.as_ref());
+        let (at, asked) = (in_a_row + 1, Cell::new(0));
+        let stop = || {
+            asked.set(asked.get() + 1);
+            asked.get() >= at
+        };
+        let started_by = match learner.tell_until(outcome, &stop) {
+            Ok(()) => {
+                in_a_row = 0;
+                continue;
+            }
+            Err(LearnerTellError::Interrupted { task_id }) => task_id,
+            Err(other) => panic!("{setup:?}: {other}"),
+        };
+        (stopped, in_a_row) = (stopped + 1, in_a_row + 1);
+        // As if the outcome had not come back: the checkpoint hands the task out again. (An
+        // outcome that waited for a retried task's may start the update instead.)
+        assert!(
+            started_by != task.id || bits(&learner, environment.as_ref()) == before,
+            "{setup:?}: update {stopped}, stopped at question {at}, left a trace"
+        );
+        if stopped % 2 == 0 {
+            let saved = checkpoint::decode(&before, STAMP).unwrap();
+            (learner, environment) = setup.build();
+            saved.apply(&mut learner, environment.as_mut()).unwrap();
+        }
+    }
+    (bits(&learner, environment.as_ref()), stopped)
+}
+
+#[test]
+fn an_update_stopped_half_way_leaves_no_trace() {
+    // The plain update and self-paced's joint one (which moves its context distribution too),
+    // each memory, one task out or four.
+    for (method, per_task, in_flight) in [
+        (Method::Random, false, 1),
+        (Method::Random, true, 4),
+        (Method::SelfPaced, false, 4),
+        (Method::SelfPaced, true, 1),
+    ] {
+        let setup = Setup::Function {
+            method,
+            retire: false,
+            seed: 2,
+            in_flight,
+            per_task,
+        };
+        let (bits, stopped) = stopped_updates(setup);
+        // 12 updates, each stopped at every question (a few per Newton step, one per block of
+        // a fit's columns), then run to its end.
+        assert!(stopped >= 12 * 5, "{setup:?}: {stopped} updates stopped");
+        assert!(
+            bits == uninterrupted(setup),
+            "{setup:?}: stopped updates changed the run"
+        );
+    }
 }
 
 #[test]

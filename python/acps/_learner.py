@@ -118,7 +118,9 @@ class Learner:
         and whether it succeeded (``ok``; a non-finite reward or score fails it too). A failed
         task is asked again once. In any order and any grouping: the learner consumes outcomes
         in task order. The whole batch is checked before any of it is taken
-        (:class:`acps.TellError`)."""
+        (:class:`acps.TellError`). Ctrl-C during the policy update an outcome starts raises
+        ``KeyboardInterrupt`` at once, with the outcomes before that one taken and the rest
+        not: :meth:`save` then continues the run bit for bit."""
         self._native.tell(
             np.ascontiguousarray(ids, dtype=np.uint64),
             np.ascontiguousarray(rewards, dtype=np.float64),

@@ -7,12 +7,13 @@ use acps_experiments::file::LoadedFile;
 use acps_experiments::plan::Plan;
 use acps_experiments::settings::ExperimentFile;
 use acps_learner::checkpoint::{self, Checkpoint, Stamp};
-use acps_learner::{Learner, Search};
+use acps_learner::{Learner, LearnerTellError, Search};
 use acps_shared::{Outcome, OutcomeStatus, Task};
 use acps_wire::wire::kind_code;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use std::cell::Cell;
 use std::collections::HashSet;
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard, PoisonError};
@@ -190,9 +191,14 @@ impl NativeLearner {
     /// Take the outcomes of tasks `ids`: their `rewards` (what the learner maximises) and
     /// `scores` (the problem's measure), and whether each rollout succeeded (`ok`; a non-finite
     /// reward or score fails it too). The whole batch is checked before any of it is taken.
+    ///
+    /// Ctrl-C during the policy update an outcome starts (seconds at the largest sizes) raises
+    /// `KeyboardInterrupt` at once: the outcomes before that one are taken, that one and the
+    /// rest are not, and `save` continues the run bit for bit.
     #[pyo3(signature = (ids, rewards, scores, ok=None))]
     fn tell(
         &self,
+        py: Python<'_>,
         ids: PyReadonlyArray1<'_, u64>,
         rewards: PyReadonlyArray1<'_, f64>,
         scores: PyReadonlyArray1<'_, f64>,
@@ -226,11 +232,29 @@ impl NativeLearner {
                 )));
             }
         }
+        // Python's signal handlers run here, between the steps of an update: what they raise
+        // (KeyboardInterrupt) stops it and is raised in its place.
+        let raised = Cell::new(None);
+        let stop = || match py.check_signals() {
+            Ok(()) => false,
+            Err(error) => {
+                raised.set(Some(error));
+                true
+            }
+        };
         for (i, &id) in ids.iter().enumerate() {
             let ok = ok.as_ref().is_none_or(|ok| ok[i]);
-            learner
-                .tell(outcome(id, rewards[i], scores[i], ok))
-                .map_err(|e| AcpsError::new_err(format!("tell: {e} (after the batch was checked: a bug)")))?;
+            match learner.tell_until(outcome(id, rewards[i], scores[i], ok), &stop) {
+                Ok(()) => {}
+                Err(LearnerTellError::Interrupted { .. }) => {
+                    return Err(raised.take().expect("stopped by a raised signal handler"));
+                }
+                Err(error) => {
+                    return Err(AcpsError::new_err(format!(
+                        "tell: {error} (after the batch was checked: a bug)"
+                    )));
+                }
+            }
         }
         Ok(())
     }

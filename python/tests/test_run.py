@@ -252,6 +252,63 @@ class RunTest(unittest.TestCase):
             self.assertEqual(len(list((out / "checkpoints").glob("*.ckpt"))), 4)
             self.assertFalse((out / "summary.json").exists())
 
+    def test_ctrl_c_stops_the_largest_update_that_tell_starts(self) -> None:
+        """SIGINT while tell runs a C-REPS update of 100,000 rollouts of 64 parameters (about
+        2 s): KeyboardInterrupt from tell, that outcome not taken, and the learner goes on."""
+        with tempfile.TemporaryDirectory() as d:
+            telling = Path(d) / "telling"
+            script = (
+                "import signal, sys, pathlib, numpy as np, acps\n"
+                "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+                "n = 100_000\n"
+                "settings = {'methods': ['random'], 'episodes': n, 'eval_every': n,\n"
+                "    'in_flight': 1000, 'memory_size': n, 'update_every': n, 'memory': 'window',\n"
+                "    'problem': {'name': 'wide', 'theta0': [0.0] * 64, 'metric': 'cost',\n"
+                "        'training_grid': {'low': [0.0], 'high': [1.0], 'points': [5]},\n"
+                "        'test_contexts': [[0.5]], 'environment': {'name': 'wide'}}}\n"
+                "learner = acps.Learner(settings, method='random')\n"
+                "def outcomes(tasks):\n"
+                "    rewards = -np.sum(tasks.thetas**2, axis=1)\n"
+                "    return tasks.ids, rewards, -rewards\n"
+                "issued, last = 0, None\n"
+                "while last is None:\n"
+                "    tasks = learner.ask(1000)\n"
+                "    training = np.flatnonzero(tasks.kinds == 'train')\n"
+                "    ids, rewards, scores = outcomes(tasks)\n"
+                "    keep = np.ones(len(tasks), dtype=bool)\n"
+                "    if issued + len(training) == n:\n"
+                "        keep[training[-1]] = False\n"
+                "        last = tuple(a[~keep] for a in (ids, rewards, scores))\n"
+                "    issued += len(training)\n"
+                "    learner.tell(ids[keep], rewards[keep], scores[keep])\n"
+                "pathlib.Path(sys.argv[1]).touch()\n"
+                "try:\n"
+                "    learner.tell(*last)\n"
+                "    print('the update ran to its end')\n"
+                "except KeyboardInterrupt:\n"
+                "    print('interrupted at', learner.episodes)\n"
+                "learner.tell(*last)\n"
+                "print('then', learner.episodes)\n"
+            )
+            child = subprocess.Popen(
+                [sys.executable, "-c", script, str(telling)],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            try:
+                deadline = time.monotonic() + 120
+                while not telling.exists():
+                    self.assertIsNone(child.poll(), "the learner ended before its last tell")
+                    self.assertLess(time.monotonic(), deadline, "no last tell within 120 s")
+                    time.sleep(0.01)
+                child.send_signal(signal.SIGINT)
+                stdout, stderr = child.communicate(timeout=120)
+            finally:
+                child.kill()
+            self.assertEqual(child.returncode, 0, stderr)
+            self.assertEqual(stdout.split("\n")[:2], ["interrupted at 99999", "then 100000"])
+
 
 if __name__ == "__main__":
     unittest.main()

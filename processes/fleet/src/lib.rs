@@ -18,7 +18,7 @@ pub mod server;
 mod wake;
 
 /// The progress [`TaskSource::learning`] reports.
-pub use acps_learner::LearningProgress;
+pub use acps_learner::{Interrupted, LearningProgress};
 pub use acps_wire::ipc::{RunName, RunNameParseError, ServerError};
 pub use acps_wire::secret::{RunSecret, SecretError};
 pub use fleet::{Fleet, FleetBuilder, FleetStartError, RUN_ENV, SECRET_ENV};

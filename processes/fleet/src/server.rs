@@ -28,7 +28,7 @@
 //! that serves one environment is handed only tasks of jobs that need it.
 
 use crate::wake::Waker;
-use acps_learner::{Learner, LearningProgress};
+use acps_learner::{Interrupted, Learner, LearnerTellError, LearningProgress};
 use acps_shared::{EnvironmentSpec, Outcome, Serves, SpecBuildError, Task};
 use acps_wire::ipc::{self, IpcError, RunName, ServerError, TICK, TaskRequest, TaskServer, TaskService};
 use acps_wire::secret::RunSecret;
@@ -174,9 +174,10 @@ pub trait TaskSource {
     /// Job `job`'s next ready task, if any.
     fn ask(&mut self, job: usize) -> Option<Task>;
 
-    /// Job `job`'s outcome; `false` when it was dropped: a duplicate, or of a task that is no
-    /// longer waiting for one.
-    fn tell(&mut self, job: usize, outcome: Outcome) -> bool;
+    /// Job `job`'s outcome; `Ok(false)` when it was dropped: a duplicate, or of a task that is
+    /// no longer waiting for one. A learner's update asks `stop` between its steps, and a
+    /// stopped one is `Err` ([`Learner::tell_until`]): the server then stops too.
+    fn tell(&mut self, job: usize, outcome: Outcome, stop: &dyn Fn() -> bool) -> Result<bool, Interrupted>;
 
     /// Hand task `task_id` of job `job` out again (its worker is gone); `false` when it is no
     /// longer waiting for an outcome.
@@ -299,10 +300,10 @@ impl TaskSource for Source<'_> {
         }
     }
 
-    fn tell(&mut self, job: usize, outcome: Outcome) -> bool {
+    fn tell(&mut self, job: usize, outcome: Outcome, stop: &dyn Fn() -> bool) -> Result<bool, Interrupted> {
         match self {
-            Self::Own(source) => source.tell(job, outcome),
-            Self::Forwarding(source) => source.tell(job, outcome),
+            Self::Own(source) => source.tell(job, outcome, stop),
+            Self::Forwarding(source) => source.tell(job, outcome, stop),
         }
     }
 
@@ -367,9 +368,16 @@ impl TaskSource for Learners<'_> {
         self.0[job].learner.ask()
     }
 
-    fn tell(&mut self, job: usize, outcome: Outcome) -> bool {
-        // Both errors (an unknown task, a second outcome) are a re-issued task answered twice.
-        self.0.get_mut(job).is_some_and(|j| j.learner.tell(outcome).is_ok())
+    fn tell(&mut self, job: usize, outcome: Outcome, stop: &dyn Fn() -> bool) -> Result<bool, Interrupted> {
+        let Some(job) = self.0.get_mut(job) else {
+            return Ok(false);
+        };
+        match job.learner.tell_until(outcome, stop) {
+            Ok(()) => Ok(true),
+            Err(LearnerTellError::Interrupted { .. }) => Err(Interrupted),
+            // An unknown task or a second outcome: a re-issued task answered twice.
+            Err(LearnerTellError::UnknownTask { .. } | LearnerTellError::Duplicate { .. }) => Ok(false),
+        }
     }
 
     fn reissue(&mut self, job: usize, task_id: u64) -> bool {
@@ -1010,7 +1018,7 @@ pub(crate) fn serve<'r>(
             told_any = true;
             let started = Instant::now();
             let job = job as usize;
-            let told = job < source.jobs() && source.tell(job, outcome);
+            let told = job < source.jobs() && source.tell(job, outcome, stop).map_err(|_| FleetError::Interrupted)?;
             let finished = Instant::now();
             progress.learner_seconds += (finished - started).as_secs_f64();
             if told {

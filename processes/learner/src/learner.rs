@@ -38,10 +38,10 @@
 //! outcome had not arrived are handed out again (same task, same seed), before the tasks never
 //! handed out.
 
-use crate::SelectorConfig;
 use crate::creps::Rejection;
 use crate::search::{Search, SearchConfig, SearchCreateError, SearchReport, SearchRestoreError, SearchState};
 use crate::selection::{Choice, ContextSelector, SelectorCreateError, SelectorRestoreError, SelectorState};
+use crate::{Interrupted, SelectorConfig};
 use acps_shared::{
     EnvironmentMatchError, EnvironmentSpec, Outcome, Problem, Stream, Task, TaskKind, derive_seed, nearest,
 };
@@ -161,9 +161,20 @@ pub enum LearnerCreateError {
     Selector(#[from] SelectorCreateError),
 }
 
-/// Why [`Learner::tell`] refuses an outcome. The learner is left unchanged.
+/// Why [`Learner::tell`] refuses an outcome. The learner is left unchanged, but for
+/// [`Interrupted`](Self::Interrupted).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum LearnerTellError {
+    /// [`Learner::tell_until`]'s `stop` stopped the policy update that consuming task
+    /// `task_id`'s outcome started. That outcome is dropped and the task handed out again
+    /// (first), as if it had never come back; what was consumed before it stays.
+    #[error(
+        "the policy update that the outcome of task {task_id} started was interrupted; the task is handed out again"
+    )]
+    Interrupted {
+        /// The task whose outcome started the update.
+        task_id: u64,
+    },
     /// No task with this id is waiting for its outcome (never issued, or already consumed).
     #[error("outcome for task {task_id}, which is not waiting for an outcome")]
     UnknownTask {
@@ -723,6 +734,15 @@ impl Learner {
     /// Report the outcome of a task. Outcomes may arrive in any order; they are consumed in task
     /// order, and consuming them may create new tasks.
     pub fn tell(&mut self, outcome: Outcome) -> Result<(), LearnerTellError> {
+        self.tell_until(outcome, &|| false)
+    }
+
+    /// [`tell`](Self::tell), asking `stop` between the steps of a policy update that consuming
+    /// outcomes starts, so that Ctrl-C ends even the largest C-REPS update (seconds) within a
+    /// fraction of a second. A stopped update leaves the learner as if the outcome of the task
+    /// that started it had not come back ([`LearnerTellError::Interrupted`]): a snapshot then
+    /// continues the run bit for bit.
+    pub fn tell_until(&mut self, outcome: Outcome, stop: &dyn Fn() -> bool) -> Result<(), LearnerTellError> {
         let task_id = outcome.task_id;
         let run = &mut self.run;
         let Some(pending) = run.pending_mut(task_id) else {
@@ -750,10 +770,44 @@ impl Learner {
         while self.run.pending.front().is_some_and(|p| p.arrived.is_some()) {
             let mut pending = self.run.pending.pop_front().expect("a front task");
             let outcome = pending.arrived.take().expect("its outcome arrived");
+            // The update first: the one step that can be stopped, so a stop leaves no trace.
+            let report = match self.record(&pending, &outcome, stop) {
+                Ok(report) => report,
+                Err(Interrupted) => {
+                    let task_id = pending.task.id;
+                    pending.queued = true;
+                    self.run.pending.push_front(pending);
+                    self.run.outbox.push_front(task_id);
+                    return Err(LearnerTellError::Interrupted { task_id });
+                }
+            };
             self.run.next_to_consume += 1;
-            self.consume(pending, outcome);
+            self.consume(pending, outcome, report);
         }
         Ok(())
+    }
+
+    /// Hand a successful training outcome to the policy search; the report of the update it
+    /// started, if any.
+    fn record(
+        &mut self,
+        pending: &Pending,
+        outcome: &Outcome,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Option<SearchReport>, Interrupted> {
+        let (Role::Train { bucket, .. }, Some(policy), true) = (&pending.role, self.policy.as_mut(), outcome.is_ok())
+        else {
+            return Ok(None);
+        };
+        let task = &pending.task;
+        policy.record(
+            *bucket,
+            &task.context,
+            &task.theta,
+            outcome.reward,
+            self.selector.paced(),
+            stop,
+        )
     }
 
     /// Whether [`tell`](Self::tell) takes an outcome of `task_id` now: the task exists and no
@@ -1015,7 +1069,7 @@ impl Learner {
         }
     }
 
-    fn consume(&mut self, pending: Pending, outcome: Outcome) {
+    fn consume(&mut self, pending: Pending, outcome: Outcome, report: Option<SearchReport>) {
         match pending.role {
             Role::Baseline { arm } => {
                 if outcome.is_ok() {
@@ -1044,11 +1098,12 @@ impl Learner {
                     }
                 }
             }
-            Role::Train { choice, bucket } => self.consume_training(pending.task, choice, bucket, &outcome),
+            Role::Train { choice, .. } => self.consume_training(choice, &outcome, report),
         }
     }
 
-    fn consume_training(&mut self, task: Task, choice: Choice, bucket: usize, outcome: &Outcome) {
+    /// A training outcome, whose update (`report`) [`record`](Self::record) has run.
+    fn consume_training(&mut self, choice: Choice, outcome: &Outcome, report: Option<SearchReport>) {
         self.run.train_consumed += 1;
         let reward = if outcome.is_ok() {
             self.run.lowest_reward = Some(
@@ -1056,15 +1111,6 @@ impl Learner {
                     .lowest_reward
                     .map_or(outcome.reward, |low| low.min(outcome.reward)),
             );
-            let report = self.policy.as_mut().and_then(|p| {
-                p.record(
-                    bucket,
-                    &task.context,
-                    &task.theta,
-                    outcome.reward,
-                    self.selector.paced(),
-                )
-            });
             if let Some(report) = report {
                 match report.rejected() {
                     None => self.run.stats.updates += 1,

@@ -30,6 +30,7 @@ pub mod learner;
 pub mod method;
 pub mod search;
 pub mod selection;
+mod stop;
 
 pub use learner::{
     Episode, Evaluation, Learner, LearnerConfig, LearnerCreateError, LearnerRestoreError, LearnerSnapshot,
@@ -37,3 +38,4 @@ pub use learner::{
 };
 pub use method::{BanditConfig, Baseline, Method, MethodParseError, SelectorConfig};
 pub use search::{Search, SearchConfig, SearchReport, SearchState};
+pub use stop::Interrupted;

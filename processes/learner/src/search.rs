@@ -5,6 +5,7 @@
 use rand::RngCore;
 use serde::{Deserialize, Serialize};
 
+use crate::Interrupted;
 use crate::ccmaes::{CCmaes, CCmaesConfig, CCmaesCreateError, CCmaesReport, CCmaesRestoreError, CCmaesState};
 use crate::creps::{
     CReps, CRepsConfig, CRepsCreateError, CRepsRestoreError, CRepsState, LinearGaussianPolicy, PacedContexts,
@@ -191,7 +192,10 @@ impl Search {
 
     /// Records a rollout of training context `task` and returns the report of the update it
     /// triggers. `paced` moves with a C-REPS update; a C-CMA-ES learner is never built with a
-    /// paced selector.
+    /// paced selector. A C-REPS update asks `stop` between its steps and, stopped, leaves
+    /// everything as it was before this rollout ([`CReps::record_until`]); a C-CMA-ES
+    /// generation's update is not stopped (it weighs one generation, at most 100,000 rollouts,
+    /// where C-REPS weighs up to 100,000 remembered ones and solves a dual first).
     pub fn record(
         &mut self,
         task: usize,
@@ -199,10 +203,11 @@ impl Search {
         theta: &[f64],
         reward: f64,
         paced: Option<&mut dyn PacedContexts>,
-    ) -> Option<SearchReport> {
-        match self {
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Option<SearchReport>, Interrupted> {
+        Ok(match self {
             Search::CReps(s) => s
-                .record_paced(task, context, theta, reward, paced)
+                .record_until(task, context, theta, reward, paced, stop)?
                 .map(SearchReport::CReps),
             Search::CCmaes(s) => {
                 debug_assert!(
@@ -211,7 +216,7 @@ impl Search {
                 );
                 s.record(context, theta, reward).map(SearchReport::CCmaes)
             }
-        }
+        })
     }
 
     /// The current policy.

@@ -5,8 +5,8 @@
 use crate::net::{self, Admission, BUILD, Down, Hello, NET_PROTOCOL, NetError, NetOptions, NetOutcome, Up, Welcome};
 use crate::pump::{Bell, Pump, PumpStartError};
 use acps_fleet::{
-    Fleet, FleetError, FleetProgress, ForwardError, ForwardingSource, LearningProgress, ObserveError, Observer,
-    TaskSource,
+    Fleet, FleetError, FleetProgress, ForwardError, ForwardingSource, Interrupted, LearningProgress, ObserveError,
+    Observer, TaskSource,
 };
 use acps_shared::{EnvironmentSpec, Outcome, Serves, Task};
 use acps_wire::ipc::RunName;
@@ -585,6 +585,28 @@ impl Drop for RelaySource {
     }
 }
 
+impl RelaySource {
+    /// [`TaskSource::tell`]: an outcome of a task this relay holds, sent on to the learner.
+    fn forward(&mut self, job: usize, outcome: Outcome) -> bool {
+        let key = (job as u32, outcome.task_id);
+        if self.held.remove(&key).is_none() {
+            // Re-issued here after its worker was given up on, and not handed out again yet.
+            let Some(queue) = self.queues.get_mut(job) else {
+                return false;
+            };
+            let Some(at) = queue.iter().position(|task| task.id == outcome.task_id) else {
+                return false;
+            };
+            queue.remove(at);
+            self.queued -= 1;
+        }
+        self.outgoing_since.get_or_insert_with(Instant::now);
+        self.outgoing.push(NetOutcome::new(key.0, &outcome));
+        self.forwarded += 1;
+        true
+    }
+}
+
 impl TaskSource for RelaySource {
     fn jobs(&self) -> usize {
         self.environments.len()
@@ -610,23 +632,9 @@ impl TaskSource for RelaySource {
         Some(task)
     }
 
-    fn tell(&mut self, job: usize, outcome: Outcome) -> bool {
-        let key = (job as u32, outcome.task_id);
-        if self.held.remove(&key).is_none() {
-            // Re-issued here after its worker was given up on, and not handed out again yet.
-            let Some(queue) = self.queues.get_mut(job) else {
-                return false;
-            };
-            let Some(at) = queue.iter().position(|task| task.id == outcome.task_id) else {
-                return false;
-            };
-            queue.remove(at);
-            self.queued -= 1;
-        }
-        self.outgoing_since.get_or_insert_with(Instant::now);
-        self.outgoing.push(NetOutcome::new(key.0, &outcome));
-        self.forwarded += 1;
-        true
+    /// Outcomes go to the learner, whose updates a relay's Ctrl-C does not stop.
+    fn tell(&mut self, job: usize, outcome: Outcome, _: &dyn Fn() -> bool) -> Result<bool, Interrupted> {
+        Ok(self.forward(job, outcome))
     }
 
     fn reissue(&mut self, job: usize, task_id: u64) -> bool {

@@ -12,7 +12,8 @@ use acps_fleet::{
 };
 use acps_learner::checkpoint::Stamp;
 use acps_learner::{
-    Episode, Learner, LearnerConfig, LearnerCreateError, LearningProgress, Records, SelectorConfig, run_in_process,
+    Episode, Interrupted, Learner, LearnerConfig, LearnerCreateError, LearnerTellError, LearningProgress, Records,
+    SelectorConfig, run_in_process,
 };
 use acps_shared::{Environment, EnvironmentMatchError, Outcome, Problem, Task};
 use rayon::prelude::*;
@@ -228,6 +229,18 @@ fn mismatched(tasks: &[(usize, Task)], outcomes: &[Outcome]) -> Option<String> {
         })
 }
 
+/// Tell `learner` the outcome of a task it just handed out, its update stopped once `stop` is
+/// set: `Err` then, with the learner as if the outcome had not come back.
+fn told(learner: &mut Learner, outcome: Outcome, stop: &AtomicBool) -> Result<(), Interrupted> {
+    match learner.tell_until(outcome, &|| stop.load(Ordering::Relaxed)) {
+        Err(LearnerTellError::Interrupted { .. }) => Err(Interrupted),
+        told => {
+            told.expect("the outcome answers a task just handed out");
+            Ok(())
+        }
+    }
+}
+
 impl Experiment {
     /// Training episodes over all its (method, run) jobs.
     pub fn total_episodes(&self) -> u64 {
@@ -374,9 +387,11 @@ impl Experiment {
             }
             for ((index, _), outcome) in tasks.iter().zip(outcomes) {
                 let (job, writer) = &mut jobs[*index];
-                job.learner
-                    .tell(outcome)
-                    .expect("the outcome answers a task just handed out");
+                if told(&mut job.learner, outcome, stop).is_err() {
+                    // Stopped half-way through an update: the loop's next pass writes the
+                    // checkpoints, and the tasks whose outcomes are left are asked again.
+                    break;
+                }
                 if let Some(writer) = writer {
                     writer.after_tell(&mut job.learner, job.environment.as_deref())?;
                 }
@@ -427,9 +442,11 @@ impl Experiment {
                     }
                     let Some(task) = job.learner.ask() else { break };
                     let outcome = environment.rollout(&task);
-                    job.learner
-                        .tell(outcome)
-                        .expect("the outcome answers a task just handed out");
+                    if told(&mut job.learner, outcome, stop).is_err() {
+                        // Stopped half-way through an update: the check above writes the
+                        // checkpoint.
+                        continue;
+                    }
                     if let Some(writer) = writer {
                         writer.after_tell(&mut job.learner, Some(environment.as_ref()))?;
                     }

@@ -45,6 +45,8 @@
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn, SVD};
 use serde::{Deserialize, Serialize};
 
+use crate::stop::{Never, Stop};
+
 use super::error::{
     DualEvaluateError, DualSolveError, InvalidValue, check_at_least_one, check_finite, check_len, check_positive,
     check_range,
@@ -170,25 +172,30 @@ pub fn solve_dual(
     if returns.is_empty() {
         return Err(DualSolveError::NoSamples);
     }
-    Ok(solve_valid(phi, returns, epsilon, eta_min, options)?)
+    let Ok(solution) = solve_valid(phi, returns, epsilon, eta_min, options, Never);
+    Ok(solution?)
 }
 
 /// [`solve_dual`] on data known to be consistent and finite (a [`Batch`](super::Batch)'s).
-pub(crate) fn solve_valid(
+pub(crate) fn solve_valid<S: Stop>(
     phi: &DMatrix<f64>,
     returns: &[f64],
     epsilon: f64,
     eta_min: f64,
     options: &DualOptions,
-) -> Result<DualSolution, InvalidValue> {
-    check_positive("epsilon", epsilon)?;
-    check_eta_min(eta_min)?;
-    check_options(options)?;
+    stop: S,
+) -> Result<Result<DualSolution, InvalidValue>, S::Halt> {
+    let checked = check_positive("epsilon", epsilon)
+        .and_then(|()| check_eta_min(eta_min))
+        .and_then(|()| check_options(options));
+    if let Err(invalid) = checked {
+        return Ok(Err(invalid));
+    }
     let n = returns.len();
     let Some(problem) = Standardised::new(phi, returns, epsilon) else {
         // Equal returns: any eta gives uniform weights with v = 0, and g = m + eta eps is least
         // at eta = 0.
-        return Ok(DualSolution {
+        return Ok(Ok(DualSolution {
             eta: 0.0,
             eta_at_bound: true,
             v: DVector::zeros(phi.ncols()),
@@ -198,11 +205,11 @@ pub(crate) fn solve_valid(
             optimality: 0.0,
             iterations: 0,
             converged: true,
-        });
+        }));
     };
-    let newton = problem.minimise(eta_min, options);
+    let newton = problem.minimise(eta_min, options, stop)?;
     let weights = newton.weights;
-    Ok(DualSolution {
+    Ok(Ok(DualSolution {
         eta: problem.scale * newton.eta,
         eta_at_bound: newton.eta <= eta_min,
         v: &problem.to_v * &newton.u * problem.scale,
@@ -212,7 +219,7 @@ pub(crate) fn solve_valid(
         optimality: newton.optimality,
         iterations: newton.iterations,
         converged: newton.optimality <= attainable(options.tolerance, newton.eta),
-    })
+    }))
 }
 
 /// The dual `g(eta, v)` and its gradient at one point, in the returns' units (computed with a
@@ -388,7 +395,7 @@ impl Standardised {
     }
 
     /// Path following on eta with Newton steps (see the module documentation).
-    fn minimise(&self, eta_min: f64, options: &DualOptions) -> Newton {
+    fn minimise<S: Stop>(&self, eta_min: f64, options: &DualOptions, stop: S) -> Result<Newton, S::Halt> {
         let mut scratch = Scratch::new(self.returns.len(), self.rank());
         let mut steps = 0;
         let (eta, u) = self.start(eta_min);
@@ -398,6 +405,7 @@ impl Standardised {
             if optimality <= attainable(options.tolerance, current.eta) || steps >= options.max_iterations {
                 break optimality;
             }
+            stop.check()?;
             steps += 1;
             // The scratch holds the evaluation of `current`: the start, or the step accepted last.
             let hessian = scratch.hessian(&self.basis, current.eta);
@@ -421,14 +429,14 @@ impl Standardised {
                 }
             }
         };
-        Newton {
+        Ok(Newton {
             weights: scratch.softmax.p.clone(),
             eta: current.eta,
             u: current.u,
             value: current.value,
             optimality,
             iterations: steps,
-        }
+        })
     }
 
     /// A backtracking line search along `step` from `point`: the first of the step (shortened

@@ -52,6 +52,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::stop::{Never, Stop};
+
 use super::dual::{
     CENTRING, DualOptions, DualValue, ETA_STEP_FACTOR, MAX_LOG_WEIGHT_CHANGE, ROUNDING, Scratch, Softmax, Standardised,
     backtrack, check_data, check_eta_min, check_options, factor_regularised, kl_to_uniform, standardise,
@@ -147,30 +149,35 @@ pub fn solve_joint_dual(
     if returns.is_empty() {
         return Err(DualSolveError::NoSamples);
     }
-    Ok(solve_joint_valid(phi, returns, context, epsilon, eta_min, options)?)
+    let Ok(solution) = solve_joint_valid(phi, returns, context, epsilon, eta_min, options, Never);
+    Ok(solution?)
 }
 
 /// [`solve_joint_dual`] on data known to be consistent and finite (a memory's); the context
 /// term and the settings are checked.
-pub(crate) fn solve_joint_valid(
+pub(crate) fn solve_joint_valid<S: Stop>(
     phi: &DMatrix<f64>,
     returns: &[f64],
     context: &ContextTerm,
     epsilon: f64,
     eta_min: f64,
     options: &DualOptions,
-) -> Result<JointDualSolution, InvalidValue> {
-    check_positive("epsilon", epsilon)?;
-    check_context(context, returns.len())?;
-    check_eta_min(eta_min)?;
-    check_options(options)?;
+    stop: S,
+) -> Result<Result<JointDualSolution, InvalidValue>, S::Halt> {
+    let checked = check_positive("epsilon", epsilon)
+        .and_then(|()| check_context(context, returns.len()))
+        .and_then(|()| check_eta_min(eta_min))
+        .and_then(|()| check_options(options));
+    if let Err(invalid) = checked {
+        return Ok(Err(invalid));
+    }
     let (n, original) = (returns.len(), returns);
     // Returns equal to rounding at their own magnitude carry no preference, as in `solve_dual`.
     let (returns, midrange) = recentre(returns);
     let Some(policy) = standardise(original).and_then(|_| Standardised::new(phi, &returns, epsilon)) else {
         // Equal returns: A = 0, and v = 0 with both temperatures at 0 gives the least value, m.
         let uniform = DVector::from_element(n, 1.0 / n as f64);
-        return Ok(JointDualSolution {
+        return Ok(Ok(JointDualSolution {
             eta: 0.0,
             eta_at_bound: true,
             eta_context: 0.0,
@@ -184,12 +191,12 @@ pub(crate) fn solve_joint_valid(
             optimality: 0.0,
             iterations: 0,
             converged: true,
-        });
+        }));
     };
     let problem = Joint::new(policy, context);
-    let newton = problem.minimise(eta_min, options);
+    let newton = problem.minimise(eta_min, options, stop)?;
     let scale = problem.policy.scale;
-    Ok(JointDualSolution {
+    Ok(Ok(JointDualSolution {
         eta: scale * newton.point.temperatures[0],
         eta_at_bound: newton.point.temperatures[0] <= eta_min,
         eta_context: scale * newton.point.temperatures[1],
@@ -203,7 +210,7 @@ pub(crate) fn solve_joint_valid(
         converged: newton.optimality <= problem.attainable(options.tolerance, &newton.point),
         optimality: newton.optimality,
         iterations: newton.iterations,
-    })
+    }))
 }
 
 /// The joint dual `g(eta, eta_c, v)` and its gradient `(dg/deta, dg/deta_c, dg/dv_0, ...,
@@ -341,7 +348,7 @@ impl Joint {
     }
 
     /// Projected Newton (see the module documentation).
-    fn minimise(&self, eta_min: f64, options: &DualOptions) -> JointNewton {
+    fn minimise<S: Stop>(&self, eta_min: f64, options: &DualOptions, stop: S) -> Result<JointNewton, S::Halt> {
         let n = self.log_ratio.len();
         let k = self.policy.rank();
         let mut scratch = (Scratch::new(n, k), Scratch::new(n, k));
@@ -353,6 +360,7 @@ impl Joint {
             if optimality <= self.attainable(options.tolerance, &current) || steps >= options.max_iterations {
                 break optimality;
             }
+            stop.check()?;
             steps += 1;
             // The scratch holds the evaluation of `current`: the start, or the step accepted last.
             let hessian = self.hessian(&current, &mut scratch);
@@ -374,13 +382,13 @@ impl Joint {
                 }
             }
         };
-        JointNewton {
+        Ok(JointNewton {
             weights: scratch.0.softmax.p.clone(),
             context_weights: scratch.1.softmax.p.clone(),
             point: current,
             optimality,
             iterations: steps,
-        }
+        })
     }
 
     /// The policy dual's start (the least-squares baseline and its eta), and the eta_c at which

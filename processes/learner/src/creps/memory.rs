@@ -50,6 +50,13 @@ pub(crate) struct Sample {
     pub reward: f64,
 }
 
+/// What one [`Memory::push`] changed: where the sample went (`None`: it was not kept) and the
+/// sample it pushed out (the window's oldest, or the bucket's worst).
+pub(crate) struct Pushed {
+    position: Option<usize>,
+    evicted: Option<Sample>,
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) enum Memory {
     Window {
@@ -77,20 +84,59 @@ impl Memory {
         }
     }
 
-    /// Stores `sample` for `task` (which must be < n_tasks).
-    pub fn push(&mut self, task: usize, sample: Sample) {
+    /// Stores `sample` for `task` (which must be < n_tasks); returns what [`undo`](Self::undo)
+    /// needs to take it back.
+    pub fn push(&mut self, task: usize, sample: Sample) -> Pushed {
         match self {
             Memory::Window { capacity, samples } => {
-                if samples.len() == *capacity {
-                    samples.pop_front();
-                }
+                let evicted = if samples.len() == *capacity {
+                    samples.pop_front()
+                } else {
+                    None
+                };
                 samples.push_back(sample);
+                Pushed {
+                    position: Some(samples.len() - 1),
+                    evicted,
+                }
             }
             Memory::PerTask { per_task, buckets } => {
                 let bucket = &mut buckets[task];
                 let position = bucket.partition_point(|kept| kept.reward >= sample.reward);
+                if position == *per_task {
+                    // Worse than every kept one of a full bucket: nothing changes.
+                    return Pushed {
+                        position: None,
+                        evicted: None,
+                    };
+                }
                 bucket.insert(position, sample);
-                bucket.truncate(*per_task);
+                let evicted = if bucket.len() > *per_task { bucket.pop() } else { None };
+                Pushed {
+                    position: Some(position),
+                    evicted,
+                }
+            }
+        }
+    }
+
+    /// Take back the last [`push`](Self::push) for `task`, which returned `pushed`.
+    pub fn undo(&mut self, task: usize, pushed: Pushed) {
+        match self {
+            Memory::Window { samples, .. } => {
+                if pushed.position.is_some() {
+                    samples.pop_back();
+                }
+                if let Some(evicted) = pushed.evicted {
+                    samples.push_front(evicted);
+                }
+            }
+            Memory::PerTask { buckets, .. } => {
+                let bucket = &mut buckets[task];
+                if let Some(position) = pushed.position {
+                    bucket.remove(position);
+                }
+                bucket.extend(pushed.evicted);
             }
         }
     }
@@ -268,6 +314,27 @@ mod tests {
         assert_eq!(ids(&memory), [1.0, 4.0, 2.0]);
         memory.push(0, sample(7.0, 6.0));
         assert_eq!(ids(&memory), [7.0, 1.0, 2.0]);
+    }
+
+    #[test]
+    fn an_undone_push_leaves_the_memory_as_it_was() {
+        let configs = [
+            MemoryConfig::SlidingWindow { capacity: 3 },
+            MemoryConfig::BestPerTask { per_task: 2 },
+        ];
+        for config in configs {
+            let mut memory = Memory::new(&config, 2);
+            // Each push undone on every state from empty to full: new best, worst and ties.
+            for (id, reward) in [(0.0, 1.0), (1.0, 5.0), (2.0, 3.0), (3.0, 5.0), (4.0, 0.0), (5.0, 9.0)] {
+                for (task, trial) in [(0, 4.0), (0, 5.0), (0, -1.0), (1, 2.0), (0, 10.0)] {
+                    let before = memory.clone();
+                    let pushed = memory.push(task, sample(99.0, trial));
+                    memory.undo(task, pushed);
+                    assert_eq!(memory, before, "{config:?}: reward {trial} for task {task}");
+                }
+                memory.push(0, sample(id, reward));
+            }
+        }
     }
 
     #[test]

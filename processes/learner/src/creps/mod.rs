@@ -87,6 +87,10 @@ use serde::{Deserialize, Serialize};
 
 pub(crate) use error::{check_at_least_one, check_finite, check_non_negative, check_positive, check_range};
 use memory::{Memory, Sample};
+use update::{update_paced_stopping, update_stopping};
+
+use crate::Interrupted;
+use crate::stop::{Never, Stop};
 
 /// C-REPS settings. [`Default`] is BOLeRo's `CREPSOptimizer`; the paper's three settings are
 /// [`paper_function`](Self::paper_function), [`paper_dims`](Self::paper_dims) and
@@ -234,13 +238,16 @@ impl CRepsState {
 pub trait PacedContexts {
     /// The context side of the update on the rollouts in memory, whose contexts are
     /// `contexts` (in memory order): `alpha`, relative to the returns' standard deviation, and
-    /// `ln mu(c_i) - ln q(c_i)` per context, finite. Called once per update, in update order.
-    fn terms(&mut self, contexts: &[&[f64]]) -> PacedTerms;
+    /// `ln mu(c_i) - ln q(c_i)` per context, finite. Called once per update, in update order;
+    /// changes nothing, since an update may be stopped half-way
+    /// ([`Learner::tell_until`](crate::Learner::tell_until)).
+    fn terms(&self, contexts: &[&[f64]]) -> PacedTerms;
 
-    /// Refit the distribution to `contexts` weighted by `weights` (which sum to 1), moving it by
-    /// at most `epsilon` (the update's KL bound) from where it is. Called after every update that
-    /// was not rejected.
-    fn refit(&mut self, contexts: &[&[f64]], weights: &[f64], epsilon: f64);
+    /// Called after every update that ran to its end: refit the distribution to `contexts`
+    /// weighted by `weights` (which sum to 1), moving it by at most `epsilon` (the update's KL
+    /// bound) from where it is; `weights` is `None` when the update was rejected, and the
+    /// distribution stays.
+    fn refit(&mut self, contexts: &[&[f64]], weights: Option<&[f64]>, epsilon: f64);
 }
 
 /// What [`PacedContexts::terms`] returns.
@@ -336,7 +343,8 @@ impl CReps {
     /// # Panics
     /// If `task >= n_tasks`, `context.len() != context_dim` or `theta.len() != n_theta`.
     pub fn record(&mut self, task: usize, context: &[f64], theta: &[f64], reward: f64) -> Option<UpdateReport> {
-        self.record_paced(task, context, theta, reward, None)
+        let Ok(report) = self.record_stopping(task, context, theta, reward, None, Never);
+        report
     }
 
     /// [`record`](CReps::record), with the updates it triggers moving `paced` together with the
@@ -353,6 +361,37 @@ impl CReps {
         reward: f64,
         paced: Option<&mut dyn PacedContexts>,
     ) -> Option<UpdateReport> {
+        let Ok(report) = self.record_stopping(task, context, theta, reward, paced, Never);
+        report
+    }
+
+    /// [`record_paced`](CReps::record_paced), asking `stop` between the steps of the update
+    /// it triggers (Ctrl-C): a stopped update leaves the learner (and `paced`) as it was
+    /// before this rollout, which is not stored.
+    ///
+    /// # Panics
+    /// As [`record_paced`](CReps::record_paced).
+    pub fn record_until(
+        &mut self,
+        task: usize,
+        context: &[f64],
+        theta: &[f64],
+        reward: f64,
+        paced: Option<&mut dyn PacedContexts>,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Option<UpdateReport>, Interrupted> {
+        self.record_stopping(task, context, theta, reward, paced, stop)
+    }
+
+    fn record_stopping<S: Stop>(
+        &mut self,
+        task: usize,
+        context: &[f64],
+        theta: &[f64],
+        reward: f64,
+        paced: Option<&mut dyn PacedContexts>,
+        stop: S,
+    ) -> Result<Option<UpdateReport>, S::Halt> {
         assert!(
             task < self.n_tasks,
             "task {task} out of range, n_tasks is {}",
@@ -366,7 +405,7 @@ impl CReps {
             && features.iter().all(|f| f.is_finite());
         if !finite {
             self.dropped += 1;
-            return None;
+            return Ok(None);
         }
         let sample = Sample {
             context: context.to_vec(),
@@ -374,13 +413,21 @@ impl CReps {
             theta: DVector::from_column_slice(theta),
             reward,
         };
-        self.memory.push(task, sample);
-        self.since_update += 1;
-        if self.since_update < self.config.update_every {
-            return None;
+        let pushed = self.memory.push(task, sample);
+        if self.since_update + 1 < self.config.update_every {
+            self.since_update += 1;
+            return Ok(None);
         }
-        self.since_update = 0;
-        Some(self.update(paced))
+        match self.update(paced, stop) {
+            Ok(report) => {
+                self.since_update = 0;
+                Ok(Some(report))
+            }
+            Err(halt) => {
+                self.memory.undo(task, pushed);
+                Err(halt)
+            }
+        }
     }
 
     /// The current policy.
@@ -482,8 +529,9 @@ impl CReps {
         }
     }
 
-    /// One C-REPS update on everything in memory, moving `paced` with the policy when given.
-    fn update(&mut self, paced: Option<&mut dyn PacedContexts>) -> UpdateReport {
+    /// One C-REPS update on everything in memory, moving `paced` with the policy when given;
+    /// a stopped one changes nothing.
+    fn update<S: Stop>(&mut self, paced: Option<&mut dyn PacedContexts>, stop: S) -> Result<UpdateReport, S::Halt> {
         let samples: Vec<&Sample> = self.memory.samples().collect();
         let features = stack_rows(samples.iter().map(|s| &s.features), self.policy.n_features());
         let thetas = stack_rows(samples.iter().map(|s| &s.theta), self.policy.n_params());
@@ -493,7 +541,7 @@ impl CReps {
         let batch = Batch::of_valid(features, thetas, returns);
         let settings = self.update_settings();
         let (policy, report) = match paced {
-            None => update(&self.policy, &batch, &settings)
+            None => update_stopping(&self.policy, &batch, &settings, stop)?
                 .expect("the memory fits the policy and the settings were checked"),
             Some(paced) => {
                 let contexts: Vec<&[f64]> = samples.iter().map(|s| s.context.as_slice()).collect();
@@ -503,16 +551,15 @@ impl CReps {
                     alpha: terms.alpha,
                     epsilon: settings.epsilon,
                 };
-                let (policy, report, weights) = update_paced(&self.policy, &batch, &term, &settings)
+                let (policy, report, weights) = update_paced_stopping(&self.policy, &batch, &term, &settings, stop)?
                     .unwrap_or_else(|e| panic!("a paced distribution's terms are out of range: {e}"));
-                if report.rejected.is_none() {
-                    paced.refit(&contexts, &weights, settings.epsilon);
-                }
+                let refit = report.rejected.is_none().then_some(weights.as_slice());
+                paced.refit(&contexts, refit, settings.epsilon);
                 (policy, report)
             }
         };
         self.policy = policy;
-        report
+        Ok(report)
     }
 }
 

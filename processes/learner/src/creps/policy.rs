@@ -5,6 +5,8 @@ use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
 use rand::RngCore;
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::stop::{Never, Stop};
+
 use super::error::{
     InvalidValue, PolicyCreateError, PolicyFitError, Rejection, check_finite, check_len, check_non_negative,
 };
@@ -209,17 +211,21 @@ impl LinearGaussianPolicy {
         }
         check_finite("features", features.as_slice())?;
         check_finite("thetas", thetas.as_slice())?;
-        Ok(self.fit_weighted(features, thetas, weights, ridge)?)
+        let Ok(fitted) = self.fit_weighted(features, thetas, weights, ridge, Never);
+        Ok(fitted?)
     }
 
     /// [`fit`](Self::fit) on inputs already checked.
-    pub(crate) fn fit_weighted(
+    /// Asks `stop` between its steps, the longest of which (the covariance's sum over the
+    /// rollouts) it takes a few columns at a time.
+    pub(crate) fn fit_weighted<S: Stop>(
         &self,
         features: &DMatrix<f64>,
         thetas: &DMatrix<f64>,
         weights: &[f64],
         ridge: f64,
-    ) -> Result<Self, Rejection> {
+        stop: S,
+    ) -> Result<Result<Self, Rejection>, S::Halt> {
         let d = DVector::from_iterator(
             weights.len(),
             weights.iter().map(|&w| if w == 0.0 { f64::EPSILON } else { w }),
@@ -228,16 +234,29 @@ impl LinearGaussianPolicy {
         let scale = sum / (sum * sum - d.norm_squared());
         let residuals = thetas - features * &self.weights;
         let weighted_residuals = scale_rows(&residuals, &d);
-        let covariance = residuals.tr_mul(&weighted_residuals) * scale;
+        let covariance = tr_mul_stopping(&residuals, &weighted_residuals, stop)? * scale;
+        stop.check()?;
+        Ok(Self::fit_mean(features, thetas, &d, ridge, covariance))
+    }
+
+    /// The rest of [`fit_weighted`](Self::fit_weighted) once it has the covariance: the mean's
+    /// regression, whose sums over the rollouts are n_phi wide.
+    fn fit_mean(
+        features: &DMatrix<f64>,
+        thetas: &DMatrix<f64>,
+        d: &DVector<f64>,
+        ridge: f64,
+        covariance: DMatrix<f64>,
+    ) -> Result<Self, Rejection> {
         if !covariance.iter().all(|c| c.is_finite()) {
             return Err(Rejection::CovarianceNotFinite);
         }
 
-        let mut normal_matrix = features.tr_mul(&scale_rows(features, &d));
+        let mut normal_matrix = features.tr_mul(&scale_rows(features, d));
         for i in 0..normal_matrix.nrows() {
             normal_matrix[(i, i)] += ridge;
         }
-        let right_hand_side = features.tr_mul(&scale_rows(thetas, &d));
+        let right_hand_side = features.tr_mul(&scale_rows(thetas, d));
         let weights = Cholesky::new(normal_matrix)
             .ok_or(Rejection::SingularRegression)?
             .solve(&right_hand_side);
@@ -361,21 +380,26 @@ impl LinearGaussianPolicy {
     /// The search for nu works on second moments of the rollouts (n_phi and n_theta wide, not N
     /// long), so each trial costs a few small factorisations; the covariance of the fit is then
     /// made from the rollouts' residuals.
-    pub(crate) fn fit_bounded(
+    ///
+    /// Asks `stop` between its steps, the longest of which (the sums of n_theta x n_theta
+    /// terms over the rollouts) it takes a few columns at a time.
+    pub(crate) fn fit_bounded<S: Stop>(
         &self,
         features: &DMatrix<f64>,
         thetas: &DMatrix<f64>,
         weights: &[f64],
         ridge: f64,
         epsilon: f64,
-    ) -> Result<(Self, f64), Rejection> {
+        stop: S,
+    ) -> Result<Result<(Self, f64), Rejection>, S::Halt> {
         let d = DVector::from_column_slice(weights);
         let n = weights.len() as f64;
         let weighted_features = scale_rows(features, &d);
         let weighted_gram = features.tr_mul(&weighted_features);
         let gram = features.tr_mul(features) / n;
         let cross = weighted_features.tr_mul(thetas);
-        let second = thetas.tr_mul(&scale_rows(thetas, &d));
+        let second = tr_mul_stopping(thetas, &scale_rows(thetas, &d), stop)?;
+        stop.check()?;
         let old_cross = &gram * &self.weights;
         // The ridge regression on the rollouts (weights d_i) and on this policy's means at their
         // contexts (weights nu / N), from the second moments: one small solve per trial.
@@ -402,22 +426,40 @@ impl LinearGaussianPolicy {
         let nu = bound_by_kl(kl, epsilon);
         // The covariance from the rollouts' residuals themselves: the moments' difference of
         // large terms would round away a small spread.
-        let weights = mean_at(nu).ok_or(Rejection::SingularRegression)?;
+        let Some(weights) = mean_at(nu) else {
+            return Ok(Err(Rejection::SingularRegression));
+        };
         if !weights.iter().all(|w| w.is_finite()) {
-            return Err(Rejection::MeanNotFinite);
+            return Ok(Err(Rejection::MeanNotFinite));
         }
         let old_means = features * &self.weights;
         let new_means = features * &weights;
         let residuals = thetas - &new_means;
         let shifts = new_means - old_means;
-        let spread = residuals.tr_mul(&scale_rows(&residuals, &d));
-        let covariance = (spread + (&self.covariance + shifts.tr_mul(&shifts) / n) * nu) / (d.sum() + nu);
+        let spread = tr_mul_stopping(&residuals, &scale_rows(&residuals, &d), stop)?;
+        let shifted = tr_mul_stopping(&shifts, &shifts, stop)?;
+        stop.check()?;
+        let covariance = (spread + (&self.covariance + shifted / n) * nu) / (d.sum() + nu);
         if !covariance.iter().all(|c| c.is_finite()) {
-            return Err(Rejection::CovarianceNotFinite);
+            return Ok(Err(Rejection::CovarianceNotFinite));
         }
-        let policy = Self::new(weights, covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)?;
-        Ok((policy, nu))
+        let policy = Self::new(weights, covariance).map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite);
+        Ok(policy.map(|policy| (policy, nu)))
     }
+}
+
+/// `a^T b`, a few columns of `b` at a time with `stop` asked in between: nalgebra's `tr_mul`
+/// makes each entry one `dot` of two columns, so the blocks give the same bits as one call.
+fn tr_mul_stopping<S: Stop>(a: &DMatrix<f64>, b: &DMatrix<f64>, stop: S) -> Result<DMatrix<f64>, S::Halt> {
+    // 8 columns of 100,000 rollouts against 64 take about 50 ms.
+    const COLUMNS: usize = 8;
+    let mut product = DMatrix::zeros(a.ncols(), b.ncols());
+    for start in (0..b.ncols()).step_by(COLUMNS) {
+        stop.check()?;
+        let width = COLUMNS.min(b.ncols() - start);
+        a.tr_mul_to(&b.columns(start, width), &mut product.columns_mut(start, width));
+    }
+    Ok(product)
 }
 
 /// `diag(d) m`.
@@ -432,6 +474,7 @@ pub(crate) fn scale_rows(m: &DMatrix<f64>, d: &DVector<f64>) -> DMatrix<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Interrupted;
     use crate::creps::FeatureMap;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -579,6 +622,26 @@ mod tests {
     }
 
     #[test]
+    fn products_taken_a_few_columns_at_a_time_are_nalgebras_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        for (rows, left, right) in [(1000, 64, 64), (37, 6, 21), (5, 3, 8), (9, 2, 1)] {
+            let a = DMatrix::from_fn(rows, left, |_, _| rng.random::<f64>() - 0.3);
+            let b = DMatrix::from_fn(rows, right, |_, _| rng.random::<f64>() * 1e3);
+            let Ok(product) = tr_mul_stopping(&a, &b, Never);
+            assert_eq!(product, a.tr_mul(&b), "{rows} x {left} by {right}");
+            // Asked before every block of 8 columns; stopped at the last question.
+            let asked = std::cell::Cell::new(0);
+            let blocks = right.div_ceil(8);
+            let stop = || {
+                asked.set(asked.get() + 1);
+                asked.get() == blocks
+            };
+            assert_eq!(tr_mul_stopping(&a, &b, &stop as &dyn Fn() -> bool), Err(Interrupted));
+            assert_eq!(asked.get(), blocks);
+        }
+    }
+
+    #[test]
     fn bound_by_kl_finds_the_smallest_pull_within_the_bound() {
         // KL(nu) = 4 / (1 + nu)^2 is 1 at nu = 1.
         let nu = bound_by_kl(|nu| 4.0 / (1.0 + nu).powi(2), 1.0);
@@ -619,7 +682,8 @@ mod tests {
         let total: f64 = weights.iter().sum();
         weights.iter_mut().for_each(|w| *w /= total);
         for epsilon in [0.05, 0.5, 2.0] {
-            let (new, nu) = old.fit_bounded(&features, &thetas, &weights, 1e-6, epsilon).unwrap();
+            let Ok(fitted) = old.fit_bounded(&features, &thetas, &weights, 1e-6, epsilon, Never);
+            let (new, nu) = fitted.unwrap();
             let kl = mean_kl(&old, &new, &features);
             assert!(
                 nu > 0.0 && kl <= epsilon * (1.0 + 1e-9) && kl > 0.99 * epsilon,
@@ -627,8 +691,9 @@ mod tests {
             );
         }
         // A bound that does not bind leaves the weighted maximum-likelihood mean.
-        let (free, nu) = old.fit_bounded(&features, &thetas, &weights, 1e-6, 1e6).unwrap();
-        let unbounded = old.fit_weighted(&features, &thetas, &weights, 1e-6).unwrap();
+        let Ok(free) = old.fit_bounded(&features, &thetas, &weights, 1e-6, 1e6, Never);
+        let (free, nu) = free.unwrap();
+        let unbounded = old.fit(&features, &thetas, &weights, 1e-6).unwrap();
         assert_eq!(nu, 0.0);
         assert!((free.weights() - unbounded.weights()).amax() < 1e-9);
     }

@@ -9,6 +9,7 @@ use super::error::{
 };
 use super::joint::{ContextTerm, solve_joint_valid};
 use super::{FeatureMap, LinearGaussianPolicy};
+use crate::stop::{Never, Stop};
 
 /// The settings of one update.
 #[derive(Clone, Debug, PartialEq)]
@@ -201,14 +202,31 @@ pub fn update(
     batch: &Batch,
     settings: &UpdateSettings,
 ) -> Result<(LinearGaussianPolicy, UpdateReport), CRepsUpdateError> {
-    check_update(policy, batch, settings)?;
-    let dual = solve_valid(
+    let Ok(updated) = update_stopping(policy, batch, settings, Never);
+    updated
+}
+
+/// [`update`], asking `stop` between its steps.
+pub(crate) fn update_stopping<S: Stop>(
+    policy: &LinearGaussianPolicy,
+    batch: &Batch,
+    settings: &UpdateSettings,
+    stop: S,
+) -> Result<Result<(LinearGaussianPolicy, UpdateReport), CRepsUpdateError>, S::Halt> {
+    if let Err(error) = check_update(policy, batch, settings) {
+        return Ok(Err(error));
+    }
+    let dual = match solve_valid(
         &batch.features,
         &batch.returns,
         settings.epsilon,
         settings.eta_min,
         &settings.dual,
-    )?;
+        stop,
+    )? {
+        Ok(dual) => dual,
+        Err(invalid) => return Ok(Err(invalid.into())),
+    };
     let solved = Solved {
         eta: dual.eta,
         eta_at_bound: dual.eta_at_bound,
@@ -219,8 +237,8 @@ pub fn update(
         iterations: dual.iterations,
         converged: dual.converged,
     };
-    let fitter = |weights: &[f64]| policy.fit_weighted(&batch.features, &batch.thetas, weights, settings.ridge);
-    Ok(fit(policy, batch, settings, &solved, fitter))
+    let fitter = |weights: &[f64]| policy.fit_weighted(&batch.features, &batch.thetas, weights, settings.ridge, stop);
+    Ok(Ok(fit(policy, batch, settings, &solved, fitter)?))
 }
 
 /// One update of `policy` together with a context distribution (SPRL, Klink et al. 2019): the
@@ -238,15 +256,36 @@ pub fn update_paced(
     context: &ContextTerm,
     settings: &UpdateSettings,
 ) -> Result<(LinearGaussianPolicy, UpdateReport, Vec<f64>), CRepsUpdateError> {
-    check_update(policy, batch, settings)?;
-    let joint = solve_joint_valid(
+    let Ok(updated) = update_paced_stopping(policy, batch, context, settings, Never);
+    updated
+}
+
+/// What [`update_paced`] returns.
+type Paced = (LinearGaussianPolicy, UpdateReport, Vec<f64>);
+
+/// [`update_paced`], asking `stop` between its steps.
+pub(crate) fn update_paced_stopping<S: Stop>(
+    policy: &LinearGaussianPolicy,
+    batch: &Batch,
+    context: &ContextTerm,
+    settings: &UpdateSettings,
+    stop: S,
+) -> Result<Result<Paced, CRepsUpdateError>, S::Halt> {
+    if let Err(error) = check_update(policy, batch, settings) {
+        return Ok(Err(error));
+    }
+    let joint = match solve_joint_valid(
         &batch.features,
         &batch.returns,
         context,
         settings.epsilon,
         settings.eta_min,
         &settings.dual,
-    )?;
+        stop,
+    )? {
+        Ok(joint) => joint,
+        Err(invalid) => return Ok(Err(invalid.into())),
+    };
     let solved = Solved {
         eta: joint.eta,
         eta_at_bound: joint.eta_at_bound,
@@ -259,17 +298,20 @@ pub fn update_paced(
     };
     let mut nu = None;
     let fitter = |weights: &[f64]| {
-        let (next, pull) = policy.fit_bounded(
+        let fitted = policy.fit_bounded(
             &batch.features,
             &batch.thetas,
             weights,
             settings.ridge,
             settings.epsilon,
+            stop,
         )?;
-        nu = Some(pull);
-        Ok(next)
+        Ok(fitted.map(|(next, pull)| {
+            nu = Some(pull);
+            next
+        }))
     };
-    let (next, mut report) = fit(policy, batch, settings, &solved, fitter);
+    let (next, mut report) = fit(policy, batch, settings, &solved, fitter)?;
     report.context = Some(ContextReport {
         alpha: context.alpha,
         eta: joint.eta_context,
@@ -278,7 +320,7 @@ pub fn update_paced(
         ess: effective_sample_size(joint.context_weights.as_slice()),
         nu,
     });
-    Ok((next, report, joint.context_weights.as_slice().to_vec()))
+    Ok(Ok((next, report, joint.context_weights.as_slice().to_vec())))
 }
 
 /// The settings in range and a batch of the policy's widths.
@@ -318,19 +360,19 @@ struct Solved<'a> {
 
 /// Fit the policy to the weighted rollouts with `fitter` (or reject the update) and report; a
 /// paced update adds its context report once its fit has told it nu.
-fn fit(
+fn fit<H>(
     policy: &LinearGaussianPolicy,
     batch: &Batch,
     settings: &UpdateSettings,
     dual: &Solved,
-    fitter: impl FnOnce(&[f64]) -> Result<LinearGaussianPolicy, Rejection>,
-) -> (LinearGaussianPolicy, UpdateReport) {
+    fitter: impl FnOnce(&[f64]) -> Result<Result<LinearGaussianPolicy, Rejection>, H>,
+) -> Result<(LinearGaussianPolicy, UpdateReport), H> {
     let fitted = if batch.len() < 2 {
         Err(Rejection::TooFewSamples)
     } else if !dual.converged {
         Err(Rejection::DualNotSolved)
     } else {
-        fitter(dual.weights)
+        fitter(dual.weights)?
     };
     let (next, rejected) = match fitted {
         Ok(next) => (next, None),
@@ -351,5 +393,5 @@ fn fit(
         rejected,
         context: None,
     };
-    (next, report)
+    Ok((next, report))
 }

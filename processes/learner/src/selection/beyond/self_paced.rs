@@ -317,7 +317,7 @@ impl ContextSelector for SelfPaced {
 }
 
 impl PacedContexts for SelfPaced {
-    fn terms(&mut self, contexts: &[&[f64]]) -> PacedTerms {
+    fn terms(&self, contexts: &[&[f64]]) -> PacedTerms {
         let log_ratio: Vec<f64> = self.log_densities(contexts).map(|q| self.log_target - q).collect();
         let alpha = if self.updates < self.config.offset {
             0.0
@@ -329,7 +329,6 @@ impl PacedContexts for SelfPaced {
                 self.config.max_alpha
             }
         };
-        self.updates += 1;
         PacedTerms { alpha, log_ratio }
     }
 
@@ -337,8 +336,9 @@ impl PacedContexts for SelfPaced {
     /// [`update_paced`](crate::creps::update_paced)) until `KL(q || q')` is at most `epsilon`,
     /// with the variance floor applied: `m' = (sum w c + nu m) / (1 + nu)`,
     /// `Sigma' = (sum w (c - m')(c - m')^T + nu (Sigma + (m - m')(m - m')^T)) / (1 + nu)`.
-    fn refit(&mut self, contexts: &[&[f64]], weights: &[f64], epsilon: f64) {
-        let Some(fit) = WeightedMoments::new(contexts, weights) else {
+    fn refit(&mut self, contexts: &[&[f64]], weights: Option<&[f64]>, epsilon: f64) {
+        self.updates += 1;
+        let Some(fit) = weights.and_then(|weights| WeightedMoments::new(contexts, weights)) else {
             return;
         };
         let kl_from = GaussianKl::new(&self.covariance).expect("q's covariance has a factor");
@@ -443,7 +443,7 @@ mod tests {
         let mut selector = unit_square();
         selector.refit(
             &[&[0.2, 0.3], &[0.4, 0.1], &[0.3, -0.5]],
-            &[0.5, 0.3, 0.2],
+            Some(&[0.5, 0.3, 0.2]),
             f64::INFINITY,
         );
         let (m, s) = (selector.mean.clone(), selector.covariance.clone());
@@ -467,9 +467,10 @@ mod tests {
         let contexts: Vec<&[f64]> = vec![&[0.95], &[1.0], &[1.1]];
         for _ in 0..2 {
             assert_eq!(selector.terms(&contexts).alpha, 0.0);
+            selector.refit(&contexts, None, f64::INFINITY);
         }
         // Narrow q around 1: KL(q || U[0, 2]) is positive.
-        selector.refit(&[&[0.9], &[1.1]], &[0.5, 0.5], f64::INFINITY);
+        selector.refit(&[&[0.9], &[1.1]], Some(&[0.5, 0.5]), f64::INFINITY);
         let terms = selector.terms(&contexts);
         let variance = selector.covariance()[(0, 0)];
         let log_q = |x: f64| -0.5 * ((2.0 * std::f64::consts::PI * variance).ln() + (x - 1.0).powi(2) / variance);
@@ -490,7 +491,7 @@ mod tests {
             offset: 0,
             ..SelfPacedConfig::default()
         };
-        let mut selector = SelfPaced::new(space, config).unwrap();
+        let selector = SelfPaced::new(space, config).unwrap();
         // q = N(0.5, 1/12) against U[0, 1] = mu: ln q < ln mu = 0 near the edges, so contexts
         // there give a negative KL estimate; at the centre a positive one.
         assert_eq!(selector.terms(&[&[0.05], &[0.95]]).alpha, 1e3);
@@ -502,12 +503,12 @@ mod tests {
     fn refit_is_weighted_maximum_likelihood_with_the_floor() {
         let mut selector = unit_square();
         let contexts: Vec<&[f64]> = vec![&[0.1, 0.5], &[0.3, 0.5], &[0.2, 0.9]];
-        selector.refit(&contexts, &[0.25, 0.25, 0.5], f64::INFINITY);
+        selector.refit(&contexts, Some(&[0.25, 0.25, 0.5]), f64::INFINITY);
         assert!((selector.mean()[0] - 0.2).abs() < 1e-15 && (selector.mean()[1] - 0.7).abs() < 1e-15);
         assert!((selector.covariance()[(0, 0)] - 0.005).abs() < 1e-15);
         assert!((selector.covariance()[(1, 1)] - 0.04).abs() < 1e-15);
         // All the weight on contexts with one y: its variance is raised to (0.02 x 2)^2.
-        selector.refit(&[&[0.1, 0.5], &[0.3, 0.5]], &[0.5, 0.5], f64::INFINITY);
+        selector.refit(&[&[0.1, 0.5], &[0.3, 0.5]], Some(&[0.5, 0.5]), f64::INFINITY);
         assert_eq!(selector.covariance()[(1, 1)], 0.04f64.powi(2));
     }
 
@@ -515,11 +516,11 @@ mod tests {
     fn refit_moves_q_by_at_most_epsilon() {
         let far: Vec<&[f64]> = vec![&[0.95, 0.9], &[0.9, 0.95]];
         let mut free = unit_square();
-        free.refit(&far, &[0.5, 0.5], f64::INFINITY);
+        free.refit(&far, Some(&[0.5, 0.5]), f64::INFINITY);
         for epsilon in [0.05, 0.5, 2.0] {
             let mut bounded = unit_square();
             let start = unit_square();
-            bounded.refit(&far, &[0.5, 0.5], epsilon);
+            bounded.refit(&far, Some(&[0.5, 0.5]), epsilon);
             let shift = &bounded.mean - &start.mean;
             let kl = GaussianKl::new(&start.covariance)
                 .unwrap()
@@ -535,7 +536,7 @@ mod tests {
         let mut selector = unit_square();
         selector.refit(
             &[&[0.0, -1.0], &[0.5, 0.0], &[1.0, 1.0]],
-            &[0.3, 0.4, 0.3],
+            Some(&[0.3, 0.4, 0.3]),
             f64::INFINITY,
         );
         let covariance = selector.covariance();
@@ -575,10 +576,9 @@ mod tests {
         let mut selector = unit_square();
         selector.refit(
             &[&[0.2, 0.3], &[0.4, 0.1], &[0.3, -0.5]],
-            &[0.5, 0.3, 0.2],
+            Some(&[0.5, 0.3, 0.2]),
             f64::INFINITY,
         );
-        selector.terms(&[&[0.2, 0.3]]);
         let mut restored = unit_square();
         restored.restore_state(selector.save_state()).unwrap();
         assert_eq!(restored.updates(), 1);
