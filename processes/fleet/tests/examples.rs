@@ -27,10 +27,10 @@ fn run(name: &str) -> String {
     stdout
 }
 
-/// Files of runs named `prefix`... in /dev/shm and /tmp/iceoryx2.
+/// Files of runs named `prefix`... in /dev/shm and this user's iceoryx2 directory.
 fn leftovers(prefix: &str) -> Vec<PathBuf> {
     let mut found = Vec::new();
-    let mut stack = vec![PathBuf::from("/dev/shm"), PathBuf::from("/tmp/iceoryx2")];
+    let mut stack = vec![PathBuf::from("/dev/shm"), acps_wire::ipc::iceoryx2_root()];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
             if entry

@@ -68,22 +68,30 @@ pub enum IpcError {
         /// The system's reason.
         reason: String,
     },
-    /// The run's shared memory, or iceoryx2's directory, belongs to another user, who alone may
-    /// write there.
+    /// The run's shared memory belongs to another user, who alone may write there.
     #[error(
-        "creating node '{node}' of run '{run}': {what} belongs to user {owner}, who alone may use it; run this process as that user (this one runs as user {user})"
+        "creating node '{node}' of run '{run}': the run's shared memory belongs to user {owner}, who alone may use it; run this process as that user (this one runs as user {user})"
     )]
     OtherUser {
         /// The node's name.
         node: String,
         /// The run.
         run: RunName,
-        /// What belongs to the other user: the run's shared memory, or iceoryx2's directory.
-        what: String,
         /// The user who owns the run's files.
         owner: u32,
         /// This process's user.
         user: u32,
+    },
+    /// This user's directory of iceoryx2's files ([`iceoryx2_root`]) cannot be made, or is not
+    /// a directory of this user's alone.
+    #[error("iceoryx2's directory {} for run '{run}': {reason}", path.display())]
+    Root {
+        /// The directory.
+        path: std::path::PathBuf,
+        /// The run.
+        run: RunName,
+        /// Why it cannot be used.
+        reason: String,
     },
     /// iceoryx2 could not create the process's node of the run (permissions, resources).
     #[error("creating node '{node}' of run '{run}'")]
@@ -303,7 +311,7 @@ impl RunName {
         }
     }
 
-    /// The run a file of `/dev/shm` or `/tmp/iceoryx2` belongs to, if it is an acps run's.
+    /// The run a file of `/dev/shm` or [`iceoryx2_root`] belongs to, if it is an acps run's.
     fn of_file(file: &str) -> Option<Self> {
         let rest = file.strip_prefix(PREFIX)?;
         let (name, _) = rest.split_once('_')?;
@@ -321,16 +329,21 @@ impl RunName {
         &self.0
     }
 
-    /// The iceoryx2 file prefix of the run's resources in /dev/shm and /tmp/iceoryx2.
+    /// The iceoryx2 file prefix of the run's resources in /dev/shm and [`iceoryx2_root`].
     pub fn prefix(&self) -> String {
         format!("{PREFIX}{}_", self.0)
     }
 
-    /// The iceoryx2 configuration of the run.
+    /// The iceoryx2 configuration of the run: its prefix, in this user's [`iceoryx2_root`].
     pub fn config(&self) -> Config {
         let mut config = Config::default();
         config.global.prefix =
             FileName::new(self.prefix().as_bytes()).expect("a run name's prefix is a short file name of [A-Za-z0-9_-]");
+        let root = iceoryx2_root();
+        config.global.set_root_path(
+            &iceoryx2::prelude::Path::new(root.as_os_str().as_encoded_bytes())
+                .expect("/tmp/acps-iceoryx2-<uid>/ is a short absolute path"),
+        );
         config.global.creation_timeout = LIMITS.creation_timeout;
         config
     }
@@ -382,6 +395,46 @@ pub fn quiet_iceoryx2_log() {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
 }
 
+/// This user's directory of iceoryx2's node and service files, `/tmp/acps-iceoryx2-<uid>/`.
+/// iceoryx2's default, `/tmp/iceoryx2`, is one directory for every user, which only the user
+/// who made it first may write in: no other user could run acps on the machine. The Python
+/// worker (`acps_worker/_ipc.py`) names the same.
+pub fn iceoryx2_root() -> std::path::PathBuf {
+    format!("/tmp/acps-iceoryx2-{}/", crate::secret::current_user()).into()
+}
+
+/// Make this user's [`iceoryx2_root`] if it is missing, accessible to its owner only, or
+/// refuse one that is not a directory of this user's (another user could read or fill it).
+fn own_root(run: &RunName) -> Result<(), IpcError> {
+    use std::os::unix::fs::{DirBuilderExt as _, MetadataExt as _, PermissionsExt as _};
+    let root = iceoryx2_root();
+    let refused = |reason: String| IpcError::Root {
+        path: root.clone(),
+        run: run.clone(),
+        reason,
+    };
+    match std::fs::DirBuilder::new().mode(0o700).create(&root) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(refused(e.to_string())),
+    }
+    let metadata = std::fs::symlink_metadata(&root).map_err(|e| refused(e.to_string()))?;
+    let user = crate::secret::current_user();
+    if !metadata.is_dir() {
+        return Err(refused("it is not a directory; remove it".into()));
+    }
+    if metadata.uid() != user {
+        return Err(refused(format!(
+            "it belongs to user {}, not to this process's user {user}; remove it",
+            metadata.uid()
+        )));
+    }
+    if metadata.mode() & 0o077 != 0 {
+        std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o700)).map_err(|e| refused(e.to_string()))?;
+    }
+    Ok(())
+}
+
 /// A node of `run` named `name`. Signal handling stays with the host program (library code must
 /// not swallow SIGINT/SIGTERM).
 pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
@@ -396,14 +449,7 @@ pub fn node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcError> {
 /// fail. A file of the run that this user cannot restrict (another user made it) is an error.
 fn owner_only(run: &RunName) -> Result<(), IpcError> {
     use std::os::unix::fs::PermissionsExt;
-    let prefix = run.prefix();
-    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
-        return Ok(());
-    };
-    for entry in entries.flatten() {
-        if !entry.file_name().to_string_lossy().starts_with(&prefix) {
-            continue;
-        }
+    for entry in shm_entries(run) {
         let path = entry.path();
         let restrict = |path: &std::path::Path| -> std::io::Result<()> {
             let mode = std::fs::metadata(path)?.permissions().mode();
@@ -443,47 +489,49 @@ pub fn worker_node(run: &RunName, name: &str) -> Result<Node<ipc::Service>, IpcE
 
 fn node_with(run: &RunName, name: &str, config: &Config) -> Result<Node<ipc::Service>, IpcError> {
     let node_name = NodeName::new(name).map_err(|_| IpcError::NodeNameInvalid { got: shown(name) })?;
+    // /dev/shm is every user's: a run of this name there may be another user's, whose nodes
+    // are in that user's iceoryx2 directory, where this process would never find them.
+    let user = crate::secret::current_user();
+    if let Some(owner) = shm_owners(run).into_iter().find(|&owner| owner != user) {
+        return Err(IpcError::OtherUser {
+            node: name.to_string(),
+            run: run.clone(),
+            owner,
+            user,
+        });
+    }
+    own_root(run)?;
     NodeBuilder::new()
         .name(&node_name)
         .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|source| {
-            // iceoryx2 says only that it could not make a node id: name the owner instead.
-            use std::os::unix::fs::MetadataExt as _;
-            let user = crate::secret::current_user();
-            let foreign = |path: &Path| std::fs::metadata(path).ok().map(|m| m.uid()).filter(|&uid| uid != user);
-            // iceoryx2 keeps every user's nodes in one directory, whose maker alone may write in it.
-            let root = Path::new(NODES_DIR).parent().unwrap_or(Path::new(NODES_DIR));
-            let owner = leftover_files(run)
-                .iter()
-                .find_map(|path| foreign(path))
-                .map(|owner| (owner, "the run's shared memory".to_string()))
-                .or_else(|| foreign(root).map(|owner| (owner, format!("iceoryx2's directory {}", root.display()))));
-            match owner {
-                Some((owner, what)) => {
-                    // What this process made of a run that is not its user's (iceoryx2's
-                    // node counter, as it tried): nobody else would remove it.
-                    for path in leftover_files(run) {
-                        if std::fs::metadata(&path).is_ok_and(|m| m.uid() == user) {
-                            let _ = std::fs::remove_file(&path);
-                        }
-                    }
-                    IpcError::OtherUser {
-                        node: name.to_string(),
-                        run: run.clone(),
-                        what,
-                        owner,
-                        user,
-                    }
-                }
-                None => IpcError::NodeCreate {
-                    node: name.to_string(),
-                    run: run.clone(),
-                    source,
-                },
-            }
+        .map_err(|source| IpcError::NodeCreate {
+            node: name.to_string(),
+            run: run.clone(),
+            source,
         })
+}
+
+/// The owners of `run`'s files in /dev/shm.
+fn shm_owners(run: &RunName) -> Vec<u32> {
+    use std::os::unix::fs::MetadataExt as _;
+    shm_entries(run)
+        .iter()
+        .filter_map(|entry| entry.metadata().ok().map(|m| m.uid()))
+        .collect()
+}
+
+/// `run`'s files in /dev/shm (none when it cannot be read).
+fn shm_entries(run: &RunName) -> Vec<std::fs::DirEntry> {
+    let prefix = run.prefix();
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .filter(|entry| entry.file_name().to_string_lossy().starts_with(&prefix))
+        .collect()
 }
 
 /// Why a process could not open a service of its run, in words: iceoryx2's reasons name its
@@ -700,7 +748,7 @@ pub fn clean_stale(run: &RunName) -> Result<usize, IpcError> {
             *cleaned += 1;
         }
     })?;
-    remove_orphaned_node_dirs(Path::new(NODES_DIR), ORPHAN_AGE);
+    remove_orphaned_node_dirs(&nodes_dir(), ORPHAN_AGE);
     Ok(cleaned)
 }
 
@@ -738,7 +786,9 @@ fn list_nodes<T: Clone>(
 }
 
 /// Where iceoryx2 keeps a directory per node, `<id>/`, holding files named by the run's prefix.
-const NODES_DIR: &str = "/tmp/iceoryx2/nodes";
+fn nodes_dir() -> std::path::PathBuf {
+    iceoryx2_root().join("nodes")
+}
 
 /// An empty node directory older than this is an orphan: iceoryx2 fills a node's directory as
 /// it creates the node, within microseconds.
@@ -783,7 +833,7 @@ pub fn live_nodes(run: &RunName) -> Result<usize, IpcError> {
     })
 }
 
-/// Files of `run` in /dev/shm and /tmp/iceoryx2 (recursively).
+/// Files of `run` in /dev/shm and this user's [`iceoryx2_root`] (recursively).
 pub fn leftover_files(run: &RunName) -> Vec<std::path::PathBuf> {
     let prefix = run.prefix();
     acps_files()
@@ -793,13 +843,11 @@ pub fn leftover_files(run: &RunName) -> Vec<std::path::PathBuf> {
         .collect()
 }
 
-/// Every file of any acps run in /dev/shm and /tmp/iceoryx2 (recursively), with its name.
+/// Every file of any acps run in /dev/shm and this user's [`iceoryx2_root`] (recursively), with
+/// its name.
 fn acps_files() -> Vec<(String, std::path::PathBuf)> {
     let mut found = Vec::new();
-    let mut stack = vec![
-        std::path::PathBuf::from("/dev/shm"),
-        std::path::PathBuf::from("/tmp/iceoryx2"),
-    ];
+    let mut stack = vec![std::path::PathBuf::from("/dev/shm"), iceoryx2_root()];
     while let Some(dir) = stack.pop() {
         let Ok(entries) = std::fs::read_dir(&dir) else { continue };
         for entry in entries.flatten() {
@@ -819,9 +867,9 @@ fn acps_files() -> Vec<(String, std::path::PathBuf)> {
 /// creates a run's first files and its first node within milliseconds.
 const STARTING_AGE: Duration = Duration::from_secs(2);
 
-/// Remove everything that runs whose every node is dead left in /dev/shm and /tmp/iceoryx2,
-/// whatever their names: after a `kill -9` of a learner and its workers nothing else would
-/// ever remove it. A run with a live node, a node in creation, or no node and files younger than
+/// Remove everything that runs whose every node is dead left in /dev/shm and this user's
+/// [`iceoryx2_root`], whatever their names: after a `kill -9` of a learner and its workers
+/// nothing else would ever remove it. A run with a live node, a node in creation, or no node and files younger than
 /// a few seconds (a run that is starting) is left alone. Returns the runs cleaned.
 pub fn clean_dead_runs() -> Vec<RunName> {
     let mut runs: std::collections::BTreeMap<String, (RunName, bool)> = std::collections::BTreeMap::new();
@@ -907,7 +955,7 @@ pub fn remove_run_files(run: &RunName) -> Result<usize, IpcError> {
         // A node's directory holds only its run's files; the emptied one goes too.
         if let Some(parent) = path
             .parent()
-            .filter(|parent| parent.parent() == Some(Path::new(NODES_DIR)))
+            .filter(|parent| parent.parent() == Some(nodes_dir().as_path()))
         {
             let _ = std::fs::remove_dir(parent);
         }

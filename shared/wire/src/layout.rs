@@ -177,6 +177,7 @@ pub fn describe() -> Value {
             "secret_env": SECRET_ENV,
             "secret_file": "/dev/shm/acps_{run}_secret",
             "prefix": "acps_{run}_",
+            "root": "/tmp/acps-iceoryx2-{uid}/",
             "creation_timeout_ms": limits.creation_timeout.as_millis() as u64,
             "tasks": {
                 "pattern": "request-response",
@@ -225,6 +226,15 @@ mod tests {
             .unwrap()
             .replace("{run}", "x");
         assert_eq!(crate::secret::RunSecret::path(&run).to_str(), Some(pattern.as_str()));
+    }
+
+    #[test]
+    fn the_root_pattern_is_where_the_nodes_are() {
+        let pattern = describe()["services"]["root"]
+            .as_str()
+            .unwrap()
+            .replace("{uid}", &crate::secret::current_user().to_string());
+        assert_eq!(crate::ipc::iceoryx2_root().to_str(), Some(pattern.as_str()));
     }
 
     #[test]

@@ -1288,6 +1288,10 @@ fn a_hand_started_worker_keeps_a_run_going_after_the_started_ones_exit() {
     assert_clean(&run);
 }
 
+/// Held by the tests that run acps as user nobody: one of them replaces that user's iceoryx2
+/// directory.
+static NOBODY: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn a_worker_of_another_user_is_told_whose_run_it_is() {
     // Needs root to become another user; elsewhere, and where that user cannot run this build
@@ -1310,6 +1314,7 @@ fn a_worker_of_another_user_is_told_whose_run_it_is() {
         eprintln!("skipped: this test runs acps as user nobody, which needs root and a build others may run");
         return;
     }
+    let _nobody = NOBODY.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let SlowRun {
         dir: _dir, run, out, ..
     } = slow_run("other-user");
@@ -1331,6 +1336,68 @@ fn a_worker_of_another_user_is_told_whose_run_it_is() {
     );
     let output = learner.wait_with_output().unwrap();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_clean(&run);
+}
+
+#[test]
+fn two_users_run_fleets_on_one_machine() {
+    // iceoryx2's own directory, /tmp/iceoryx2, is writable by its first user alone: a second
+    // user's run failed there. Needs root to become user nobody, as the test above.
+    let as_nobody = |args: &[&str]| {
+        Command::new("runuser")
+            .args([
+                "-u",
+                "nobody",
+                "--",
+                "timeout",
+                "--signal=KILL",
+                "180",
+                env!("CARGO_BIN_EXE_acps"),
+            ])
+            .args(args)
+            .output()
+    };
+    if !as_nobody(&["--version"]).is_ok_and(|output| output.status.success()) {
+        eprintln!("skipped: this test runs acps as user nobody, which needs root and a build others may run");
+        return;
+    }
+    let _nobody = NOBODY.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let short = ["function", "--runs", "1", "--episodes", "100", "--workers", "1", "-q"];
+    let (mine, theirs) = (temp_dir("user-mine"), temp_dir("user-theirs"));
+    let run = run_name("user-mine");
+    succeeded(
+        &watched()
+            .arg("run")
+            .args(short)
+            .args(["--run", run.as_str(), "--out"])
+            .arg(&*mine)
+            .output()
+            .unwrap(),
+    );
+    std::fs::create_dir(&*theirs).unwrap();
+    std::os::unix::fs::chown(&*theirs, Some(65534), Some(65534)).unwrap();
+    let output = as_nobody(&[&["run"], &short[..], &["--out", theirs.to_str().unwrap()]].concat()).unwrap();
+    succeeded(&output);
+    assert_eq!(
+        std::fs::read(theirs.join("summary.json")).unwrap(),
+        std::fs::read(mine.join("summary.json")).unwrap()
+    );
+    // Each user's iceoryx2 directory is theirs alone; one another user made is refused.
+    use std::os::unix::fs::MetadataExt as _;
+    let root = Path::new("/tmp/acps-iceoryx2-65534");
+    let made = std::fs::metadata(root).unwrap();
+    assert_eq!((made.uid(), made.mode() & 0o777), (65534, 0o700));
+    std::fs::remove_dir_all(root).unwrap();
+    std::fs::create_dir(root).unwrap();
+    let output = as_nobody(&[&["run"], &short[..], &["--out", theirs.join("again").to_str().unwrap()]].concat());
+    std::fs::remove_dir_all(root).unwrap();
+    let said = String::from_utf8_lossy(&output.as_ref().unwrap().stderr).into_owned();
+    assert_eq!(output.unwrap().status.code(), Some(2), "{said}");
+    assert!(
+        said.contains("iceoryx2's directory /tmp/acps-iceoryx2-65534/ for run '")
+            && said.contains("it belongs to user 0, not to this process's user 65534; remove it"),
+        "{said}"
+    );
     assert_clean(&run);
 }
 

@@ -48,10 +48,6 @@ _OPEN_FAILURES = (
         "a process of another acps build created it with other types or settings",
     ),
 )
-#: Where iceoryx2 keeps a directory per node.
-NODES_DIR = Path("/tmp/iceoryx2/nodes")
-#: The directories iceoryx2 keeps a run's files in.
-ROOTS = (Path("/dev/shm"), Path("/tmp/iceoryx2"))
 #: Attempts at listing a run's nodes (a listing fails while any node is created or removed).
 LIST_ATTEMPTS = 50
 
@@ -135,11 +131,70 @@ def prefix(run: str) -> str:
     return _wire.PREFIX_FORMAT.format(run=run)
 
 
+def iceoryx2_root() -> Path:
+    """This user's directory of iceoryx2's node and service files (``ipc::iceoryx2_root``):
+    iceoryx2's default, /tmp/iceoryx2, only its first user may write in."""
+    return Path(_wire.ROOT_FORMAT.format(uid=os.geteuid()))
+
+
+class RootError(AcpsWorkerError):
+    """This user's directory of iceoryx2's files cannot be made, or is not theirs alone; or the
+    run is another user's."""
+
+
+def own_root(run: str) -> None:
+    """Make :func:`iceoryx2_root` if it is missing, accessible to its owner only, or refuse
+    one that is not a directory of this user's (``ipc::own_root``)."""
+    root = iceoryx2_root()
+
+    def refuse(reason: str) -> RootError:
+        return RootError(f"iceoryx2's directory {root} for run '{run}': {reason}")
+
+    try:
+        root.mkdir(mode=0o700)
+    except FileExistsError:
+        pass
+    except OSError as error:
+        raise refuse(str(error)) from error
+    try:
+        status = root.lstat()
+        if not stat.S_ISDIR(status.st_mode):
+            raise refuse("it is not a directory; remove it")
+        if status.st_uid != os.geteuid():
+            raise refuse(
+                f"it belongs to user {status.st_uid}, not to this process's user "
+                f"{os.geteuid()}; remove it"
+            )
+        if status.st_mode & 0o077:
+            root.chmod(0o700)
+    except OSError as error:
+        raise refuse(str(error)) from error
+
+
+def check_owner(run: str, node: str) -> None:
+    """Refuse ``run`` when its files in /dev/shm are another user's (``ipc::node_with``): that
+    user's learner keeps its nodes where this process would never find them."""
+    start, user = prefix(run), os.geteuid()
+    for path in Path("/dev/shm").glob(start + "*"):
+        try:
+            owner = path.lstat().st_uid
+        except OSError:
+            continue
+        if owner != user:
+            raise RootError(
+                f"creating node '{node}' of run '{run}': the run's shared memory belongs to "
+                f"user {owner}, who alone may use it; run this process as that user (this one "
+                f"runs as user {user})"
+            )
+
+
 def run_config(run: str, worker: bool = True) -> Any:
-    """The iceoryx2 config of ``run``; a worker's leaves cleaning up dead nodes to the learner
-    (``ipc::worker_node``: each look reads every node's files of the run)."""
+    """The iceoryx2 config of ``run``, in this user's :func:`iceoryx2_root`; a worker's leaves
+    cleaning up dead nodes to the learner (``ipc::worker_node``: each look reads every node's
+    files of the run)."""
     config = iox2.config.default()
     config.global_cfg.prefix = iox2.FileName.new(prefix(run))
+    config.global_cfg.root_path = iox2.Path.new(str(iceoryx2_root()) + "/")
     config.global_cfg.creation_timeout = iox2.Duration.from_millis(_wire.CREATION_TIMEOUT_MS)
     if worker:
         config.global_cfg.node.cleanup_dead_nodes_on_creation = False
@@ -204,10 +259,10 @@ def alive_learner_pid(config: Any) -> int | None:
 
 
 def run_files(run: str) -> list[Path]:
-    """Files of ``run`` in /dev/shm and /tmp/iceoryx2 (recursively)."""
+    """Files of ``run`` in /dev/shm and this user's :func:`iceoryx2_root` (recursively)."""
     start = prefix(run)
     found: list[Path] = []
-    stack = list(ROOTS)
+    stack = [Path("/dev/shm"), iceoryx2_root()]
     while stack:
         directory = stack.pop()
         try:
@@ -255,7 +310,7 @@ def remove_run_files_if_last(run: str) -> int:
         except OSError:
             continue
         parent = path.parent
-        if parent.parent == NODES_DIR:
+        if parent.parent == iceoryx2_root() / "nodes":
             try:
                 parent.rmdir()
             except OSError:

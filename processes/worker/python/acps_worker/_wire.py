@@ -57,6 +57,8 @@ SECRET_ENV = "ACPS_RUN_SECRET"
 SECRET_FILE = "/dev/shm/acps_{run}_secret"
 #: What the iceoryx2 prefix of a run's files is made from.
 PREFIX_FORMAT = "acps_{run}_"
+#: Each user's directory of iceoryx2's node and service files.
+ROOT_FORMAT = "/tmp/acps-iceoryx2-{uid}/"
 #: How long a process waits for another to finish creating a service of the run.
 CREATION_TIMEOUT_MS = 10_000
 #: Most nodes of every service of a run.

@@ -482,6 +482,8 @@ class _Session:
     def open(self) -> None:
         """The node and the run's services, opened with the limits every side agrees on."""
         ports = self.ports
+        _ipc.check_owner(self.run, self.name)
+        _ipc.own_root(self.run)
         try:
             ports.node = (
                 iox2.NodeBuilder.new()

@@ -145,5 +145,5 @@ class Serving:
 
 
 def leftovers(run: str) -> list[Path]:
-    """Files of ``run`` left in /dev/shm and /tmp/iceoryx2."""
+    """Files of ``run`` left in /dev/shm and this user's iceoryx2 directory."""
     return _ipc.run_files(run)

@@ -105,6 +105,7 @@ class LayoutTest(unittest.TestCase):
         self.assertEqual(services["secret_env"], _wire.SECRET_ENV)
         self.assertEqual(services["secret_file"], _wire.SECRET_FILE)
         self.assertEqual(services["prefix"], _wire.PREFIX_FORMAT)
+        self.assertEqual(services["root"], _wire.ROOT_FORMAT)
         self.assertEqual(services["creation_timeout_ms"], _wire.CREATION_TIMEOUT_MS)
         tasks = dict(services["tasks"])
         self.assertEqual(

@@ -45,7 +45,7 @@ class ServeTest(unittest.TestCase):
         cls.environment = environment
 
     def assert_clean(self, run: str) -> None:
-        """Nothing of ``run`` is left in /dev/shm or /tmp/iceoryx2."""
+        """Nothing of ``run`` is left in /dev/shm or this user's iceoryx2 directory."""
         self.assertEqual(leftovers(run), [], f"files of run {run} left behind")
 
     def test_a_worker_serves_a_run_to_its_end(self) -> None:
