@@ -253,20 +253,21 @@ class RunTest(unittest.TestCase):
             self.assertFalse((out / "summary.json").exists())
 
     def test_ctrl_c_stops_the_largest_update_that_tell_starts(self) -> None:
-        """SIGINT while tell runs a C-REPS update of 100,000 rollouts of 64 parameters (about
-        2 s): KeyboardInterrupt from tell, that outcome not taken, and the learner goes on."""
+        """SIGINT while tell runs a self-paced C-REPS update of 100,000 rollouts of 64 parameters
+        (about 1.3 s): KeyboardInterrupt from tell, that outcome not taken, and the learner goes
+        on."""
         with tempfile.TemporaryDirectory() as d:
             telling = Path(d) / "telling"
             script = (
                 "import signal, sys, pathlib, numpy as np, acps\n"
                 "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
                 "n = 100_000\n"
-                "settings = {'methods': ['random'], 'episodes': n, 'eval_every': n,\n"
+                "settings = {'methods': ['self-paced'], 'episodes': n, 'eval_every': n,\n"
                 "    'in_flight': 1000, 'memory_size': n, 'update_every': n, 'memory': 'window',\n"
                 "    'problem': {'name': 'wide', 'theta0': [0.0] * 64, 'metric': 'cost',\n"
                 "        'training_grid': {'low': [0.0], 'high': [1.0], 'points': [5]},\n"
-                "        'test_contexts': [[0.5]], 'environment': {'name': 'wide'}}}\n"
-                "learner = acps.Learner(settings, method='random')\n"
+                "        'test_contexts': [[0.5]], 'environment': {'name': 'wide', 'settings': 'v1'}}}\n"
+                "learner = acps.Learner(settings, method='self-paced')\n"
                 "def outcomes(tasks):\n"
                 "    rewards = -np.sum(tasks.thetas**2, axis=1)\n"
                 "    return tasks.ids, rewards, -rewards\n"
