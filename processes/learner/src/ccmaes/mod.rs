@@ -139,11 +139,13 @@ pub struct Rates {
     /// Learning rate of the path `p_c`, within (0, 1]; default
     /// `(4 + mu_eff / n) / (n + 4 + 2 mu_eff / n)`.
     pub c_c: Option<f64>,
-    /// Rate of the rank-one update, within [0, 1] with `c_1 + c_mu < 1`; default
-    /// `2 / ((n + 1.3)^2 + mu_eff)`.
+    /// Rate of the rank-one update, within [0, 1] with `c_1 + c_mu < 1` (or = 1 when the
+    /// population's best half outnumbers n_theta); default `2 / ((n + 1.3)^2 + mu_eff)`.
     pub c_1: Option<f64>,
-    /// Rate of the rank-mu update, within [0, 1] with `c_1 + c_mu < 1`; default
-    /// `min(1 - c_1, 2 (mu_eff - 2 + 1 / mu_eff) / ((n + 2)^2 + mu_eff))`.
+    /// Rate of the rank-mu update, within [0, 1] with `c_1 + c_mu < 1` (or = 1 when the
+    /// population's best half outnumbers n_theta); default
+    /// `min(1 - c_1, 2 (mu_eff - 2 + 1 / mu_eff) / ((n + 2)^2 + mu_eff))`, which is `1 - c_1`
+    /// from a population of about `4 (n + 2)^2`.
     pub c_mu: Option<f64>,
 }
 
@@ -170,15 +172,20 @@ pub enum CCmaesCreateError {
         /// The baseline's feature count.
         n_psi: usize,
     },
-    /// `c_1 + c_mu` is 1 or more, so the old shape would keep no weight or a negative one.
+    /// `c_1 + c_mu` is over 1, so the old shape would keep a negative weight; or 1 while the
+    /// best half of a generation is too few to make C positive definite alone.
     #[error(
-        "rates c_1 + c_mu must be < 1 (the old C keeps weight 1 - c_1 - c_mu, which keeps C positive definite), got {c_1} + {c_mu}"
+        "rates c_1 + c_mu must be < 1, or 1 when the best half of a generation (mu = {mu}) outnumbers the {n_theta} parameters (the old C keeps weight 1 - c_1 - c_mu; without it C is the mu best steps' alone, positive definite only if they span the parameters), got {c_1} + {c_mu}"
     )]
     RatesSum {
         /// The rank-one rate.
         c_1: f64,
         /// The rank-mu rate.
         c_mu: f64,
+        /// The rollouts of a generation that weigh in (half the population).
+        mu: usize,
+        /// The parameters.
+        n_theta: usize,
     },
 }
 
@@ -225,6 +232,10 @@ struct Strategy {
     h_sigma_threshold: f64,
 }
 
+/// How far `1 - c_1 - c_mu` may be from 0 and count as 0: `(1 - c_1) + c_1` rounds to 1 or its
+/// neighbours.
+const ROUNDING: f64 = 1e-12;
+
 impl Strategy {
     fn new(
         config: &CCmaesConfig,
@@ -268,9 +279,14 @@ impl Strategy {
             .c_mu
             .unwrap_or((1.0 - c_1).min(2.0 * (mu_eff - 2.0 + 1.0 / mu_eff) / ((n + 2.0).powi(2) + mu_eff)));
         check_range("rates.c_mu", c_mu, (0.0, 1.0))?;
-        if c_1 + c_mu >= 1.0 {
-            return Err(CCmaesCreateError::RatesSum { c_1, c_mu });
+        // Hansen's default reaches c_1 + c_mu = 1 (to rounding) once mu_eff is about (n + 2)^2,
+        // from a population of about 4 (n + 2)^2: the old shape then keeps no weight, and C is
+        // made of the new steps alone, positive definite when the mu best span n_theta.
+        let old_weight = 1.0 - c_1 - c_mu;
+        if old_weight < -ROUNDING || (old_weight <= ROUNDING && mu <= n_theta) {
+            return Err(CCmaesCreateError::RatesSum { c_1, c_mu, mu, n_theta });
         }
+        let c_mu = c_mu.min(1.0 - c_1);
         Ok(Self {
             population,
             weights,

@@ -101,6 +101,30 @@ fn the_shape_stays_positive_definite_and_sigma_shrinks_as_it_converges() {
 }
 
 #[test]
+fn a_population_whose_default_rates_leave_the_old_shape_no_weight_still_learns() {
+    // Hansen's c_mu is 1 - c_1 from a population of about 4 (n + 2)^2 = 784 here: C is then the
+    // best half's steps alone, positive definite as they span the 10 parameters.
+    let config = CCmaesConfig {
+        population: Some(2000),
+        ..CCmaesConfig::default()
+    };
+    let mut conditions = Vec::new();
+    let (_, score) = train_on_sphere(config.clone(), 10, 2, 20 * 2000, 5, |learner, report| {
+        let eigen = SymmetricEigen::new(learner.shape().clone());
+        assert!(eigen.eigenvalues.min() > 0.0, "{}", eigen.eigenvalues);
+        conditions.push(report.condition);
+    });
+    let (_, first) = train_on_sphere(config, 10, 2, 2000, 5, |_, _| {});
+    assert!(
+        score > 1e-3 * first,
+        "cost {} after one generation, {} after 20",
+        -first,
+        -score
+    );
+    assert_eq!(conditions.len(), 20);
+}
+
+#[test]
 fn sigma_grows_on_a_slope() {
     // A linear return: every step along -theta_0 is better, so the path lengthens and sigma
     // grows, as CMA-ES's does.
@@ -229,9 +253,25 @@ fn settings_out_of_range_are_refused_with_the_key_the_value_and_the_range() {
             c_mu: Some(0.5),
             ..Rates::default()
         },
+        population: Some(40),
         ..CCmaesConfig::default()
     });
-    assert!(error.contains("c_1 + c_mu must be < 1"), "{error}");
+    assert!(
+        error.contains(
+            "c_1 + c_mu must be < 1, or 1 when the best half of a generation (mu = 20) outnumbers the 20 parameters"
+        ) && error.contains("got 0.5 + 0.5"),
+        "{error}"
+    );
+    let error = refused(CCmaesConfig {
+        rates: Rates {
+            c_1: Some(0.5),
+            c_mu: Some(0.6),
+            ..Rates::default()
+        },
+        population: Some(1000),
+        ..CCmaesConfig::default()
+    });
+    assert!(error.contains("got 0.5 + 0.6"), "{error}");
     let error = refused(CCmaesConfig {
         initial_sigma: 0.0,
         ..CCmaesConfig::default()
