@@ -192,10 +192,8 @@ impl Search {
 
     /// Records a rollout of training context `task` and returns the report of the update it
     /// triggers. `paced` moves with a C-REPS update; a C-CMA-ES learner is never built with a
-    /// paced selector. A C-REPS update asks `stop` between its steps and, stopped, leaves
-    /// everything as it was before this rollout ([`CReps::record_until`]); a C-CMA-ES
-    /// generation's update is not stopped (it weighs one generation, at most 100,000 rollouts,
-    /// where C-REPS weighs up to 100,000 remembered ones and solves a dual first).
+    /// paced selector. The update asks `stop` between its steps and, stopped, leaves everything
+    /// as it was before this rollout ([`CReps::record_until`], [`CCmaes::record_until`]).
     pub fn record(
         &mut self,
         task: usize,
@@ -214,7 +212,7 @@ impl Search {
                     paced.is_none(),
                     "the learner refuses self-paced selection with C-CMA-ES"
                 );
-                s.record(context, theta, reward).map(SearchReport::CCmaes)
+                s.record_until(context, theta, reward, stop)?.map(SearchReport::CCmaes)
             }
         })
     }

@@ -4,7 +4,11 @@
 use nalgebra::{Cholesky, DMatrix, DVector, SymmetricEigen};
 
 use super::{CCmaesReport, Strategy};
-use crate::creps::{LinearGaussianPolicy, PolicyCreateError, Rejection, scale_rows};
+use crate::creps::{LinearGaussianPolicy, PolicyCreateError, Rejection, scale_rows, tr_mul_stopping};
+use crate::stop::Stop;
+
+/// What [`Generation::next`] makes: the next generation, its policy and the update's report.
+pub(super) type Next = (Generation, LinearGaussianPolicy, CCmaesReport);
 
 /// The step size, the covariance's shape and the two evolution paths, after `count`
 /// generations.
@@ -53,14 +57,16 @@ impl Generation {
     }
 
     /// The next generation and its policy from the rollouts `data` of `policy` (this
-    /// generation's), or why the update is rejected.
-    pub(super) fn next(
+    /// generation's), or why the update is rejected; asks `stop` before its sum over the
+    /// rollouts and every 8 columns of it.
+    pub(super) fn next<S: Stop>(
         &self,
         strategy: &Strategy,
         ridge: f64,
         policy: &LinearGaussianPolicy,
         data: &Data,
-    ) -> Result<(Self, LinearGaussianPolicy, CCmaesReport), Rejection> {
+        stop: S,
+    ) -> Result<Result<Next, Rejection>, S::Halt> {
         let n = data.returns.len();
         let weights = rank_weights(&advantages(data.psi, data.returns, ridge), &strategy.weights);
         let old_w = policy.weights();
@@ -81,18 +87,19 @@ impl Generation {
                 .sum::<f64>()
         });
         let feature_scale = self.feature_scale.zip_map(&squares, f64::max);
-        let step = ridge_solve(data.phi, &weights, &residuals, ridge, feature_scale.as_slice())
-            .ok_or(Rejection::SingularRegression)?;
+        let Some(step) = ridge_solve(data.phi, &weights, &residuals, ridge, feature_scale.as_slice()) else {
+            return Ok(Err(Rejection::SingularRegression));
+        };
         let new_w = old_w + &step;
         if !new_w.iter().all(|w| w.is_finite()) {
-            return Err(Rejection::MeanNotFinite);
+            return Ok(Err(Rejection::MeanNotFinite));
         }
         let mean_phi = data.phi.row_mean().transpose();
         let shift = step.tr_mul(&mean_phi) / self.sigma;
 
         let eigen = SymmetricEigen::new(self.shape.clone());
         if eigen.eigenvalues.min() <= 0.0 {
-            return Err(Rejection::CovarianceNotPositiveSemiDefinite);
+            return Ok(Err(Rejection::CovarianceNotPositiveSemiDefinite));
         }
         let inverse_roots = eigen.eigenvalues.map(|d| 1.0 / d.sqrt());
         let inverse_sqrt =
@@ -112,13 +119,14 @@ impl Generation {
 
         let residuals = residuals / self.sigma;
         let weight_vector = DVector::from_column_slice(&weights);
-        let rank_mu = residuals.tr_mul(&scale_rows(&residuals, &weight_vector));
+        let rank_mu = tr_mul_stopping(&residuals, &scale_rows(&residuals, &weight_vector), stop)?;
+        stop.check()?;
         let lost = if h_sigma { 0.0 } else { c_c * (2.0 - c_c) };
         let (c_1, c_mu) = (strategy.c_1, strategy.c_mu);
         let shape = &self.shape * (1.0 - c_1 - c_mu + c_1 * lost) + &p_c * p_c.transpose() * c_1 + rank_mu * c_mu;
         let shape = (&shape + shape.transpose()) * 0.5;
         if !shape.iter().all(|c| c.is_finite()) {
-            return Err(Rejection::CovarianceNotFinite);
+            return Ok(Err(Rejection::CovarianceNotFinite));
         }
         let log_step = (c_sigma / strategy.d_sigma) * (p_sigma.norm() / strategy.chi_n - 1.0);
         let sigma = self.sigma * log_step.min(MAX_LOG_STEP).exp();
@@ -130,13 +138,13 @@ impl Generation {
             count,
             feature_scale,
         };
-        let policy = next
-            .policy(new_w)
-            .map_err(|_| Rejection::CovarianceNotPositiveSemiDefinite)?;
+        let Ok(policy) = next.policy(new_w) else {
+            return Ok(Err(Rejection::CovarianceNotPositiveSemiDefinite));
+        };
         let mut report = next.report(&policy, n, None);
         report.h_sigma = h_sigma;
         report.mean_shift = whitened_shift.norm();
-        Ok((next, policy, report))
+        Ok(Ok((next, policy, report)))
     }
 
     /// The report of an update that leaves this generation with `policy` (mean shift 0, h_sigma

@@ -54,6 +54,9 @@ use crate::creps::{
 };
 use generation::Generation;
 
+use crate::Interrupted;
+use crate::stop::{Never, Stop};
+
 /// C-CMA-ES settings. [`Default`] is the original's: the population (generalised to any
 /// features) and every rate from the problem's dimensions, affine policy features, a quadratic
 /// baseline.
@@ -427,6 +430,33 @@ impl CCmaes {
     /// # Panics
     /// If `context.len() != context_dim` or `theta.len() != n_theta`.
     pub fn record(&mut self, context: &[f64], theta: &[f64], reward: f64) -> Option<CCmaesReport> {
+        let Ok(report) = self.record_stopping(context, theta, reward, Never);
+        report
+    }
+
+    /// [`record`](Self::record), asking `stop` between the steps of the update it triggers
+    /// (Ctrl-C): a stopped update leaves the learner as it was before this rollout, which is
+    /// not stored.
+    ///
+    /// # Panics
+    /// As [`record`](Self::record).
+    pub fn record_until(
+        &mut self,
+        context: &[f64],
+        theta: &[f64],
+        reward: f64,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Option<CCmaesReport>, Interrupted> {
+        self.record_stopping(context, theta, reward, stop)
+    }
+
+    fn record_stopping<S: Stop>(
+        &mut self,
+        context: &[f64],
+        theta: &[f64],
+        reward: f64,
+        stop: S,
+    ) -> Result<Option<CCmaesReport>, S::Halt> {
         self.policy.assert_params(theta);
         let features = self.features(context);
         let baseline = self.config.baseline.apply(context);
@@ -435,7 +465,7 @@ impl CCmaes {
             && features.iter().chain(&baseline).all(|f| f.is_finite());
         if !finite {
             self.dropped += 1;
-            return None;
+            return Ok(None);
         }
         self.rollouts.push(Rollout {
             features: features.data.into(),
@@ -444,10 +474,17 @@ impl CCmaes {
             reward,
         });
         if self.rollouts.len() < self.strategy.population {
-            return None;
+            return Ok(None);
         }
         let rollouts = std::mem::take(&mut self.rollouts);
-        Some(self.update(&rollouts))
+        match self.update(&rollouts, stop) {
+            Ok(report) => Ok(Some(report)),
+            Err(halt) => {
+                self.rollouts = rollouts;
+                self.rollouts.pop();
+                Err(halt)
+            }
+        }
     }
 
     /// The current policy, `N(W^T phi(s), sigma^2 C)`.
@@ -594,7 +631,7 @@ impl CCmaes {
 
     /// One generation's update on `rollouts`; a rejected one keeps the policy, paths and step
     /// size.
-    fn update(&mut self, rollouts: &[Rollout]) -> CCmaesReport {
+    fn update<S: Stop>(&mut self, rollouts: &[Rollout], stop: S) -> Result<CCmaesReport, S::Halt> {
         let rows = |row: fn(&Rollout) -> &[f64]| {
             let width = rollouts.first().map_or(0, |r| row(r).len());
             DMatrix::from_fn(rollouts.len(), width, |i, j| row(&rollouts[i])[j])
@@ -613,7 +650,8 @@ impl CCmaes {
                 thetas: &thetas,
                 returns: &returns,
             },
-        );
+            stop,
+        )?;
         let mut report = match outcome {
             Ok((next, policy, report)) => {
                 self.generation = next;
@@ -623,7 +661,7 @@ impl CCmaes {
             Err(rejection) => self.generation.report(&self.policy, rollouts.len(), Some(rejection)),
         };
         report.ess = self.strategy.mu_eff;
-        report
+        Ok(report)
     }
 }
 

@@ -64,7 +64,7 @@ mod policy;
 mod snapshot;
 mod update;
 
-pub(crate) use policy::{GaussianKl, bound_by_kl, log_det, scale_rows};
+pub(crate) use policy::{GaussianKl, bound_by_kl, log_det, scale_rows, tr_mul_stopping};
 
 pub use dual::{
     DEFAULT_ETA_MIN, DualOptions, DualSolution, DualValue, ETA_MIN_RANGE, TOLERANCE_RANGE, effective_sample_size,

@@ -450,7 +450,7 @@ impl LinearGaussianPolicy {
 
 /// `a^T b`, a few columns of `b` at a time with `stop` asked in between: nalgebra's `tr_mul`
 /// makes each entry one `dot` of two columns, so the blocks give the same bits as one call.
-fn tr_mul_stopping<S: Stop>(a: &DMatrix<f64>, b: &DMatrix<f64>, stop: S) -> Result<DMatrix<f64>, S::Halt> {
+pub(crate) fn tr_mul_stopping<S: Stop>(a: &DMatrix<f64>, b: &DMatrix<f64>, stop: S) -> Result<DMatrix<f64>, S::Halt> {
     // 8 columns of 100,000 rollouts against 64 take about 50 ms.
     const COLUMNS: usize = 8;
     let mut product = DMatrix::zeros(a.ncols(), b.ncols());
