@@ -193,7 +193,7 @@ impl Search {
     /// Records a rollout of training context `task` and returns the report of the update it
     /// triggers. `paced` moves with a C-REPS update; a C-CMA-ES learner is never built with a
     /// paced selector. The update asks `stop` between its steps and, stopped, leaves everything
-    /// as it was before this rollout ([`CReps::record_until`], [`CCmaes::record_until`]).
+    /// as it was before this rollout.
     pub fn record(
         &mut self,
         task: usize,
@@ -205,14 +205,15 @@ impl Search {
     ) -> Result<Option<SearchReport>, Interrupted> {
         Ok(match self {
             Search::CReps(s) => s
-                .record_until(task, context, theta, reward, paced, stop)?
+                .record_stopping(task, context, theta, reward, paced, stop)?
                 .map(SearchReport::CReps),
             Search::CCmaes(s) => {
                 debug_assert!(
                     paced.is_none(),
                     "the learner refuses self-paced selection with C-CMA-ES"
                 );
-                s.record_until(context, theta, reward, stop)?.map(SearchReport::CCmaes)
+                s.record_stopping(context, theta, reward, stop)?
+                    .map(SearchReport::CCmaes)
             }
         })
     }

@@ -54,7 +54,6 @@ use crate::creps::{
 };
 use generation::Generation;
 
-use crate::Interrupted;
 use crate::stop::{Never, Stop};
 
 /// C-CMA-ES settings. [`Default`] is the original's: the population (generalised to any
@@ -435,22 +434,9 @@ impl CCmaes {
     }
 
     /// [`record`](Self::record), asking `stop` between the steps of the update it triggers
-    /// (Ctrl-C): a stopped update leaves the learner as it was before this rollout, which is
-    /// not stored.
-    ///
-    /// # Panics
-    /// As [`record`](Self::record).
-    pub fn record_until(
-        &mut self,
-        context: &[f64],
-        theta: &[f64],
-        reward: f64,
-        stop: &dyn Fn() -> bool,
-    ) -> Result<Option<CCmaesReport>, Interrupted> {
-        self.record_stopping(context, theta, reward, stop)
-    }
-
-    fn record_stopping<S: Stop>(
+    /// (Ctrl-C, [`Learner::tell_until`](crate::Learner::tell_until)): a stopped update leaves
+    /// the learner as it was before this rollout, which is not stored.
+    pub(crate) fn record_stopping<S: Stop>(
         &mut self,
         context: &[f64],
         theta: &[f64],

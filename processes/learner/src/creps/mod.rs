@@ -89,7 +89,6 @@ pub(crate) use error::{check_at_least_one, check_finite, check_non_negative, che
 use memory::{Memory, Sample};
 use update::{update_paced_stopping, update_stopping};
 
-use crate::Interrupted;
 use crate::stop::{Never, Stop};
 
 /// C-REPS settings. [`Default`] is BOLeRo's `CREPSOptimizer`; the paper's three settings are
@@ -366,24 +365,10 @@ impl CReps {
     }
 
     /// [`record_paced`](CReps::record_paced), asking `stop` between the steps of the update
-    /// it triggers (Ctrl-C): a stopped update leaves the learner (and `paced`) as it was
-    /// before this rollout, which is not stored.
-    ///
-    /// # Panics
-    /// As [`record_paced`](CReps::record_paced).
-    pub fn record_until(
-        &mut self,
-        task: usize,
-        context: &[f64],
-        theta: &[f64],
-        reward: f64,
-        paced: Option<&mut dyn PacedContexts>,
-        stop: &dyn Fn() -> bool,
-    ) -> Result<Option<UpdateReport>, Interrupted> {
-        self.record_stopping(task, context, theta, reward, paced, stop)
-    }
-
-    fn record_stopping<S: Stop>(
+    /// it triggers (Ctrl-C, [`Learner::tell_until`](crate::Learner::tell_until)): a stopped
+    /// update leaves the learner (and `paced`) as it was before this rollout, which is not
+    /// stored.
+    pub(crate) fn record_stopping<S: Stop>(
         &mut self,
         task: usize,
         context: &[f64],
