@@ -10,7 +10,7 @@
 use crate::processes;
 use crate::server::{
     self, FleetError, FleetJob, FleetProgress, ForwardingSource, Learners, Liveness, Observer, Remote, Seat,
-    ServeOptions, Source, TaskSource,
+    ServeOptions, Source, Started, TaskSource,
 };
 use acps_wire::ipc::{self, RunName, ServerError};
 use std::os::unix::process::CommandExt as _;
@@ -420,7 +420,11 @@ impl Fleet {
             },
             &stop,
             observer,
-            &mut || (processes::running(&mut children), launched),
+            &mut || Started {
+                running: processes::running(&mut children),
+                launched,
+                failed: processes::failed(&mut children),
+            },
             remote.as_deref_mut(),
         );
         // Before the seat goes: a remote's own node of the run must be gone with it.
@@ -447,6 +451,7 @@ impl Fleet {
                 FleetError::NoWorkers {
                     run,
                     started,
+                    failed,
                     waited,
                     refused,
                     ..
@@ -455,6 +460,7 @@ impl Fleet {
             ) => FleetError::NoWorkers {
                 run,
                 started,
+                failed,
                 waited,
                 refused,
                 exits: processes::exits(&mut children),

@@ -86,6 +86,15 @@ pub fn running(children: &mut [Child]) -> usize {
         .count()
 }
 
+/// How many of `children` ended with a failure: a status other than 0, or a signal.
+pub fn failed(children: &mut [Child]) -> usize {
+    children
+        .iter_mut()
+        .map(|child| matches!(child.try_wait(), Ok(Some(status)) if !status.success()))
+        .filter(|&failed| failed)
+        .count()
+}
+
 /// How `children` ended, counted by kind: `2 with status 1, 1 killed by signal 9`; those not
 /// ended yet are left out. A worker that stopped on an error exits with a status other than 0,
 /// which tells the user whether to look for an error above.

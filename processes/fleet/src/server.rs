@@ -336,6 +336,16 @@ impl TaskSource for Source<'_> {
     }
 }
 
+/// The worker processes a fleet started, as the server looks at them every tick.
+pub(crate) struct Started {
+    /// Still running (connected or not).
+    pub(crate) running: usize,
+    /// Started in all.
+    pub(crate) launched: usize,
+    /// Ended with a failure (a status other than 0, or a signal).
+    pub(crate) failed: usize,
+}
+
 /// The run's learner cores: the [`TaskSource`] of a learner's fleet.
 pub struct Learners<'a>(pub &'a mut [FleetJob]);
 
@@ -517,11 +527,15 @@ pub enum FleetError {
     #[error("interrupted")]
     Interrupted,
     /// No worker was connected and none was on its way for the grace period
-    /// ([`Liveness::no_workers`]): every started worker exited, and no other joined.
+    /// ([`Liveness::no_workers`]): every started worker exited, and no other joined; or at
+    /// once, when every started worker failed.
     #[error(
-        "no worker can go on with run '{run}': none connected for {seconds:.1} s{started}{why}",
-        seconds = waited.as_secs_f64(),
-        started = if *started > 0 { format!(", and all {started} started worker processes exited{} (see their messages above)", if exits.is_empty() { String::new() } else { format!(": {exits}") }) } else { String::new() },
+        "no worker can go on with run '{run}': {how}{why}",
+        how = if *failed {
+            format!("all {started} started worker processes failed{} (see their messages above), and no other is connected", if exits.is_empty() { String::new() } else { format!(": {exits}") })
+        } else {
+            format!("none connected for {:.1} s{}", waited.as_secs_f64(), if *started > 0 { format!(", and all {started} started worker processes exited{} (see their messages above)", if exits.is_empty() { String::new() } else { format!(": {exits}") }) } else { String::new() })
+        },
         why = refused.as_ref().map_or(String::new(), |reason| format!("; the learner refused a worker: {reason}"))
     )]
     NoWorkers {
@@ -529,6 +543,9 @@ pub enum FleetError {
         run: RunName,
         /// Worker processes the fleet started.
         started: usize,
+        /// Whether every one of them failed (a status other than 0, or a signal): the run then
+        /// stops without waiting out the grace period.
+        failed: bool,
         /// How they ended, counted by exit status (`2 with status 1`), once the fleet has
         /// reaped them; empty before, or without started workers.
         exits: String,
@@ -811,7 +828,7 @@ pub(crate) fn serve<'r>(
     options: ServeOptions,
     stop: &dyn Fn() -> bool,
     observer: &mut dyn Observer,
-    started: &mut dyn FnMut() -> (usize, usize),
+    started: &mut dyn FnMut() -> Started,
     mut remote: Option<&mut (dyn Remote + 'r)>,
 ) -> Result<FleetProgress, FleetError> {
     let Seat { server, services, .. } = seat;
@@ -1053,7 +1070,11 @@ pub(crate) fn serve<'r>(
         }
         if last_tick.elapsed() >= TICK {
             last_tick = Instant::now();
-            let (running, launched) = started();
+            let Started {
+                running,
+                launched,
+                failed,
+            } = started();
             progress.started_running = running;
             progress.slowest_rollout = slowest_rollout;
             progress.serving_seconds = serving();
@@ -1125,10 +1146,14 @@ pub(crate) fn serve<'r>(
                 }
             } else if let Some(grace) = options.liveness.no_workers {
                 let since = *without_workers.get_or_insert_with(Instant::now);
-                if since.elapsed() >= grace {
+                // Workers started only to fail (a problem they refuse, an outcome the wire
+                // cannot carry) do not come back: waiting for others would only delay the error.
+                let all_failed = launched > 0 && failed == launched;
+                if all_failed || since.elapsed() >= grace {
                     return Err(FleetError::NoWorkers {
                         run: run.clone(),
                         started: launched,
+                        failed: all_failed,
                         exits: String::new(),
                         waited: since.elapsed(),
                         refused: last_refusal.map(|(reason, _)| reason),

@@ -1212,28 +1212,39 @@ fn a_hung_worker_s_tasks_go_to_another_and_the_result_is_unchanged() {
 
 #[test]
 fn a_fleet_whose_workers_all_exit_stops_with_an_error_naming_the_run() {
-    let (_, mut jobs, _) = short_grid(4);
-    let run = run_name("no-workers");
-    // Worker processes that exit at once, as a broken worker command would.
-    let mut fleet = Fleet::builder(run.clone())
-        .spawn_workers(2, |_| Command::new("true"))
-        .liveness(Liveness {
-            no_workers: Some(Duration::from_millis(200)),
-            ..Liveness::default()
-        })
-        .start()
-        .unwrap();
-    let error = fleet
-        .serve(&mut jobs, &mut |_: &FleetProgress| {})
-        .unwrap_err()
-        .to_string();
-    assert!(
-        error.starts_with(&format!("no worker can go on with run '{run}': none connected for")),
-        "{error}"
-    );
-    assert!(error.contains("all 2 started worker processes exited"), "{error}");
-    drop(fleet);
-    assert_clean(&run);
+    // Worker processes that exit at once: with status 0 the fleet waits out its grace for
+    // others (200 ms); failing, as a broken worker command does, they stop it at once (a grace
+    // of 2 minutes would fail the message's test).
+    for (command, grace, said) in [
+        ("true", 200, "none connected for"),
+        (
+            "false",
+            120_000,
+            "all 2 started worker processes failed: 2 with status 1 (see their messages above), and no other is connected",
+        ),
+    ] {
+        let (_, mut jobs, _) = short_grid(4);
+        let run = run_name(&format!("no-workers-{command}"));
+        let mut fleet = Fleet::builder(run.clone())
+            .spawn_workers(2, move |_| Command::new(command))
+            .liveness(Liveness {
+                no_workers: Some(Duration::from_millis(grace)),
+                ..Liveness::default()
+            })
+            .start()
+            .unwrap();
+        let error = fleet
+            .serve(&mut jobs, &mut |_: &FleetProgress| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.starts_with(&format!("no worker can go on with run '{run}': {said}")),
+            "{error}"
+        );
+        assert!(error.contains("all 2 started worker processes"), "{error}");
+        drop(fleet);
+        assert_clean(&run);
+    }
 }
 
 /// The pids of `pid`'s children.
@@ -1703,8 +1714,9 @@ fn killing_the_only_worker_ends_the_run_saying_so() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(
-        stderr.contains(&format!("no worker can go on with run '{run}': none connected for"))
-            && stderr.contains("all 1 started worker processes exited"),
+        stderr.contains(&format!(
+            "no worker can go on with run '{run}': all 1 started worker processes failed: 1 killed by signal 9"
+        )),
         "{stderr}"
     );
     assert!(!stderr.contains("another"), "{stderr}");
@@ -1743,7 +1755,7 @@ fn a_fleet_run_that_fails_half_way_prints_the_command_that_continues_it() {
     assert!(stderr.contains("no worker can go on"), "{stderr}");
     // How the started worker ended, so that the user knows it did not just finish.
     assert!(
-        stderr.contains("all 1 started worker processes exited: 1 killed by signal 9"),
+        stderr.contains("all 1 started worker processes failed: 1 killed by signal 9"),
         "{stderr}"
     );
     let printed = stderr
