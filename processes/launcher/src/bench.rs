@@ -645,6 +645,10 @@ fn fleet(workload: Workload, options: &BenchOptions, mode: Mode) -> anyhow::Resu
     let died = || format!("{}: {who} exited before the bench was done", context());
     let progress = match served {
         Err(FleetError::Interrupted) if exited => anyhow::bail!(died()),
+        // The fleet itself may notice first that its only workers failed.
+        Err(error @ FleetError::NoWorkers { failed: true, .. }) => {
+            return Err(anyhow::Error::new(error).context(died()));
+        }
         Err(error) if exited => return Err(anyhow::Error::new(error).context(died())),
         served => served.with_context(context)?,
     };
