@@ -1,5 +1,5 @@
 //! `acps._native`, the extension module of the `acps` Python package: the learner core as
-//! ask/tell over numpy arrays ([`learner::NativeLearner`]), the acps command line ([`cli`]),
+//! ask/tell over numpy arrays (`NativeLearner`), the acps command line (`cli`),
 //! and the package's exceptions. The typed Python API in `python/acps/` wraps it.
 #![warn(missing_docs)]
 

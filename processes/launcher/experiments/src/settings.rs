@@ -115,7 +115,7 @@ impl LearnerName {
     }
 
     /// The learner of an experiment whose summary recorded `settings`: C-CMA-ES when they have
-    /// its settings (`ccmaes`, [`crate::paper::with_search`]), else C-REPS (also for a problem
+    /// its settings (`ccmaes`, which the paper experiments' `with_search` writes), else C-REPS (also for a problem
     /// without a policy, which has neither).
     pub fn recorded(settings: &serde_json::Value) -> Self {
         if settings.get("ccmaes").is_some() {

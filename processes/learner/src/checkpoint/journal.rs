@@ -10,7 +10,7 @@
 //! |---|---|
 //! | 1 | kind: 0 episode, 1 update, 2 evaluation |
 //! | 4 | payload length (u32, little-endian) |
-//! | n | payload: the [`Episode`](crate::Episode), [`UpdateRecord`](crate::UpdateRecord) or [`Evaluation`](crate::Evaluation) in bincode 2's standard encoding |
+//! | n | payload: the [`crate::Episode`], [`crate::UpdateRecord`] or [`crate::Evaluation`] in bincode 2's standard encoding |
 //!
 //! A [`JournalMark`] is the file's length, the FNV-1a 64 hash of all its bytes and the records
 //! of each kind up to that length. Resuming from a mark checks the header (another file, run or
