@@ -9,11 +9,14 @@ import math
 import os
 import re
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
 import threading
 import unittest
+from pathlib import Path
+from unittest import mock
 
 import acps_worker
 from acps_worker import Environment, Exit, NoLearnerError, Policy, RefusedError, Task, _ipc, _wire
@@ -210,6 +213,48 @@ class ServeTest(unittest.TestCase):
                     os.environ.pop(key, None)
                 else:
                     os.environ[key] = value
+
+    def test_the_iceoryx2_directory_is_this_users_alone(self) -> None:
+        """own_root makes the directory 0700, narrows a wider one and refuses a file or another
+        user's directory; check_owner refuses a run whose shared memory is another user's."""
+        run = run_name("root")
+        with tempfile.TemporaryDirectory() as d:
+            root = Path(d) / "root"
+            with mock.patch.object(_ipc, "iceoryx2_root", return_value=root):
+                _ipc.own_root(run)
+                self.assertEqual(stat.S_IMODE(root.stat().st_mode), 0o700)
+                root.chmod(0o755)
+                _ipc.own_root(run)
+                self.assertEqual(stat.S_IMODE(root.stat().st_mode), 0o700)
+                root.rmdir()
+                root.write_text("")
+                with self.assertRaisesRegex(
+                    _ipc.RootError, f"{root} for run '{run}': it is not a directory; remove it"
+                ):
+                    _ipc.own_root(run)
+                root.unlink()
+                if os.geteuid() == 0:
+                    root.mkdir(mode=0o700)
+                    os.chown(root, 65534, 65534)
+                    with self.assertRaisesRegex(
+                        _ipc.RootError, "it belongs to user 65534, not to this process's user 0"
+                    ):
+                        _ipc.own_root(run)
+        if os.geteuid() != 0:
+            return
+        # Root can forge what another user's learner leaves in /dev/shm.
+        forged = Path("/dev/shm") / (_ipc.prefix(run) + "forged")
+        forged.write_bytes(b"")
+        os.chown(forged, 65534, 65534)
+        try:
+            with self.assertRaisesRegex(
+                _ipc.RootError,
+                f"creating node 'w' of run '{run}': the run's shared memory belongs to user "
+                "65534, who alone may use it",
+            ):
+                _ipc.check_owner(run, "w")
+        finally:
+            forged.unlink()
 
     def test_no_learner_is_an_error_and_leaves_nothing(self) -> None:
         """A worker whose learner never comes gives up and removes what it created."""
