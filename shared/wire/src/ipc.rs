@@ -869,8 +869,9 @@ const STARTING_AGE: Duration = Duration::from_secs(2);
 
 /// Remove everything that runs whose every node is dead left in /dev/shm and this user's
 /// [`iceoryx2_root`], whatever their names: after a `kill -9` of a learner and its workers
-/// nothing else would ever remove it. A run with a live node, a node in creation, or no node and files younger than
-/// a few seconds (a run that is starting) is left alone. Returns the runs cleaned.
+/// nothing else would ever remove it. A run with a live node, a node in creation, or no node
+/// and files younger than a few seconds (a run that is starting) is left alone. Returns the runs
+/// cleaned.
 pub fn clean_dead_runs() -> Vec<RunName> {
     let mut runs: std::collections::BTreeMap<String, (RunName, bool)> = std::collections::BTreeMap::new();
     for (name, path) in acps_files() {
@@ -946,6 +947,7 @@ pub fn remove_run_files(run: &RunName) -> Result<usize, IpcError> {
     }
     let files = leftover_files(run);
     let count = files.len();
+    let nodes = nodes_dir();
     for path in files {
         let _ = if path.is_dir() {
             std::fs::remove_dir_all(&path)
@@ -953,10 +955,7 @@ pub fn remove_run_files(run: &RunName) -> Result<usize, IpcError> {
             std::fs::remove_file(&path)
         };
         // A node's directory holds only its run's files; the emptied one goes too.
-        if let Some(parent) = path
-            .parent()
-            .filter(|parent| parent.parent() == Some(nodes_dir().as_path()))
-        {
+        if let Some(parent) = path.parent().filter(|parent| parent.parent() == Some(nodes.as_path())) {
             let _ = std::fs::remove_dir(parent);
         }
     }

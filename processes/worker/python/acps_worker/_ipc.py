@@ -298,6 +298,7 @@ def remove_run_files_if_last(run: str) -> int:
     if alive > 0:
         return 0
     removed = 0
+    nodes = iceoryx2_root() / "nodes"
     for path in run_files(run):
         try:
             if path.is_dir():
@@ -310,7 +311,7 @@ def remove_run_files_if_last(run: str) -> int:
         except OSError:
             continue
         parent = path.parent
-        if parent.parent == iceoryx2_root() / "nodes":
+        if parent.parent == nodes:
             try:
                 parent.rmdir()
             except OSError:
