@@ -94,8 +94,13 @@ impl Generation {
         if !new_w.iter().all(|w| w.is_finite()) {
             return Ok(Err(Rejection::MeanNotFinite));
         }
-        let mean_phi = data.phi.row_mean().transpose();
-        let shift = step.tr_mul(&mean_phi) / self.sigma;
+        // The shift at the weighted mean of the features is (with a constant feature, up to
+        // the ridge) the weighted mean of the residuals, CMA-ES's step: N(0, C / mu_eff) under
+        // random selection, as CSA assumes. At the unweighted mean (BOLeRo's) it extrapolates
+        // the selected rollouts' residuals to the contexts they were not drawn in, and on the
+        // dartboard with monotonic progress sigma grew without bound (docs/CHOICES.md).
+        let weighted_phi = data.phi.tr_mul(&DVector::from_column_slice(&weights));
+        let shift = step.tr_mul(&weighted_phi) / self.sigma;
 
         let eigen = SymmetricEigen::new(self.shape.clone());
         if eigen.eigenvalues.min() <= 0.0 {
@@ -205,13 +210,23 @@ fn advantages(psi: &DMatrix<f64>, returns: &[f64], ridge: f64) -> Vec<f64> {
 }
 
 /// The weight of each rollout: `ranked[k]` for the rollout of the (k+1)-th largest advantage,
-/// 0 beyond them; equal advantages rank in rollout order.
+/// 0 beyond them. Rollouts of equal advantage (the dartboard's misses of one field) share the
+/// weights of the ranks they span equally: their order says nothing of their parameters. The
+/// paths keep the ranks' `mu_eff`, so a generation of ties moves them less, and sigma shrinks
+/// on such a plateau instead of wandering off it (docs/CHOICES.md).
 fn rank_weights(advantages: &[f64], ranked: &[f64]) -> Vec<f64> {
     let mut order: Vec<usize> = (0..advantages.len()).collect();
     order.sort_by(|&a, &b| advantages[b].total_cmp(&advantages[a]).then(a.cmp(&b)));
     let mut weights = vec![0.0; advantages.len()];
-    for (&i, &w) in order.iter().zip(ranked) {
-        weights[i] = w;
+    let mut start = 0;
+    while start < order.len() {
+        let value = advantages[order[start]];
+        let end = start + order[start..].iter().take_while(|&&i| advantages[i] == value).count();
+        let shared = ranked.iter().take(end).skip(start).sum::<f64>() / (end - start) as f64;
+        for &i in &order[start..end] {
+            weights[i] = shared;
+        }
+        start = end;
     }
     weights
 }
@@ -237,9 +252,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn equal_advantages_rank_in_rollout_order_and_the_rest_get_nothing() {
+    fn equal_advantages_share_their_ranks_weights_and_the_rest_get_nothing() {
         let weights = rank_weights(&[1.0, 3.0, 1.0, 3.0, -2.0], &[0.5, 0.3, 0.2]);
-        assert_eq!(weights, vec![0.2, 0.5, 0.0, 0.3, 0.0]);
+        assert_eq!(weights, vec![0.1, 0.4, 0.1, 0.4, 0.0]);
+        let distinct = rank_weights(&[1.0, 3.0, 2.0, 0.0], &[0.5, 0.3, 0.2]);
+        assert_eq!(distinct, vec![0.2, 0.5, 0.3, 0.0]);
     }
 
     #[test]
