@@ -133,3 +133,25 @@ fn c_cmaes_keeps_improving_on_bolero_s_sphere_where_c_reps_stalls() {
         assert!(a > 10f64.ln() && b < 2f64.ln(), "run {r}: C-REPS {a}, C-CMA-ES {b}");
     }
 }
+
+#[test]
+fn c_cmaes_s_step_size_stays_bounded_on_the_dartboard_with_monotonic_progress() {
+    // Issue 36: D-UCB practises a few fields at a time, the regression extrapolates their
+    // rollouts to the rest, and normalised as if it did not, CSA's path grew: sigma ran away in
+    // 12 of 20 reported runs, and in runs 1002 and 1004 of these tuning seeds (to 4.6e9 and
+    // 12,000 cm). All three end within a few cm now (0.56-0.83).
+    let request = ExperimentFile {
+        seed: Some(1002),
+        learner: Some(acps_experiments::settings::LearnerName::CCmaes),
+        ..options(3, &[Method::MonotonicProgress])
+    };
+    let summary = paper::dartboard(paper::Sim::Analytic, &request)
+        .run(&Progress::new("test", 0, true))
+        .unwrap();
+    let finals = &summary.methods[Method::MonotonicProgress.name()].final_scores;
+    assert_eq!(finals.len(), 3);
+    for (r, score) in finals.iter().enumerate() {
+        let score = score.unwrap();
+        assert!(score < 10.0, "run {r}: {score} cm");
+    }
+}

@@ -87,20 +87,24 @@ impl Generation {
                 .sum::<f64>()
         });
         let feature_scale = self.feature_scale.zip_map(&squares, f64::max);
-        let Some(step) = ridge_solve(data.phi, &weights, &residuals, ridge, feature_scale.as_slice()) else {
+        let Some(regression) = Ridge::new(data.phi, &weights, ridge, feature_scale.as_slice()) else {
             return Ok(Err(Rejection::SingularRegression));
         };
+        let step = regression.solve(&residuals);
         let new_w = old_w + &step;
         if !new_w.iter().all(|w| w.is_finite()) {
             return Ok(Err(Rejection::MeanNotFinite));
         }
-        // The shift at the weighted mean of the features is (with a constant feature, up to
-        // the ridge) the weighted mean of the residuals, CMA-ES's step: N(0, C / mu_eff) under
-        // random selection, as CSA assumes. At the unweighted mean (BOLeRo's) it extrapolates
-        // the selected rollouts' residuals to the contexts they were not drawn in, and on the
-        // dartboard with monotonic progress sigma grew without bound (docs/CHOICES.md).
-        let weighted_phi = data.phi.tr_mul(&DVector::from_column_slice(&weights));
-        let shift = step.tr_mul(&weighted_phi) / self.sigma;
+        // The change of the mean at the generation's average features drives the paths. It is
+        // sum_i a_i y_i of the residuals y_i ~ N(0, C), so under random selection its variance
+        // is ||a||^2 C: 1 / mu_eff, as CSA assumes, only where the average is the weights' own
+        // and there is no ridge. The regression extrapolates the selected rollouts' residuals
+        // to the contexts they were not drawn in, ||a||^2 is then larger, and with 1 / mu_eff
+        // in its place sigma ran away on the dartboard with monotonic progress (CHOICES.md).
+        let mean_phi = data.phi.row_mean().transpose();
+        let shift = step.tr_mul(&mean_phi) / self.sigma;
+        let variance = regression.variance_at(&mean_phi);
+        let samples = if variance > 0.0 { 1.0 / variance } else { 0.0 };
 
         let eigen = SymmetricEigen::new(self.shape.clone());
         if eigen.eigenvalues.min() <= 0.0 {
@@ -113,13 +117,12 @@ impl Generation {
 
         let (c_sigma, c_c) = (strategy.c_sigma, strategy.c_c);
         let count = self.count + 1;
-        let p_sigma =
-            &self.p_sigma * (1.0 - c_sigma) + &whitened_shift * (c_sigma * (2.0 - c_sigma) * strategy.mu_eff).sqrt();
+        let p_sigma = &self.p_sigma * (1.0 - c_sigma) + &whitened_shift * (c_sigma * (2.0 - c_sigma) * samples).sqrt();
         let unbiased = p_sigma.norm() / (1.0 - (1.0 - c_sigma).powf(2.0 * count as f64)).sqrt();
         let h_sigma = unbiased < strategy.h_sigma_threshold * strategy.chi_n;
         let mut p_c = &self.p_c * (1.0 - c_c);
         if h_sigma {
-            p_c += &shift * (c_c * (2.0 - c_c) * strategy.mu_eff).sqrt();
+            p_c += &shift * (c_c * (2.0 - c_c) * samples).sqrt();
         }
 
         let residuals = residuals / self.sigma;
@@ -202,8 +205,11 @@ fn advantages(psi: &DMatrix<f64>, returns: &[f64], ridge: f64) -> Vec<f64> {
     }
     let standardised = DMatrix::from_iterator(returns.len(), 1, returns.iter().map(|r| (r - mean) / spread));
     let ones = vec![1.0; returns.len()];
-    match ridge_solve(psi, &ones, &standardised, ridge, &[]) {
-        Some(beta) => (&standardised - psi * beta).iter().copied().collect(),
+    match Ridge::new(psi, &ones, ridge, &[]) {
+        Some(baseline) => (&standardised - psi * baseline.solve(&standardised))
+            .iter()
+            .copied()
+            .collect(),
         // Features that are all 0: no baseline to take.
         None => standardised.iter().copied().collect(),
     }
@@ -211,9 +217,8 @@ fn advantages(psi: &DMatrix<f64>, returns: &[f64], ridge: f64) -> Vec<f64> {
 
 /// The weight of each rollout: `ranked[k]` for the rollout of the (k+1)-th largest advantage,
 /// 0 beyond them. Rollouts of equal advantage (the dartboard's misses of one field) share the
-/// weights of the ranks they span equally: their order says nothing of their parameters. The
-/// paths keep the ranks' `mu_eff`, so a generation of ties moves them less, and sigma shrinks
-/// on such a plateau instead of wandering off it (docs/CHOICES.md).
+/// weights of the ranks they span equally: their order says nothing of their parameters, and
+/// choosing the first of them would choose the context a selector practised first.
 fn rank_weights(advantages: &[f64], ranked: &[f64]) -> Vec<f64> {
     let mut order: Vec<usize> = (0..advantages.len()).collect();
     order.sort_by(|&a, &b| advantages[b].total_cmp(&advantages[a]).then(a.cmp(&b)));
@@ -231,25 +236,52 @@ fn rank_weights(advantages: &[f64], ranked: &[f64]) -> Vec<f64> {
     weights
 }
 
-/// `(X^T D X + R)^-1 X^T D Y` with `D = diag(weights)` and `R` the diagonal of `X^T D X`, or
-/// the larger `scale` where given, times `ridge` (Marquardt's scaling); `None` when that matrix
-/// is not positive definite.
-fn ridge_solve(x: &DMatrix<f64>, weights: &[f64], y: &DMatrix<f64>, ridge: f64, scale: &[f64]) -> Option<DMatrix<f64>> {
-    let weighted = scale_rows(x, &DVector::from_column_slice(weights));
-    let mut normal = weighted.tr_mul(x);
-    let mean_diagonal = normal.trace() / normal.nrows() as f64;
-    for i in 0..normal.nrows() {
-        // Each feature's own scale, floored so that a feature that is 0 in every rollout
-        // still gets a ridge.
-        let own = scale.get(i).copied().unwrap_or(0.0).max(normal[(i, i)]);
-        normal[(i, i)] += ridge * own.max(1e-12 * mean_diagonal);
+/// A weighted ridge regression on the rows of `X`: `(X^T D X + R)^-1 X^T D Y` with
+/// `D = diag(weights)` and `R` the diagonal of `X^T D X`, or the larger `scale` where given,
+/// times `ridge` (Marquardt's scaling).
+struct Ridge {
+    /// `D X`.
+    weighted: DMatrix<f64>,
+    /// Of `X^T D X + R`.
+    normal: Cholesky<f64, nalgebra::Dyn>,
+}
+
+impl Ridge {
+    /// The regression, or `None` when `X^T D X + R` is not positive definite.
+    fn new(x: &DMatrix<f64>, weights: &[f64], ridge: f64, scale: &[f64]) -> Option<Self> {
+        let weighted = scale_rows(x, &DVector::from_column_slice(weights));
+        let mut normal = weighted.tr_mul(x);
+        let mean_diagonal = normal.trace() / normal.nrows() as f64;
+        for i in 0..normal.nrows() {
+            // Each feature's own scale, floored so that a feature that is 0 in every rollout
+            // still gets a ridge.
+            let own = scale.get(i).copied().unwrap_or(0.0).max(normal[(i, i)]);
+            normal[(i, i)] += ridge * own.max(1e-12 * mean_diagonal);
+        }
+        Some(Self {
+            normal: Cholesky::new(normal)?,
+            weighted,
+        })
     }
-    Some(Cholesky::new(normal)?.solve(&weighted.tr_mul(y)))
+
+    /// The coefficients for the targets `y` (a row per row of `X`).
+    fn solve(&self, y: &DMatrix<f64>) -> DMatrix<f64> {
+        self.normal.solve(&self.weighted.tr_mul(y))
+    }
+
+    /// The variance of the fit at `point` for targets of unit variance, independent of each
+    /// other and of the weights: `||D X (X^T D X + R)^-1 point||^2`.
+    fn variance_at(&self, point: &DVector<f64>) -> f64 {
+        (&self.weighted * self.normal.solve(point)).norm_squared()
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::StandardNormal;
 
     #[test]
     fn equal_advantages_share_their_ranks_weights_and_the_rest_get_nothing() {
@@ -273,6 +305,40 @@ mod tests {
         for (a, o) in advantages.iter().zip(&own) {
             assert!((a - scale * o).abs() < 1e-9 * scale, "{advantages:?}");
         }
+    }
+
+    #[test]
+    fn the_paths_are_normalised_by_the_shifts_own_variance() {
+        // 40 rollouts at a few contexts, selected unevenly (weights independent of the
+        // targets): the fit at the unweighted mean features has the variance `variance_at`
+        // gives, measured over 20,000 draws of unit normal targets; at the weights' own mean
+        // without a ridge it is CMA-ES's 1 / mu_eff; and extrapolated it is larger.
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let contexts: Vec<f64> = (0..40).map(|i| [0.0, 0.1, 0.2, 3.0][i % 4]).collect();
+        let x = DMatrix::from_fn(40, 2, |i, j| if j == 0 { 1.0 } else { contexts[i] });
+        let weights: Vec<f64> = (0..40).map(|i| if i % 4 == 3 { 0.0 } else { (i + 1) as f64 }).collect();
+        let total: f64 = weights.iter().sum();
+        let weights: Vec<f64> = weights.iter().map(|w| w / total).collect();
+        let mean = x.row_mean().transpose();
+        let regression = Ridge::new(&x, &weights, 1e-5, &[]).unwrap();
+        let draws = 20_000;
+        let fits: Vec<f64> = (0..draws)
+            .map(|_| {
+                let y = DMatrix::from_fn(40, 1, |_, _| rng.sample(StandardNormal));
+                (regression.solve(&y).transpose() * &mean)[(0, 0)]
+            })
+            .collect();
+        let measured = fits.iter().map(|f| f * f).sum::<f64>() / draws as f64;
+        let predicted = regression.variance_at(&mean);
+        assert!(
+            (measured / predicted - 1.0).abs() < 0.05,
+            "{measured} against {predicted}"
+        );
+        let mu_eff = 1.0 / weights.iter().map(|w| w * w).sum::<f64>();
+        let own = x.tr_mul(&DVector::from_column_slice(&weights));
+        let exact = Ridge::new(&x, &weights, 0.0, &[]).unwrap();
+        assert!((exact.variance_at(&own) * mu_eff - 1.0).abs() < 1e-9);
+        assert!(predicted * mu_eff > 10.0, "{}", predicted * mu_eff);
     }
 
     #[test]

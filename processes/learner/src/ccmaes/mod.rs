@@ -14,11 +14,11 @@
 //!    `ln((lambda + 1) / 2) - ln i`, normalised (equal advantages share their ranks' weights);
 //!    the rest 0.
 //! 3. **Mean.** `W` by weighted ridge regression of the parameters on `phi(s)`.
-//! 4. **Paths and covariance.** The shift of the mean at the weights' average features (the
-//!    weighted mean of the residuals, CMA-ES's step), in units of `sigma`, drives the
-//!    conjugate path `p_sigma` and the path `p_c`; `C` gets the rank-one update from `p_c` and
-//!    the rank-mu update from the residuals `(theta_i - W_old^T phi(s_i)) / sigma` of the old
-//!    mean, each in its own context.
+//! 4. **Paths and covariance.** The shift of the mean at the generation's average features, in
+//!    units of `sigma` and of its own spread under random selection, drives the conjugate path
+//!    `p_sigma` and the path `p_c`; `C` gets the rank-one update from `p_c` and the rank-mu
+//!    update from the residuals `(theta_i - W_old^T phi(s_i)) / sigma` of the old mean, each in
+//!    its own context.
 //! 5. **Step size.** `sigma` by cumulative step-size adaptation on `||p_sigma||`.
 //!
 //! Only the ranks of the advantages are used, and the baseline absorbs a shift of the returns,
@@ -320,8 +320,8 @@ pub struct CCmaesReport {
     pub p_c: f64,
     /// Whether the path `p_c` was updated (the stall test h_sigma).
     pub h_sigma: bool,
-    /// The shift of the mean at the weighted mean of the generation's context features, in
-    /// units of the old sigma (in the metric of C).
+    /// The shift of the mean at the generation's average context features, in units of the
+    /// old sigma (in the metric of C).
     pub mean_shift: f64,
     /// The condition number of C (largest over smallest eigenvalue) after the update.
     pub condition: f64,
